@@ -20,7 +20,7 @@ ICP minimises, and what is implemented, is the sum over nearest-neighbour pairs,
 Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'·m')``, identical to
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
 and free of LAPACK call overhead. Nearest neighbours are a vectorised all-pairs distance for
-small sets and a ``scipy.spatial.cKDTree`` built once on ``M`` for large ones.
+small sets and a KD-tree (``pykdtree``) built once on ``M`` for large ones.
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+from pykdtree.kdtree import KDTree
 
+from fusion._icp_kernels import fit_rigid, match_brute, spread
 from fusion.rigid import Rigid2D
 from topo._checks import as_points, check_int, check_real
 
@@ -109,47 +110,43 @@ def best_rotation_angle(P: np.ndarray, Q: np.ndarray) -> float:
 
 def degeneracy(points: np.ndarray, name: str, rel: float = 1e-9) -> str | None:
     """``None`` if ``points`` spread in two dimensions; else why a rotation can't be fixed."""
-    centred = points - points.mean(axis=0)
-    a = float(np.dot(centred[:, 0], centred[:, 0]))
-    b = float(np.dot(centred[:, 0], centred[:, 1]))
-    c = float(np.dot(centred[:, 1], centred[:, 1]))
-    half_gap = math.hypot((a - c) / 2.0, b)
-    big, small = (a + c) / 2.0 + half_gap, (a + c) / 2.0 - half_gap
-    scale = float(np.abs(points).max()) ** 2 * len(points) + 1e-300
-    if big <= 1e-24 * scale:
+    _, _, big, small, scale = spread(points)
+    if big <= 1e-24 * scale + 1e-300:
         return f"all points of {name} coincide: rotation undetermined, identity used"
     if small <= rel * big:
         return f"{name} is collinear: rotation about the line is ambiguous"
     return None
 
 
-class NearestNeighbours:
-    """Nearest point of a fixed set ``M`` for many query sets (built once, queried per iteration).
+class _BruteMatcher:
+    """All-pairs nearest neighbours, one compiled call per iteration (small sets)."""
 
-    All-pairs distances below :data:`BRUTE_FORCE_MAX_PAIRS`, a ``cKDTree`` above.
-    """
+    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
+        self.M, self.D, self.max_d2 = M, D, max_d2
 
-    __slots__ = ("_M", "_m2", "_tree", "_max_queries")
+    def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
+                 prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
+                 keep: np.ndarray) -> tuple[float, bool]:
+        return match_brute(self.D, self.M, theta, t[0], t[1], self.max_d2, prev_idx,
+                           prev_keep, idx, d2, keep)
 
-    def __init__(self, M: np.ndarray, n_queries: int) -> None:
-        self._M = M
-        self._max_queries = n_queries
-        if len(M) * n_queries <= BRUTE_FORCE_MAX_PAIRS:
-            self._tree = None
-            self._m2 = np.einsum("ij,ij->i", M, M)
-        else:
-            self._tree = cKDTree(M)
-            self._m2 = None
 
-    def query(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(squared distances, indices)`` of the nearest point of ``M`` to each row of ``X``."""
-        if self._tree is not None:
-            dist, idx = self._tree.query(X, k=1)
-            return dist * dist, idx
-        d2 = self._m2[None, :] - 2.0 * (X @ self._M.T)
-        idx = d2.argmin(axis=1)
-        best = d2[np.arange(len(X)), idx] + np.einsum("ij,ij->i", X, X)
-        return np.maximum(best, 0.0), idx
+class _TreeMatcher:
+    """KD-tree nearest neighbours (pykdtree, built once on the fixed set ``M``; large sets)."""
+
+    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
+        self.tree = KDTree(M)
+        self.D, self.max_d2 = D, max_d2
+
+    def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
+                 prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
+                 keep: np.ndarray) -> tuple[float, bool]:
+        c, s = math.cos(theta), math.sin(theta)
+        moved = self.D @ np.array([[c, s], [-s, c]]) + t
+        d2[:], idx[:] = self.tree.query(moved, k=1, sqr_dists=True)
+        np.less_equal(d2, self.max_d2, out=keep)
+        same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
+        return float(d2[keep].sum()), bool(same)
 
 
 def _check_options(tau, max_iter, rel_tol, max_distance, trim, init) -> None:
@@ -217,57 +214,58 @@ def icp_svd(
     _check_options(tau, max_iter, rel_tol, max_distance, trim, init)
     degenerate = degeneracy(M, "M") or degeneracy(D, "D")
 
-    if init is None:
-        theta, t = 0.0, M.mean(axis=0) - D.mean(axis=0)
+    if init is None:  # Step 1: R = I, T = mean(M) - mean(D)
+        mx, my, *_ = spread(M)
+        dx, dy, *_ = spread(D)
+        theta, t = 0.0, np.array([mx - dx, my - dy])
     else:
         theta, t = init.theta, init.T.copy()
-    nn = NearestNeighbours(M, len(D))
-    n_keep = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
     max_d2 = math.inf if max_distance is None else max_distance * max_distance
+    matcher_type = _BruteMatcher if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS else _TreeMatcher
+    match = matcher_type(M, D, max_d2)
+    n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
 
+    idx = np.zeros(len(D), dtype=np.int64)
+    d2 = np.empty(len(D))
+    keep = np.empty(len(D), dtype=bool)
+    prev_idx = np.full(len(D), -1, dtype=np.int64)
+    prev_keep = np.zeros(len(D), dtype=bool)
     errors: list[float] = []
-    prev_idx: np.ndarray | None = None
-    prev_keep: np.ndarray | None = None
     converged = False
     iterations = 0
     while True:
-        c, s = math.cos(theta), math.sin(theta)
-        Dk = D @ np.array([[c, s], [-s, c]]) + t
-        d2, idx = nn.query(Dk)
-        keep = d2 <= max_d2
-        if n_keep < len(D):
-            order = np.argsort(d2, kind="stable")
-            keep[order[n_keep:]] = False
-        f = float(d2[keep].sum())
+        f, same = match(theta, t, prev_idx, prev_keep, idx, d2, keep)
+        if n_trim < len(D):  # TrICP: only the n_trim closest pairs take part
+            keep[np.argsort(d2, kind="stable")[n_trim:]] = False
+            f = float(d2[keep].sum())
+            same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         errors.append(f)
         if iterations:
             change = abs(errors[-2] - f)
             if (
-                (tau is not None and change < tau)
+                same
+                or (tau is not None and change < tau)
                 or (rel_tol is not None and change <= rel_tol * errors[-2])
-                or (np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep))
             ):
                 converged = True
                 break
         if iterations == max_iter:
             break
-        P, Q = Dk[keep], M[idx[keep]]
-        if len(P) < 2:
+        new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)
+        if n_fit < 2:
             degenerate = degenerate or (
-                f"only {len(P)} pair(s) within max_distance/trim: transform not updated"
+                f"only {n_fit} pair(s) within max_distance/trim: transform not updated"
             )
             break
-        dtheta = best_rotation_angle(P, Q)
-        cd, sd = math.cos(dtheta), math.sin(dtheta)
-        r_inc = np.array([[cd, -sd], [sd, cd]])
-        t = r_inc @ t + (Q.mean(axis=0) - r_inc @ P.mean(axis=0))
-        theta += dtheta
+        theta, t = new_theta, np.array([tx, ty])
         iterations += 1
-        prev_idx, prev_keep = idx, keep
+        idx, prev_idx = prev_idx, idx
+        keep, prev_keep = prev_keep, keep
+        # the buffers swapped: prev_* now hold this iteration's pairs, idx/keep get overwritten
 
     correspondences = np.where(keep, idx, -1).astype(np.int64)
     return IcpResult(
-        transform=Rigid2D(theta, t),
+        transform=Rigid2D.trusted(theta, t),
         iterations=iterations,
         errors=np.asarray(errors),
         converged=converged,

@@ -63,6 +63,21 @@ class Rigid2D:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
+    def trusted(cls, theta: float, T: np.ndarray) -> Rigid2D:
+        """Build without validation, from a finite float ``theta`` and a float64 ``(2,)`` array
+        the caller owns (hot paths: ICP, merges). Users want the validating constructor."""
+        out = cls.__new__(cls)
+        out._theta = math.remainder(theta, 2 * math.pi)
+        if out._theta == -math.pi:  # keep (-pi, pi]
+            out._theta = math.pi
+        c, s = math.cos(out._theta), math.sin(out._theta)
+        out._R = np.array([[c, -s], [s, c]])
+        out._R.setflags(write=False)
+        out._T = T
+        T.setflags(write=False)
+        return out
+
+    @classmethod
     def identity(cls) -> Rigid2D:
         return cls(0.0, (0.0, 0.0))
 

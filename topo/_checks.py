@@ -36,9 +36,8 @@ def as_points(value: object, name: str, *, min_points: int = 0) -> np.ndarray:
         raise ValueError(f"{name} must have shape (N, 2), got shape {arr.shape}")
     if arr.shape[0] < min_points:
         raise ValueError(f"{name} must have at least {min_points} points, got {arr.shape[0]}")
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        row = int(np.argwhere(bad)[0, 0])
+    if not np.isfinite(arr).all():
+        row = int(np.argwhere(~np.isfinite(arr))[0, 0])
         raise ValueError(f"{name} must be finite, got {arr[row].tolist()} at row {row}")
     return arr
 

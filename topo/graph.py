@@ -228,7 +228,7 @@ class TopoMap:
             lengths = [d["length"] for _, _, d in edge_rows]
         paths = None
         if edge_rows and all("path" in d for _, _, d in edge_rows):
-            # networkx may report an edge as (v, u): orient each polyline from the edge's first node.
+            # networkx may report an edge as (v, u): orient polylines from the first node.
             paths = []
             for (u, _v, d) in edge_rows:
                 p = np.asarray(d["path"], dtype=np.float64)

@@ -1,0 +1,163 @@
+"""The paper's similarity ω (eq. 2–3) and its baseline: exhaustive search over placements.
+
+The paper scores a fusion by ω(A, B) = Σ_i Σ_j Eq(E_A[i], E_B[j]), the number of coinciding path
+endpoints. With floating-point maps "coinciding" must mean "within a tolerance": here
+``‖a_i − (R b_j + T)‖ ≤ eps``.
+
+The baseline (the paper's "exhaustive search") tries every rotation θ from 0° in ``step_deg``
+steps and, for every vertex pair (a_i, b_j), the translation that places b_j on a_i, keeping the
+placement with the largest ω. With a 4-vertex A, a 7-vertex B and 2° steps from 0° to 360°
+*inclusive* that is the paper's 4 × 7 × 181 = 5068 fusions; 0° and 360° are the same rotation,
+so only 4 × 7 × 180 = 5040 of them are distinct. The paper rotates map A; topomerge keeps its one
+convention and moves B onto A (``p_A = R p_B + T``), so a paper angle θ corresponds to −θ here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fusion.rigid import Rigid2D, wrap_angle
+from topo._checks import as_points, check_real
+from topo.graph import TopoMap
+
+DEFAULT_EPS = 0.3
+"""Default coincidence tolerance in metres (the evaluation's translation-success threshold)."""
+
+
+def endpoint_set(value: Any, name: str) -> np.ndarray:
+    """The paper's point set of a map: :meth:`TopoMap.endpoints` or an ``(N, 2)`` array."""
+    if isinstance(value, TopoMap):
+        return value.endpoints()
+    return as_points(value, name)
+
+
+def similarity(map_a: Any, map_b: Any, transform: Rigid2D, eps: float = DEFAULT_EPS) -> int:
+    """ω of eq. (2)–(3): pairs of endpoints of A and of B moved by ``transform`` within ``eps``.
+
+    Args:
+        map_a, map_b: :class:`topo.TopoMap` (its :meth:`~topo.TopoMap.endpoints`) or ``(N, 2)``
+            point arrays.
+        transform: B → A (``p_A = R p_B + T``).
+        eps: coincidence tolerance, ``> 0``, in the maps' units.
+
+    Counts pairs, as the paper's double sum does: an endpoint of A near two endpoints of B counts
+    twice.
+    """
+    a = endpoint_set(map_a, "map_a")
+    b = endpoint_set(map_b, "map_b")
+    if not isinstance(transform, Rigid2D):
+        raise TypeError(f"transform must be a fusion.Rigid2D, got {type(transform).__name__}")
+    eps = check_real(eps, "eps", low=0.0)
+    if len(a) == 0 or len(b) == 0:
+        return 0
+    return int(cKDTree(a).count_neighbors(cKDTree(transform.apply(b)), eps))
+
+
+@dataclass(frozen=True, slots=True)
+class Placement:
+    """One candidate fusion: B rotated by ``transform.theta`` with endpoint ``anchor[1]`` of B
+    placed on endpoint ``anchor[0]`` of A, and its similarity ``score``."""
+
+    transform: Rigid2D
+    anchor: tuple[int, int]
+    score: int
+
+
+@dataclass(frozen=True, slots=True)
+class SearchResult:
+    """What :func:`exhaustive_search` found.
+
+    Attributes:
+        transform: the best placement's transform (the first of :attr:`ties`).
+        score: its similarity ω.
+        evaluations: fusions scored, ``n_A × n_B × n_angles`` (the paper's 5068 for 4 × 7 × 181).
+        distinct_evaluations: the same count without the duplicated 360° (= 0°) angle (5040).
+        ties: every *distinct* placement reaching ``score``, in angle order. Placements within one
+            angle step and ``eps`` of each other (at B's centroid) are one optimum. More than one
+            means the search is ambiguous, like the paper's two optima at 136° and 316°.
+    """
+
+    transform: Rigid2D
+    score: int
+    evaluations: int
+    distinct_evaluations: int
+    ties: tuple[Placement, ...]
+
+    @property
+    def ambiguous(self) -> bool:
+        return len(self.ties) > 1
+
+
+def search_angles(step_deg: float) -> np.ndarray:
+    """Angles in degrees from 0 to 360 inclusive, as the paper counts them (181 for 2°)."""
+    step = check_real(step_deg, "step_deg", low=0.0, high=360.0)
+    n = int(math.floor(360.0 / step + 1e-9))
+    return np.arange(n + 1) * step
+
+
+def exhaustive_search(
+    map_a: Any, map_b: Any, step_deg: float = 2.0, eps: float = DEFAULT_EPS
+) -> SearchResult:
+    """The paper's baseline: the best of every rotation step × every vertex-on-vertex placement.
+
+    Args:
+        map_a: the fixed map (:class:`topo.TopoMap` or ``(N, 2)`` endpoints), ``N >= 1``.
+        map_b: the moved map, ``N >= 1``.
+        step_deg: rotation step in degrees, in ``(0, 360]``; angles run 0..360 inclusive.
+        eps: coincidence tolerance of ω, ``> 0``.
+
+    Every placement of one angle is scored at once: the candidate translations are the
+    differences ``a_i − R b_j``, and ω of a translation is how many of those differences lie
+    within ``eps`` of it (one KD-tree ball count per angle).
+    """
+    a = endpoint_set(map_a, "map_a")
+    b = endpoint_set(map_b, "map_b")
+    for name, pts in (("map_a", a), ("map_b", b)):
+        if len(pts) == 0:
+            raise ValueError(f"{name} must have at least 1 endpoint, got 0")
+    eps = check_real(eps, "eps", low=0.0)
+    angles = search_angles(step_deg)
+    n_a, n_b = len(a), len(b)
+
+    best = -1
+    tied: list[tuple[float, int, int, np.ndarray]] = []
+    for deg in angles:
+        theta = math.radians(deg)
+        c, s = math.cos(theta), math.sin(theta)
+        rb = b @ np.array([[c, s], [-s, c]])
+        shifts = (a[:, None, :] - rb[None, :, :]).reshape(-1, 2)
+        scores = cKDTree(shifts).query_ball_point(shifts, eps, return_length=True)
+        top = int(scores.max())
+        if top < best:
+            continue
+        if top > best:
+            best, tied = top, []
+        for k in np.flatnonzero(scores == top):
+            tied.append((float(deg), int(k // n_b), int(k % n_b), shifts[k]))
+
+    centroid = b.mean(axis=0)
+    step_rad = math.radians(float(step_deg))
+    ties: list[Placement] = []
+    for deg, i, j, shift in tied:
+        transform = Rigid2D(math.radians(deg), shift)
+        if any(
+            abs(wrap_angle(transform.theta - p.transform.theta)) <= step_rad + 1e-9
+            and transform.translation_error(p.transform, at=centroid) <= eps
+            for p in ties
+        ):
+            continue
+        ties.append(Placement(transform, (i, j), best))
+
+    n_distinct_angles = len(angles) - (1 if math.isclose(angles[-1], 360.0) else 0)
+    return SearchResult(
+        transform=ties[0].transform,
+        score=best,
+        evaluations=n_a * n_b * len(angles),
+        distinct_evaluations=n_a * n_b * n_distinct_angles,
+        ties=tuple(ties),
+    )
