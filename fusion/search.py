@@ -77,9 +77,10 @@ class SearchResult:
         score: its similarity ω.
         evaluations: fusions scored, ``n_A × n_B × n_angles`` (the paper's 5068 for 4 × 7 × 181).
         distinct_evaluations: the same count without the duplicated 360° (= 0°) angle (5040).
-        ties: every *distinct* placement reaching ``score``, in angle order. Placements within one
-            angle step and ``eps`` of each other (at B's centroid) are one optimum. More than one
-            means the search is ambiguous, like the paper's two optima at 136° and 316°.
+        ties: one placement per *distinct* optimum reaching ``score``. Tied placements linked
+            by steps of at most one angle step and ``eps`` (at B's centroid) are one optimum,
+            represented by its placement of least residual. More than one means the search is ambiguous,
+            like the paper's two optima at 136° and 316°.
     """
 
     transform: Rigid2D
@@ -140,19 +141,7 @@ def exhaustive_search(
         for k in np.flatnonzero(scores == top):
             tied.append((float(deg), int(k // n_b), int(k % n_b), shifts[k]))
 
-    centroid = b.mean(axis=0)
-    step_rad = math.radians(float(step_deg))
-    ties: list[Placement] = []
-    for deg, i, j, shift in tied:
-        transform = Rigid2D(math.radians(deg), shift)
-        if any(
-            abs(wrap_angle(transform.theta - p.transform.theta)) <= step_rad + 1e-9
-            and transform.translation_error(p.transform, at=centroid) <= eps
-            for p in ties
-        ):
-            continue
-        ties.append(Placement(transform, (i, j), best))
-
+    ties = _distinct_optima(tied, a, b, math.radians(float(step_deg)), eps, best)
     n_distinct_angles = len(angles) - (1 if math.isclose(angles[-1], 360.0) else 0)
     return SearchResult(
         transform=ties[0].transform,
@@ -161,3 +150,34 @@ def exhaustive_search(
         distinct_evaluations=n_a * n_b * n_distinct_angles,
         ties=tuple(ties),
     )
+
+
+def _distinct_optima(
+    tied: list[tuple[float, int, int, np.ndarray]], a: np.ndarray, b: np.ndarray,
+    step_rad: float, eps: float, score: int,
+) -> list[Placement]:
+    """Group tied placements into optima (single linkage: within one angle step and ``eps`` at
+    B's centroid) and return, per group in angle order, the placement whose coinciding pairs
+    are closest (least squared distance): ω ties are broken by residual."""
+    centroid = b.mean(axis=0)
+    tree = cKDTree(a)
+    placements = [Placement(Rigid2D(math.radians(deg), shift), (i, j), score)
+                  for deg, i, j, shift in tied]
+    groups: list[list[Placement]] = []
+    for p in placements:
+        linked = [g for g in groups if any(
+            abs(wrap_angle(p.transform.theta - q.transform.theta)) <= step_rad + 1e-9
+            and p.transform.translation_error(q.transform, at=centroid) <= eps
+            for q in g)]
+        merged = [p]
+        for g in linked:
+            merged = g + merged
+            groups.remove(g)
+        groups.append(merged)
+    groups.sort(key=lambda g: min(q.transform.degrees % 360.0 for q in g))
+
+    def residual(p: Placement) -> float:
+        d, _ = tree.query(p.transform.apply(b), distance_upper_bound=eps)
+        return float(np.sum(d[np.isfinite(d)] ** 2))
+
+    return [min(g, key=residual) for g in groups]

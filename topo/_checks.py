@@ -30,9 +30,9 @@ def as_points(value: object, name: str, *, min_points: int = 0) -> np.ndarray:
         raise TypeError(
             f"{name} must be a numeric array of shape (N, 2), got {_describe(value)}"
         ) from exc
+    if arr.size == 0 and arr.ndim <= 2 and (arr.ndim < 2 or arr.shape[1] in (0, 2)):
+        arr = np.empty((0, 2))
     if arr.ndim != 2 or arr.shape[1] != 2:
-        if arr.size == 0 and min_points == 0:
-            return np.empty((0, 2))
         raise ValueError(f"{name} must have shape (N, 2), got shape {arr.shape}")
     if arr.shape[0] < min_points:
         raise ValueError(f"{name} must have at least {min_points} points, got {arr.shape[0]}")
