@@ -79,8 +79,8 @@ class SearchResult:
         distinct_evaluations: the same count without the duplicated 360° (= 0°) angle (5040).
         ties: one placement per *distinct* optimum reaching ``score``. Tied placements linked
             by steps of at most one angle step and ``eps`` (at B's centroid) are one optimum,
-            represented by its placement of least residual. More than one means the search is ambiguous,
-            like the paper's two optima at 136° and 316°.
+            represented by its placement of least residual. More than one means the search is
+            ambiguous, like the paper's two optima at 136° and 316°.
     """
 
     transform: Rigid2D
