@@ -110,7 +110,11 @@ def best_rotation_angle(P: np.ndarray, Q: np.ndarray) -> float:
 
 def degeneracy(points: np.ndarray, name: str, rel: float = 1e-9) -> str | None:
     """``None`` if ``points`` spread in two dimensions; else why a rotation can't be fixed."""
-    _, _, big, small, scale = spread(points)
+    return _degeneracy(spread(points), name, rel)
+
+
+def _degeneracy(moments: tuple[float, ...], name: str, rel: float = 1e-9) -> str | None:
+    _, _, big, small, scale = moments
     if big <= 1e-24 * scale + 1e-300:
         return f"all points of {name} coincide: rotation undetermined, identity used"
     if small <= rel * big:
@@ -212,12 +216,12 @@ def icp_svd(
     M = as_points(M, "M", min_points=2)
     D = as_points(D, "D", min_points=2)
     _check_options(tau, max_iter, rel_tol, max_distance, trim, init)
-    degenerate = degeneracy(M, "M") or degeneracy(D, "D")
+    m_moments, d_moments = spread(M), spread(D)
+    degenerate = _degeneracy(m_moments, "M") or _degeneracy(d_moments, "D")
 
     if init is None:  # Step 1: R = I, T = mean(M) - mean(D)
-        mx, my, *_ = spread(M)
-        dx, dy, *_ = spread(D)
-        theta, t = 0.0, np.array([mx - dx, my - dy])
+        theta = 0.0
+        t = np.array([m_moments[0] - d_moments[0], m_moments[1] - d_moments[1]])
     else:
         theta, t = init.theta, init.T.copy()
     max_d2 = math.inf if max_distance is None else max_distance * max_distance
@@ -225,7 +229,7 @@ def icp_svd(
     match = matcher_type(M, D, max_d2)
     n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
 
-    idx = np.zeros(len(D), dtype=np.int64)
+    idx = np.empty(len(D), dtype=np.int64)
     d2 = np.empty(len(D))
     keep = np.empty(len(D), dtype=bool)
     prev_idx = np.full(len(D), -1, dtype=np.int64)
