@@ -1,0 +1,275 @@
+"""Compiled inner loops of :func:`fusion.merge_maps` (numba, cached on disk after the first call).
+
+A merge of two 60-node maps tries thousands of rigid hypotheses; numpy's per-call overhead and
+``(H, N_B, N_A)`` temporaries would cost more than the arithmetic, so hypothesis generation,
+scoring, candidate selection, batched refinement and the match/conflict pass are loops here.
+Conventions: a transform is ``(theta, tx, ty)`` with ``p_A = R(theta) p_B + (tx, ty)``; ``compat``
+is the ``(3, 3)`` bool node-kind compatibility table indexed ``[kind_a, kind_b]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol, compat):
+    """2-point consensus: every (A pair, B pair) whose lengths agree within ``tol`` and whose end
+    kinds are compatible gives the rigid motion putting the B pair onto the A pair.
+
+    ``b_len`` must be sorted ascending and the B pairs listed in both orientations. Returns
+    ``(theta, tx, ty, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the
+    angle better).
+    """
+    n_out = 0
+    lo = np.searchsorted(b_len, a_len - tol)
+    hi = np.searchsorted(b_len, a_len + tol, side="right")
+    for p in range(a_i.shape[0]):
+        for q in range(lo[p], hi[p]):
+            if compat[a_kind[a_i[p]], b_kind[b_i[q]]] and compat[a_kind[a_j[p]], b_kind[b_j[q]]]:
+                n_out += 1
+    theta = np.empty(n_out)
+    tx = np.empty(n_out)
+    ty = np.empty(n_out)
+    weight = np.empty(n_out)
+    k = 0
+    for p in range(a_i.shape[0]):
+        ai, aj = a_i[p], a_j[p]
+        ang_a = math.atan2(A[aj, 1] - A[ai, 1], A[aj, 0] - A[ai, 0])
+        mxa = 0.5 * (A[ai, 0] + A[aj, 0])
+        mya = 0.5 * (A[ai, 1] + A[aj, 1])
+        for q in range(lo[p], hi[p]):
+            bi, bj = b_i[q], b_j[q]
+            if not (compat[a_kind[ai], b_kind[bi]] and compat[a_kind[aj], b_kind[bj]]):
+                continue
+            ang = ang_a - math.atan2(B[bj, 1] - B[bi, 1], B[bj, 0] - B[bi, 0])
+            c, s = math.cos(ang), math.sin(ang)
+            mxb = 0.5 * (B[bi, 0] + B[bj, 0])
+            myb = 0.5 * (B[bi, 1] + B[bj, 1])
+            theta[k] = ang
+            tx[k] = mxa - (c * mxb - s * myb)
+            ty[k] = mya - (s * mxb + c * myb)
+            weight[k] = min(a_len[p], b_len[q])
+            k += 1
+    return theta, tx, ty, weight
+
+
+NEAR_ANY_NODE = 3
+"""Bit of a :func:`raster_scores` cell: within the coarse tolerance of an A node of any kind
+(bits 0–2: of a kind compatible with B kind 0–2)."""
+ON_PATH = 4
+"""Bit of a :func:`raster_scores` cell: on one of A's paths."""
+
+
+@njit(cache=True, nogil=True)
+def raster_scores(theta, tx, ty, B, b_kind, grid, x0, y0, inv_cell, loose_kind):
+    """Coarse score of each hypothesis from a bit raster of A (``grid[iy, ix]``): +1 per B node
+    landing near an A node of a compatible kind (bit ``b_kind``), −1 per B node (not of
+    ``loose_kind``) landing on an A path (bit :data:`ON_PATH`) far from any A node (bit
+    :data:`NEAR_ANY_NODE` clear) — A went there and saw no such place."""
+    n_h = theta.shape[0]
+    ny, nx = grid.shape
+    out = np.zeros(n_h, dtype=np.int64)
+    for h in range(n_h):
+        c, s = math.cos(theta[h]), math.sin(theta[h])
+        n = 0
+        for b in range(B.shape[0]):
+            x = c * B[b, 0] - s * B[b, 1] + tx[h]
+            y = s * B[b, 0] + c * B[b, 1] + ty[h]
+            ix = int(math.floor((x - x0) * inv_cell))
+            iy = int(math.floor((y - y0) * inv_cell))
+            if 0 <= ix < nx and 0 <= iy < ny:
+                cell = grid[iy, ix]
+                if (cell >> b_kind[b]) & 1:
+                    n += 1
+                elif (b_kind[b] != loose_kind and not (cell >> NEAR_ANY_NODE) & 1
+                      and (cell >> ON_PATH) & 1):
+                    n -= 1
+        out[h] = n
+    return out
+
+
+@njit(cache=True, nogil=True)
+def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
+    """Greedy non-maximum suppression: walk ``order`` (best first) and keep up to ``k``
+    hypotheses whose angle differs by ``>= min_angle`` or whose image of B's centroid
+    ``(cx, cy)`` is ``>= min_dist`` away from every hypothesis kept before."""
+    kept = np.empty(k, dtype=np.int64)
+    n = 0
+    for h in order:
+        ok = True
+        for m in range(n):
+            g = kept[m]
+            d_ang = abs((theta[h] - theta[g] + math.pi) % (2 * math.pi) - math.pi)
+            if d_ang < min_angle and math.hypot(cx[h] - cx[g], cy[h] - cy[g]) < min_dist:
+                ok = False
+                break
+        if ok:
+            kept[n] = h
+            n += 1
+            if n == k:
+                break
+    return kept[:n]
+
+
+@njit(cache=True, nogil=True)
+def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
+    """Refine each hypothesis in place: per gate in ``gates``, pair every B node with its nearest
+    compatible A node within the gate and refit the rigid motion to those pairs (closed-form 2-D
+    SVD step). A hypothesis with fewer than 2 pairs keeps its motion."""
+    for h in range(theta.shape[0]):
+        for g in range(gates.shape[0]):
+            gate2 = gates[g] * gates[g]
+            c, s = math.cos(theta[h]), math.sin(theta[h])
+            n = 0
+            spx = spy = sqx = sqy = 0.0
+            pairs_b = np.empty(B.shape[0], dtype=np.int64)
+            pairs_a = np.empty(B.shape[0], dtype=np.int64)
+            for b in range(B.shape[0]):
+                x = c * B[b, 0] - s * B[b, 1] + tx[h]
+                y = s * B[b, 0] + c * B[b, 1] + ty[h]
+                best = gate2
+                arg = -1
+                for a in range(A.shape[0]):
+                    if not compat[a_kind[a], b_kind[b]]:
+                        continue
+                    dd = (x - A[a, 0]) ** 2 + (y - A[a, 1]) ** 2
+                    if dd <= best:
+                        best = dd
+                        arg = a
+                if arg >= 0:
+                    pairs_b[n] = b
+                    pairs_a[n] = arg
+                    spx += B[b, 0]
+                    spy += B[b, 1]
+                    sqx += A[arg, 0]
+                    sqy += A[arg, 1]
+                    n += 1
+            if n < 2:
+                continue
+            spx /= n
+            spy /= n
+            sqx /= n
+            sqy /= n
+            sc = ss = 0.0
+            for m in range(n):
+                px = B[pairs_b[m], 0] - spx
+                py = B[pairs_b[m], 1] - spy
+                qx = A[pairs_a[m], 0] - sqx
+                qy = A[pairs_a[m], 1] - sqy
+                sc += px * qx + py * qy
+                ss += px * qy - py * qx
+            ang = math.atan2(ss, sc)
+            c, s = math.cos(ang), math.sin(ang)
+            theta[h] = ang
+            tx[h] = sqx - (c * spx - s * spy)
+            ty[h] = sqy - (s * spx + c * spy)
+
+
+@njit(cache=True, nogil=True)
+def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
+    best = gate2
+    arg = -1
+    for i in range(P.shape[0]):
+        ok = compat[kind, p_kind[i]] if compat_row_first else compat[p_kind[i], kind]
+        if not ok:
+            continue
+        dd = (x - P[i, 0]) ** 2 + (y - P[i, 1]) ** 2
+        if dd <= best:
+            best = dd
+            arg = i
+    return arg, best
+
+
+@njit(cache=True, nogil=True)
+def _near_segment(x, y, P, edges, dist2):
+    for e in range(edges.shape[0]):
+        ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
+        vx, vy = P[edges[e, 1], 0] - ux, P[edges[e, 1], 1] - uy
+        ll = vx * vx + vy * vy
+        t = 0.0 if ll == 0.0 else ((x - ux) * vx + (y - uy) * vy) / ll
+        t = min(1.0, max(0.0, t))
+        dx, dy = ux + t * vx - x, uy + t * vy - y
+        if dx * dx + dy * dy <= dist2:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _any_node_within(x, y, P, dist2):
+    for i in range(P.shape[0]):
+        if (x - P[i, 0]) ** 2 + (y - P[i, 1]) ** 2 <= dist2:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
+    """Pairs of paths (one of each map) that cross at a point at least ``margin`` (a fraction
+    of each path) away from their ends, at an angle whose sine is at least ``min_sin`` (nearly
+    parallel paths are the same corridor seen twice, not a crossing): corridors that cross
+    without a junction."""
+    n = 0
+    for e in range(p_edges.shape[0]):
+        ax, ay = P[p_edges[e, 0], 0], P[p_edges[e, 0], 1]
+        rx, ry = P[p_edges[e, 1], 0] - ax, P[p_edges[e, 1], 1] - ay
+        for f in range(q_edges.shape[0]):
+            bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
+            sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
+            den = rx * sy - ry * sx
+            if abs(den) < min_sin * math.sqrt((rx * rx + ry * ry) * (sx * sx + sy * sy)):
+                continue
+            t = ((bx - ax) * sy - (by - ay) * sx) / den
+            u = ((bx - ax) * ry - (by - ay) * rx) / den
+            if p_margin[e] < t < 1.0 - p_margin[e] and q_margin[f] < u < 1.0 - q_margin[f]:
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def match_and_conflicts(A, a_kind, a_edges, B, b_kind, b_edges, theta, tx, ty, eps, compat,
+                        loose_kind, a_margin, b_margin):
+    """Matches and conflicts of B moved by ``(theta, tx, ty)`` onto A.
+
+    Returns ``(match_b, d2_b, conflicts, crossings)``: ``match_b[b]`` is the A node mutually
+    nearest (among compatible kinds, within ``eps``) to B node ``b``, or ``-1``; ``d2_b`` its
+    squared distance. A *conflict* is a node of either map (other than ``loose_kind``, the dead
+    ends that frontier artefacts make) with no node of the other map within ``eps`` but lying
+    within ``eps`` of one of its paths: the other robot went there and saw no such place.
+    ``crossings`` counts paths of the two maps crossing away from their ends (farther than the
+    fractions ``a_margin[e]`` of A's path ``e`` and ``b_margin[f]`` of B's path ``f``).
+    """
+    c, s = math.cos(theta), math.sin(theta)
+    X = np.empty_like(B)
+    for b in range(B.shape[0]):
+        X[b, 0] = c * B[b, 0] - s * B[b, 1] + tx
+        X[b, 1] = s * B[b, 0] + c * B[b, 1] + ty
+    eps2 = eps * eps
+    nn_b = np.empty(B.shape[0], dtype=np.int64)
+    d2_b = np.empty(B.shape[0])
+    for b in range(B.shape[0]):
+        nn_b[b], d2_b[b] = _nearest_compatible(X[b, 0], X[b, 1], b_kind[b], A, a_kind, False,
+                                               compat, eps2)
+    nn_a = np.empty(A.shape[0], dtype=np.int64)
+    for a in range(A.shape[0]):
+        nn_a[a], _ = _nearest_compatible(A[a, 0], A[a, 1], a_kind[a], X, b_kind, True,
+                                         compat, eps2)
+    match_b = np.full(B.shape[0], -1, dtype=np.int64)
+    for b in range(B.shape[0]):
+        a = nn_b[b]
+        if a >= 0 and nn_a[a] == b:
+            match_b[b] = a
+    conflicts = 0
+    for b in range(B.shape[0]):
+        if b_kind[b] != loose_kind and not _any_node_within(X[b, 0], X[b, 1], A, eps2):
+            if _near_segment(X[b, 0], X[b, 1], A, a_edges, eps2):
+                conflicts += 1
+    for a in range(A.shape[0]):
+        if a_kind[a] != loose_kind and not _any_node_within(A[a, 0], A[a, 1], X, eps2):
+            if _near_segment(A[a, 0], A[a, 1], X, b_edges, eps2):
+                conflicts += 1
+    crossings = _crossings(A, a_edges, a_margin, X, b_edges, b_margin, 0.5)
+    return match_b, d2_b, conflicts, crossings
