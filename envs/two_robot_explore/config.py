@@ -1,0 +1,371 @@
+"""Typed, frozen, validated configuration of ``two_robot_explore`` (STYLE.md §8).
+
+Four groups — :class:`WorldConfig`, :class:`RobotConfig`, :class:`SonarConfig`,
+:class:`MappingConfig` — and the top-level :class:`EnvConfig` that holds them with the reward
+and episode settings. Every field is checked in ``__post_init__``; every error names the field
+(``sonar.max_range``), the bad value and what is allowed. :meth:`EnvConfig.from_kwargs` builds a
+config from keyword arguments (nested groups as dicts) and refuses unknown keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from topo._checks import check_int, check_real
+
+REWARD_MODES = ("shared", "oracle", "individual")
+"""``EnvConfig.reward_mode`` values (see the env manual, section Rewards)."""
+
+ACTION_TYPES = ("continuous", "discrete")
+"""``EnvConfig.action_type`` values."""
+
+MERGE_METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp", "none")
+"""``MappingConfig.merge_method`` values; ``"none"`` never merges (each robot alone)."""
+
+
+def _check_choice(value: object, name: str, allowed: tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
+    return value
+
+
+def _check_pair(value: object, name: str, *, low: float,
+                low_inclusive: bool = False) -> tuple[float, float]:
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise TypeError(f"{name} must be a pair of numbers, got {value!r}")
+    a = check_real(value[0], f"{name}[0]", low=low, low_inclusive=low_inclusive)
+    b = check_real(value[1], f"{name}[1]", low=low, low_inclusive=low_inclusive)
+    return (a, b)
+
+
+def _check_optional_real(value: object, name: str, **bounds: Any) -> float | None:
+    return None if value is None else check_real(value, name, **bounds)
+
+
+def _set(obj: object, name: str, value: object) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _build(cls: type, data: object, name: str) -> Any:
+    """``cls`` from an instance of itself, a mapping of its fields, or ``None`` (defaults)."""
+    if data is None:
+        return cls()
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, Mapping):
+        raise TypeError(
+            f"{name} must be a {cls.__name__} or a dict of its fields, got {type(data).__name__}"
+        )
+    allowed = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(str(k) for k in data if k not in allowed)
+    if unknown:
+        raise ValueError(f"{name} has unknown keys {unknown}; allowed: {allowed}")
+    return cls(**data)
+
+
+@dataclass(frozen=True, slots=True)
+class WorldConfig:
+    """Where the robots are: a seeded procedural building or a real map file.
+
+    Attributes:
+        source: ``"procedural"`` or a path to a map file: ROS map ``.yaml`` (+ PGM), DungeonMaps
+            ``.png`` (scale from ``png_resolution``), HouseExpo-style ``.json``
+            (``{"verts": [[x, y], ...]}`` in metres).
+        size: procedural building width and height in metres, each ``>= 6``.
+        resolution: cell size of the world grid in metres (procedural and JSON worlds).
+        png_resolution: metres per pixel of PNG maps (DungeonMaps give none; 0.05–0.1 is typical).
+        room_size: procedural ``(min, max)`` room side in metres.
+        corridor_prob: chance that a procedural row/column of rooms is a corridor (1.4–2 m wide).
+        door_width: procedural door width in metres (must let a robot through).
+        loop_prob: chance of an extra door between rooms already connected (makes loops).
+        obstacle_density: procedural furniture boxes per 10 m² of room floor.
+        wall_thickness: procedural wall thickness in metres.
+        start_clearance: minimum free distance around a start position, metres, ``>=`` the robot
+            radius.
+        min_start_separation: minimum distance between the two start positions, metres.
+    """
+
+    source: str = "procedural"
+    size: tuple[float, float] = (20.0, 20.0)
+    resolution: float = 0.1
+    png_resolution: float = 0.1
+    room_size: tuple[float, float] = (3.0, 6.0)
+    corridor_prob: float = 0.25
+    door_width: float = 1.0
+    loop_prob: float = 0.3
+    obstacle_density: float = 0.5
+    wall_thickness: float = 0.2
+    start_clearance: float = 0.45
+    min_start_separation: float = 2.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.source, Path):
+            _set(self, "source", str(self.source))
+        if not isinstance(self.source, str) or not self.source:
+            raise TypeError(
+                f"world.source must be 'procedural' or a map file path, got {self.source!r}"
+            )
+        if self.source != "procedural":
+            suffix = Path(self.source).suffix.lower()
+            if suffix not in (".yaml", ".yml", ".png", ".pgm", ".json"):
+                raise ValueError(
+                    f"world.source must be 'procedural' or a .yaml/.png/.json map file, "
+                    f"got {self.source!r}"
+                )
+        _set(self, "size", _check_pair(self.size, "world.size", low=6.0, low_inclusive=True))
+        _set(self, "resolution", check_real(self.resolution, "world.resolution", low=0.01,
+                                            low_inclusive=True, high=0.5))
+        _set(self, "png_resolution", check_real(self.png_resolution, "world.png_resolution",
+                                                low=0.0))
+        rs = _check_pair(self.room_size, "world.room_size", low=0.0)
+        if not 2.0 <= rs[0] <= rs[1]:
+            raise ValueError(f"world.room_size must satisfy 2 <= min <= max, got {rs}")
+        _set(self, "room_size", rs)
+        for name in ("corridor_prob", "loop_prob"):
+            _set(self, name, check_real(getattr(self, name), f"world.{name}", low=0.0,
+                                        low_inclusive=True, high=1.0))
+        _set(self, "door_width", check_real(self.door_width, "world.door_width", low=0.0))
+        _set(self, "obstacle_density", check_real(self.obstacle_density,
+                                                  "world.obstacle_density", low=0.0,
+                                                  low_inclusive=True, high=2.0))
+        _set(self, "wall_thickness", check_real(self.wall_thickness, "world.wall_thickness",
+                                                low=0.0))
+        _set(self, "start_clearance", check_real(self.start_clearance, "world.start_clearance",
+                                                 low=0.0))
+        _set(self, "min_start_separation", check_real(self.min_start_separation,
+                                                      "world.min_start_separation",
+                                                      low=0.0, low_inclusive=True))
+
+
+@dataclass(frozen=True, slots=True)
+class RobotConfig:
+    """A Pioneer3-DX-like differential-drive disc.
+
+    Attributes:
+        radius: disc radius, metres.
+        max_speed: forward speed at action ``v = 1``, m/s.
+        max_turn_rate: turn rate at action ``ω = 1``, degrees per second.
+        dt: seconds of simulated time per env step.
+        substeps: physics substeps per env step (fixed).
+        odometry_noise: ``(translation, rotation)`` relative standard deviations of the
+            odometry increments (``0`` = perfect odometry).
+    """
+
+    radius: float = 0.25
+    max_speed: float = 0.7
+    max_turn_rate: float = 100.0
+    dt: float = 0.1
+    substeps: int = 4
+    odometry_noise: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        _set(self, "radius", check_real(self.radius, "robot.radius", low=0.0, high=2.0))
+        _set(self, "max_speed", check_real(self.max_speed, "robot.max_speed", low=0.0,
+                                           high=10.0))
+        _set(self, "max_turn_rate", check_real(self.max_turn_rate, "robot.max_turn_rate",
+                                               low=0.0, high=1000.0))
+        _set(self, "dt", check_real(self.dt, "robot.dt", low=0.0, high=1.0))
+        _set(self, "substeps", check_int(self.substeps, "robot.substeps", low=1))
+        _set(self, "odometry_noise", _check_pair(self.odometry_noise, "robot.odometry_noise",
+                                                 low=0.0, low_inclusive=True))
+        step = self.max_speed * self.dt / self.substeps
+        if step > self.radius:
+            raise ValueError(
+                f"robot.substeps must keep a substep's travel ({step:.3f} m) below "
+                f"robot.radius ({self.radius} m) so the robot cannot tunnel through walls"
+            )
+
+
+PIONEER_SONAR_DEG = (-90.0, -50.0, -30.0, -10.0, 10.0, 30.0, 50.0, 90.0)
+"""The Pioneer 3 front sonar ring, degrees CCW from the heading."""
+
+
+@dataclass(frozen=True, slots=True)
+class SonarConfig:
+    """The sonar ring (see the manual, section Sensors).
+
+    Attributes:
+        angles: sensor directions, degrees CCW from the heading (the Pioneer front ring).
+        cone: full cone width, degrees.
+        rays: rays per cone (evenly spread across it; ``1`` = a single central ray).
+        min_range: shortest range reported, metres (closer echoes read as this).
+        max_range: longest range, metres; a reading ``>= max_range`` means "no echo".
+        noise_std: standard deviation of the Gaussian range noise, metres.
+        dropout_incidence: incidence angle (degrees from the wall normal) beyond which an echo
+            may be lost to specular reflection.
+        dropout_prob: probability of losing such a steep echo.
+        measure_every: ``None`` measures every step; a distance in metres measures only after the
+            robot has travelled that far (the paper's robots used 0.10 m).
+    """
+
+    angles: tuple[float, ...] = PIONEER_SONAR_DEG
+    cone: float = 15.0
+    rays: int = 3
+    min_range: float = 0.15
+    max_range: float = 5.0
+    noise_std: float = 0.01
+    dropout_incidence: float = 60.0
+    dropout_prob: float = 0.5
+    measure_every: float | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.angles, (str, bytes)) or not hasattr(self.angles, "__len__"):
+            raise TypeError(f"sonar.angles must be a sequence of degrees, got {self.angles!r}")
+        if not 1 <= len(self.angles) <= 32:
+            raise ValueError(
+                f"sonar.angles must hold 1 to 32 directions, got {len(self.angles)}"
+            )
+        _set(self, "angles", tuple(check_real(a, f"sonar.angles[{i}]", low=-360.0,
+                                              low_inclusive=True, high=360.0)
+                                   for i, a in enumerate(self.angles)))
+        _set(self, "cone", check_real(self.cone, "sonar.cone", low=0.0, low_inclusive=True,
+                                      high=90.0))
+        _set(self, "rays", check_int(self.rays, "sonar.rays", low=1))
+        if self.rays > 16:
+            raise ValueError(f"sonar.rays must be <= 16, got {self.rays}")
+        _set(self, "min_range", check_real(self.min_range, "sonar.min_range", low=0.0,
+                                           low_inclusive=True))
+        _set(self, "max_range", check_real(self.max_range, "sonar.max_range", low=0.0,
+                                           high=50.0))
+        if self.min_range >= self.max_range:
+            raise ValueError(
+                f"sonar.min_range must be < sonar.max_range ({self.max_range}), "
+                f"got {self.min_range}"
+            )
+        _set(self, "noise_std", check_real(self.noise_std, "sonar.noise_std", low=0.0,
+                                           low_inclusive=True))
+        _set(self, "dropout_incidence", check_real(self.dropout_incidence,
+                                                   "sonar.dropout_incidence", low=0.0,
+                                                   low_inclusive=True, high=90.0))
+        _set(self, "dropout_prob", check_real(self.dropout_prob, "sonar.dropout_prob", low=0.0,
+                                              low_inclusive=True, high=1.0))
+        _set(self, "measure_every", _check_optional_real(self.measure_every,
+                                                         "sonar.measure_every", low=0.0))
+
+
+@dataclass(frozen=True, slots=True)
+class MappingConfig:
+    """Mapping and fusion in the loop.
+
+    Attributes:
+        grid_resolution: cell size of each robot's occupancy grid, metres.
+        topo_every: re-extract each robot's topological map every this many steps (``0`` never).
+        merge_every: merge the two topological maps every this many steps (``0`` never).
+        merge_method: ``fusion.merge_maps`` method, or ``"none"``.
+        local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
+        local_map_resolution: metres per ``local_map`` cell.
+        max_nodes: graph nodes in the observation (nearest first; padded with a mask).
+    """
+
+    grid_resolution: float = 0.1
+    topo_every: int = 10
+    merge_every: int = 25
+    merge_method: str = "auto"
+    local_map_size: int = 64
+    local_map_resolution: float = 0.15
+    max_nodes: int = 32
+
+    def __post_init__(self) -> None:
+        _set(self, "grid_resolution", check_real(self.grid_resolution,
+                                                 "mapping.grid_resolution", low=0.02,
+                                                 low_inclusive=True, high=0.5))
+        _set(self, "topo_every", check_int(self.topo_every, "mapping.topo_every", low=0))
+        _set(self, "merge_every", check_int(self.merge_every, "mapping.merge_every", low=0))
+        _check_choice(self.merge_method, "mapping.merge_method", MERGE_METHODS)
+        _set(self, "local_map_size", check_int(self.local_map_size, "mapping.local_map_size",
+                                               low=64))
+        if self.local_map_size > 512:
+            raise ValueError(f"mapping.local_map_size must be <= 512, got {self.local_map_size}")
+        _set(self, "local_map_resolution", check_real(self.local_map_resolution,
+                                                      "mapping.local_map_resolution", low=0.0,
+                                                      high=1.0))
+        _set(self, "max_nodes", check_int(self.max_nodes, "mapping.max_nodes", low=1))
+        if self.max_nodes > 256:
+            raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
+
+
+@dataclass(frozen=True, slots=True)
+class EnvConfig:
+    """Everything that defines a ``two_robot_explore`` episode (the manual's Arguments table).
+
+    Attributes:
+        world, robot, sonar, mapping: the groups above.
+        max_cycles: truncation after this many steps.
+        target_coverage: termination when the true covered fraction of the reachable free area
+            reaches this, in ``(0, 1]``.
+        reward_mode: ``"shared"``, ``"oracle"`` or ``"individual"``.
+        coverage_reward: reward per newly covered m².
+        collision_penalty: reward subtracted per new collision (robot–wall or robot–robot).
+        time_penalty: reward subtracted every step.
+        action_type: ``"continuous"`` (``Box(-1, 1, (2,))``) or ``"discrete"`` (5 actions).
+    """
+
+    world: WorldConfig = field(default_factory=WorldConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    sonar: SonarConfig = field(default_factory=SonarConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    max_cycles: int = 1000
+    target_coverage: float = 0.95
+    reward_mode: str = "shared"
+    coverage_reward: float = 0.1
+    collision_penalty: float = 0.5
+    time_penalty: float = 0.01
+    action_type: str = "continuous"
+
+    def __post_init__(self) -> None:
+        _set(self, "world", _build(WorldConfig, self.world, "world"))
+        _set(self, "robot", _build(RobotConfig, self.robot, "robot"))
+        _set(self, "sonar", _build(SonarConfig, self.sonar, "sonar"))
+        _set(self, "mapping", _build(MappingConfig, self.mapping, "mapping"))
+        _set(self, "max_cycles", check_int(self.max_cycles, "max_cycles", low=1))
+        _set(self, "target_coverage", check_real(self.target_coverage, "target_coverage",
+                                                 low=0.0, high=1.0))
+        _check_choice(self.reward_mode, "reward_mode", REWARD_MODES)
+        _set(self, "coverage_reward", check_real(self.coverage_reward, "coverage_reward",
+                                                 low=0.0, low_inclusive=True))
+        _set(self, "collision_penalty", check_real(self.collision_penalty, "collision_penalty",
+                                                   low=0.0, low_inclusive=True))
+        _set(self, "time_penalty", check_real(self.time_penalty, "time_penalty", low=0.0,
+                                              low_inclusive=True))
+        _check_choice(self.action_type, "action_type", ACTION_TYPES)
+        if self.world.start_clearance < self.robot.radius:
+            raise ValueError(
+                f"world.start_clearance must be >= robot.radius ({self.robot.radius}), "
+                f"got {self.world.start_clearance}"
+            )
+        if self.world.source == "procedural" and self.world.door_width <= 2 * self.robot.radius:
+            raise ValueError(
+                f"world.door_width must be > 2 * robot.radius ({2 * self.robot.radius}) so a "
+                f"robot fits through, got {self.world.door_width}"
+            )
+
+    @classmethod
+    def from_kwargs(cls, **kwargs: Any) -> EnvConfig:
+        """Build from keyword arguments; groups may be dicts. Unknown keys are a ``ValueError``.
+
+        >>> EnvConfig.from_kwargs(max_cycles=50, sonar={"rays": 1}).sonar.rays
+        1
+        """
+        allowed = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(k for k in kwargs if k not in allowed)
+        if unknown:
+            raise ValueError(f"unknown config keys {unknown}; allowed: {allowed}")
+        return cls(**kwargs)
+
+    def replace(self, **changes: Any) -> EnvConfig:
+        """A copy with ``changes`` applied (validated like :meth:`from_kwargs`)."""
+        allowed = [f.name for f in dataclasses.fields(self)]
+        unknown = sorted(k for k in changes if k not in allowed)
+        if unknown:
+            raise ValueError(f"unknown config keys {unknown}; allowed: {allowed}")
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def max_turn_rate_rad(self) -> float:
+        """``robot.max_turn_rate`` in radians per second."""
+        return math.radians(self.robot.max_turn_rate)
