@@ -1,0 +1,125 @@
+"""ParallelVecEnv: SB3 VecEnv semantics (auto-reset, terminal observation, truncation flag,
+seeding) on a small scripted ParallelEnv, in-process and across worker processes."""
+
+import functools
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from agents.sb3 import ParallelVecEnv
+
+
+class CountdownEnv(ParallelEnv):
+    """Two agents; the episode terminates when the summed actions reach ``goal`` and truncates
+    at ``limit`` steps. Observations: {"t": step, "seed": the reset seed or a draw}."""
+
+    metadata = {"name": "countdown_v0"}
+
+    def __init__(self, goal: float = 3.0, limit: int = 5):
+        self.possible_agents = ["a", "b"]
+        self.goal, self.limit = goal, limit
+        self.render_mode = None
+        self.rng = np.random.default_rng()
+
+    def observation_space(self, agent):
+        return spaces.Dict({"t": spaces.Box(0, 100, (1,), np.float32),
+                            "seed": spaces.Box(-1, 2**31, (1,), np.float32)})
+
+    def action_space(self, agent):
+        return spaces.Box(0, 1, (1,), np.float32)
+
+    def _obs(self):
+        return {a: {"t": np.array([self.t], np.float32), "seed": np.array([self.s], np.float32)}
+                for a in self.agents}
+
+    def reset(self, seed=None, options=None):
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self.s = seed if seed is not None else float(self.rng.integers(1000))
+        self.agents = list(self.possible_agents)
+        self.t, self.total = 0, 0.0
+        return self._obs(), {a: {"reset": True} for a in self.agents}
+
+    def step(self, actions):
+        self.t += 1
+        self.total += sum(float(np.asarray(v).sum()) for v in actions.values())
+        term = self.total >= self.goal
+        trunc = self.t >= self.limit and not term
+        obs = self._obs()
+        rew = {a: float(self.t) for a in self.agents}
+        terms = {a: term for a in self.agents}
+        truncs = {a: trunc for a in self.agents}
+        infos = {a: {"t": self.t} for a in self.agents}
+        if term or trunc:
+            self.agents = []
+        return obs, rew, terms, truncs, infos
+
+
+def make(goal=3.0, limit=5):
+    return functools.partial(CountdownEnv, goal, limit)
+
+
+def test_termination_auto_resets_with_terminal_observation():
+    venv = ParallelVecEnv([make(goal=5.5)])
+    assert venv.num_envs == 2
+    venv.seed(7)
+    obs = venv.reset()
+    assert obs["seed"][:, 0].tolist() == [7, 7]
+    for t in (1, 2):
+        obs, rew, dones, infos = venv.step(np.ones((2, 1)))
+        assert not dones.any() and obs["t"][:, 0].tolist() == [t, t]
+    obs, rew, dones, infos = venv.step(np.ones((2, 1)))  # total 6 >= 5.5: terminated
+    assert dones.tolist() == [True, True] and rew.tolist() == [3.0, 3.0]
+    for info in infos:
+        assert info["terminal_observation"]["t"][0] == 3
+        assert info["TimeLimit.truncated"] is False
+    assert obs["t"][:, 0].tolist() == [0, 0]  # already the next episode
+
+
+def test_truncation_sets_time_limit_flag():
+    venv = ParallelVecEnv([make(goal=1e9, limit=2)])
+    venv.reset()
+    venv.step(np.zeros((2, 1)))
+    _, _, dones, infos = venv.step(np.zeros((2, 1)))
+    assert dones.all() and all(i["TimeLimit.truncated"] is True for i in infos)
+
+
+def test_seeding_gives_each_env_its_own_reproducible_seed():
+    venv = ParallelVecEnv([make(), make(), make()])
+    assert venv.seed(100) == [100 + i for i in range(6)]
+    obs = venv.reset()
+    assert obs["seed"][:, 0].tolist() == [100, 100, 102, 102, 104, 104]
+    unseeded = venv.reset()["seed"][:, 0]  # seeds are used once (SB3 semantics)
+    assert unseeded.tolist() != [100, 100, 102, 102, 104, 104]
+
+
+def rollout(venv, steps=12):
+    venv.seed(3)
+    out = [venv.reset()["seed"].copy()]
+    rng = np.random.default_rng(0)
+    for _ in range(steps):
+        obs, rew, dones, infos = venv.step(rng.uniform(0, 1, (venv.num_envs, 1)))
+        out += [obs["t"].copy(), obs["seed"].copy(), rew.copy(), dones.copy()]
+    return out
+
+
+def test_worker_processes_match_in_process():
+    fns = [make(2.0, 4), make(3.0, 6), make(1.0, 3)]
+    local = ParallelVecEnv(fns)
+    remote = ParallelVecEnv(fns, n_workers=2)
+    try:
+        for a, b in zip(rollout(local), rollout(remote), strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert remote.get_attr("goal") == [2.0, 2.0, 3.0, 3.0, 1.0, 1.0]
+        assert remote.env_method("action_space", "a", indices=[5])[0].shape == (1,)
+    finally:
+        remote.close()
+
+
+def test_bad_arguments():
+    with pytest.raises(TypeError, match="env_fns must be a non-empty sequence"):
+        ParallelVecEnv([])
+    with pytest.raises(ValueError, match="n_workers must be >= 1, got 0"):
+        ParallelVecEnv([make()], n_workers=0)
