@@ -1,9 +1,12 @@
 """The sonar ring: a sensor object (VMAS ``Lidar`` style) over pymunk ray casts.
 
 Each of the ``S`` sonars (the Pioneer front ring by default) is a cone sampled by ``K`` rays
-spread evenly across it. A ray is a ``space.segment_query_first`` from the transducer on the
-robot's rim, with the robot's own :attr:`Robot.sensor_filter` so its own disc is skipped; it
-sees the world's wall segments (the very shapes robots collide with) and the teammate's disc.
+spread evenly across it. A ray is a ``space.segment_query_first`` from the robot's centre
+with the robot's own :attr:`Robot.sensor_filter`, so its own disc is skipped; it sees the
+world's wall segments (the very shapes robots collide with) and the teammate's disc. Ranges are
+reported from the transducers on the rim (``mount_radius`` less than the distance from the
+centre). Rays start at the centre, not on the rim, because a robot pressed against a wall has
+its rim on (or, within the contact slop, just past) the wall: a ray from there could miss it.
 
 Per ray, an echo whose incidence angle (between the ray and the surface normal) exceeds
 ``dropout_incidence`` is lost with probability ``dropout_prob`` (specular reflection: the sound
@@ -40,7 +43,7 @@ class Sonar:
     """
 
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "last_pose", "fresh",
-                 "_local_dir", "_local_origin", "_cos_dropout", "_since", "_n_rays", "_rays")
+                 "_local_dir", "_length", "_cos_dropout", "_since", "_n_rays", "_rays")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -53,8 +56,7 @@ class Sonar:
         self._n_rays = self.ray_angles.size
         ra = self.ray_angles.ravel()
         self._local_dir = np.stack([np.cos(ra), np.sin(ra)], axis=1)
-        origin = np.stack([np.cos(self.angles), np.sin(self.angles)], axis=1) * self.mount_radius
-        self._local_origin = np.repeat(origin, self._rays, axis=0)
+        self._length = self.mount_radius + cfg.max_range
         self._cos_dropout = math.cos(math.radians(cfg.dropout_incidence))
         self.last = np.full(len(self.angles), cfg.max_range)
         self.last_pose = np.zeros(3)
@@ -68,30 +70,32 @@ class Sonar:
         self._since = math.inf
 
     def ray_segments(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World ``(S*K, 2)`` start and end points of every ray from ``pose``."""
+        """World ``(S*K, 2)`` start and end points of every ray from ``pose``: from the centre,
+        ``mount_radius + max_range`` long."""
         c, s = math.cos(pose[2]), math.sin(pose[2])
         rot = np.array([[c, s], [-s, c]])
-        starts = self._local_origin @ rot + pose[:2]
-        ends = starts + (self._local_dir @ rot) * self.cfg.max_range
+        starts = np.broadcast_to(pose[:2], (self._n_rays, 2))
+        ends = starts + (self._local_dir @ rot) * self._length
         return starts, ends
 
     def cast(self, space: pymunk.Space, pose: np.ndarray,
              shape_filter: pymunk.ShapeFilter) -> tuple[np.ndarray, np.ndarray]:
-        """Noise-free ray casts: ``(S*K,)`` hit distances (``inf`` = nothing within
-        ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
+        """Noise-free ray casts: ``(S*K,)`` hit distances from the transducers (``inf`` =
+        nothing within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
         starts, ends = self.ray_segments(pose)
         query = space.segment_query_first
-        max_range = self.cfg.max_range
+        length = self._length
+        mount = self.mount_radius
         dist = [math.inf] * self._n_rays
         cos_inc = [1.0] * self._n_rays
         dirs = (ends - starts).tolist()
         for i, (a, b) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
             hit = query(a, b, 0.0, shape_filter)
             if hit is not None:
-                dist[i] = hit.alpha * max_range
+                dist[i] = hit.alpha * length - mount
                 n = hit.normal
                 d = dirs[i]
-                cos_inc[i] = abs(n.x * d[0] + n.y * d[1]) / max_range
+                cos_inc[i] = abs(n.x * d[0] + n.y * d[1]) / length
         return np.asarray(dist), np.asarray(cos_inc)
 
     def measure(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter,

@@ -42,8 +42,9 @@ def test_pymunk_rays_agree_with_numpy_reference(scene):
         ref, normal = cast_rays(starts, ends, world.segments, circle)
         np.testing.assert_array_equal(np.isinf(dist), np.isinf(ref))
         hit = np.isfinite(ref)
-        np.testing.assert_allclose(dist[hit], ref[hit], atol=1e-6)
-        dirs = (ends - starts) / sonar.cfg.max_range
+        # readings are from the transducer, mount_radius out from the centre the rays start at
+        np.testing.assert_allclose(dist[hit], ref[hit] - 0.25, atol=1e-6)
+        dirs = (ends - starts) / np.hypot(*(ends - starts).T)[:, None]
         ref_cos = np.abs(np.einsum("ij,ij->i", dirs, normal))
         np.testing.assert_allclose(cos_inc[hit], ref_cos[hit], atol=1e-6)
         checked += int(hit.sum())
@@ -60,7 +61,8 @@ def test_own_disc_is_not_seen_but_teammate_is(scene):
     ref, _ = cast_rays(starts, ends, world.segments, np.array([[other[0], other[1], 0.25]]))
     dist, _ = sonar.cast(space, pose, robots[0].sensor_filter)
     assert dist[0] > 0.1  # not the ray's own robot at alpha 0
-    assert dist[0] == pytest.approx(ref[0], abs=1e-6)
+    assert dist[0] == pytest.approx(ref[0] - 0.25, abs=1e-6)
+    assert dist[0] == pytest.approx(1.0 - 0.25 - 0.25, abs=1e-6)
     own, _ = sonar.cast(space, robots[0].true_pose(), robots[0].sensor_filter)
     assert np.all(own > 0.1)
 
@@ -76,6 +78,7 @@ def test_reading_is_nearest_echo_clipped_and_noise_free_when_asked(scene):
     expected = np.clip(np.where(np.isfinite(nearest), nearest, cfg.max_range), cfg.min_range,
                        cfg.max_range)
     np.testing.assert_allclose(reading, expected)
+    assert (reading < cfg.max_range).any()
     assert sonar.fresh
     np.testing.assert_array_equal(sonar.last_pose, pose)
 
