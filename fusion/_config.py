@@ -1,4 +1,4 @@
-"""Building the frozen config dataclasses of :mod:`fusion` from plain dicts (unknown keys refused)."""
+"""Frozen config dataclasses of :mod:`fusion` from plain dicts (unknown keys refused)."""
 
 from __future__ import annotations
 

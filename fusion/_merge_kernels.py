@@ -219,6 +219,10 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
         for f in range(q_edges.shape[0]):
             bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
             sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
+            if (max(ax, ax + rx) < min(bx, bx + sx) or max(bx, bx + sx) < min(ax, ax + rx)
+                    or max(ay, ay + ry) < min(by, by + sy)
+                    or max(by, by + sy) < min(ay, ay + ry)):
+                continue
             den = rx * sy - ry * sx
             if abs(den) < min_sin * math.sqrt((rx * rx + ry * ry) * (sx * sx + sy * sy)):
                 continue
@@ -229,19 +233,31 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
     return n
 
 
-@njit(cache=True, nogil=True)
-def match_and_conflicts(A, a_kind, a_edges, B, b_kind, b_edges, theta, tx, ty, eps, compat,
-                        loose_kind, a_margin, b_margin):
-    """Matches and conflicts of B moved by ``(theta, tx, ty)`` onto A.
+N_FEATURES = 8
+"""Columns of :func:`evidence`'s feature vector: closeness, inliers, matched paths, conflicts,
+crossings, branches agreeing, branches disagreeing, sum of squared match distances."""
 
-    Returns ``(match_b, d2_b, conflicts, crossings)``: ``match_b[b]`` is the A node mutually
-    nearest (among compatible kinds, within ``eps``) to B node ``b``, or ``-1``; ``d2_b`` its
-    squared distance. A *conflict* is a node of either map (other than ``loose_kind``, the dead
-    ends that frontier artefacts make) with no node of the other map within ``eps`` but lying
-    within ``eps`` of one of its paths: the other robot went there and saw no such place.
-    ``crossings`` counts paths of the two maps crossing away from their ends (farther than the
-    fractions ``a_margin[e]`` of A's path ``e`` and ``b_margin[f]`` of B's path ``f``).
+
+@njit(cache=True, nogil=True)
+def _angle_gap(a, b):
+    return abs((a - b + math.pi) % (2.0 * math.pi) - math.pi)
+
+
+@njit(cache=True, nogil=True)
+def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
+             b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin, match_b,
+             d2_b):
+    """The evidence for B moved by ``(theta, tx, ty)`` onto A (see ``MergeEvidence``).
+
+    Fills ``match_b[b]`` (the A node mutually nearest to B node ``b`` among compatible kinds
+    within ``eps``, or ``-1``) and ``d2_b`` (squared distance to it) and returns the
+    :data:`N_FEATURES` features. A *conflict* is a node of either map (other than
+    ``loose_kind``, the dead ends that frontier artefacts make) with no node of the other map
+    within ``eps`` but lying within ``eps`` of one of its paths: the other robot went there and
+    saw no such place. ``a_near[i, j]``: A nodes joined by a path or two. ``a_branch``,
+    ``b_branch``: direction of each path leaving each node, NaN padded.
     """
+    out = np.zeros(N_FEATURES)
     c, s = math.cos(theta), math.sin(theta)
     X = np.empty_like(B)
     for b in range(B.shape[0]):
@@ -249,7 +265,6 @@ def match_and_conflicts(A, a_kind, a_edges, B, b_kind, b_edges, theta, tx, ty, e
         X[b, 1] = s * B[b, 0] + c * B[b, 1] + ty
     eps2 = eps * eps
     nn_b = np.empty(B.shape[0], dtype=np.int64)
-    d2_b = np.empty(B.shape[0])
     for b in range(B.shape[0]):
         nn_b[b], d2_b[b] = _nearest_compatible(X[b, 0], X[b, 1], b_kind[b], A, a_kind, False,
                                                compat, eps2)
@@ -257,19 +272,59 @@ def match_and_conflicts(A, a_kind, a_edges, B, b_kind, b_edges, theta, tx, ty, e
     for a in range(A.shape[0]):
         nn_a[a], _ = _nearest_compatible(A[a, 0], A[a, 1], a_kind[a], X, b_kind, True,
                                          compat, eps2)
-    match_b = np.full(B.shape[0], -1, dtype=np.int64)
     for b in range(B.shape[0]):
         a = nn_b[b]
+        match_b[b] = -1
         if a >= 0 and nn_a[a] == b:
             match_b[b] = a
-    conflicts = 0
+            out[0] += 1.0 - d2_b[b] / eps2
+            out[1] += 1.0
+            out[7] += d2_b[b]
+            for i in range(b_branch.shape[1]):  # branches of b against those of a
+                if math.isnan(b_branch[b, i]):
+                    continue
+                hit = False
+                for j in range(a_branch.shape[1]):
+                    if not math.isnan(a_branch[a, j]) and _angle_gap(
+                            a_branch[a, j], b_branch[b, i] + theta) <= branch_tol:
+                        hit = True
+                out[5 if hit else 6] += 1.0
+            for j in range(a_branch.shape[1]):  # branches of a without one of b
+                if math.isnan(a_branch[a, j]):
+                    continue
+                hit = False
+                for i in range(b_branch.shape[1]):
+                    if not math.isnan(b_branch[b, i]) and _angle_gap(
+                            a_branch[a, j], b_branch[b, i] + theta) <= branch_tol:
+                        hit = True
+                if not hit:
+                    out[6] += 1.0
+    for e in range(b_edges.shape[0]):
+        u, v = match_b[b_edges[e, 0]], match_b[b_edges[e, 1]]
+        if u >= 0 and v >= 0 and a_near[u, v]:
+            out[2] += 1.0
     for b in range(B.shape[0]):
         if b_kind[b] != loose_kind and not _any_node_within(X[b, 0], X[b, 1], A, eps2):
             if _near_segment(X[b, 0], X[b, 1], A, a_edges, eps2):
-                conflicts += 1
+                out[3] += 1.0
     for a in range(A.shape[0]):
         if a_kind[a] != loose_kind and not _any_node_within(A[a, 0], A[a, 1], X, eps2):
             if _near_segment(A[a, 0], A[a, 1], X, b_edges, eps2):
-                conflicts += 1
-    crossings = _crossings(A, a_edges, a_margin, X, b_edges, b_margin, 0.5)
-    return match_b, d2_b, conflicts, crossings
+                out[3] += 1.0
+    out[4] = _crossings(A, a_edges, a_margin, X, b_edges, b_margin, min_sin)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
+                   b_margin, b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol,
+                   min_sin):
+    """:func:`evidence` for every hypothesis: an ``(H, N_FEATURES)`` array."""
+    out = np.empty((theta.shape[0], N_FEATURES))
+    match_b = np.empty(B.shape[0], dtype=np.int64)
+    d2_b = np.empty(B.shape[0])
+    for h in range(theta.shape[0]):
+        out[h] = evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
+                          b_margin, b_branch, theta[h], tx[h], ty[h], eps, compat, loose_kind,
+                          branch_tol, min_sin, match_b, d2_b)
+    return out

@@ -56,7 +56,9 @@ class SyntheticConfig:
         spacing: ``(low, high)`` of the uniform gap between neighbouring lattice lines.
         keep_fraction: fraction of lattice points that exist (holes make the world irregular).
         loop_fraction: fraction of the lattice corridors outside the spanning tree kept (loops).
-        jitter: std of the world nodes' offsets from the lattice.
+        jitter: std of the world nodes' offsets from the lattice (junctions of a real building
+            are not on a perfect grid: rooms and corridor widths vary). The smaller it is, the
+            more chance alignments a lattice-like world offers.
         straight_deg: a degree-2 node turning by less than this is not a node (it is contracted).
         map_nodes: ``(low, high)`` inclusive range of explored world nodes per robot.
         noise: std of the per-axis Gaussian noise on every map node.
@@ -73,7 +75,7 @@ class SyntheticConfig:
     spacing: tuple[float, float] = (2.5, 6.0)
     keep_fraction: float = 0.85
     loop_fraction: float = 0.3
-    jitter: float = 0.2
+    jitter: float = 0.3
     straight_deg: float = 20.0
     map_nodes: tuple[int, int] = (15, 60)
     noise: float = 0.15
@@ -181,7 +183,8 @@ def random_world(rng: np.random.Generator, shape: tuple[int, int],
     ys = np.concatenate([[0.0], np.cumsum(rng.uniform(*cfg.spacing, rows - 1))])
     lattice = nx.grid_2d_graph(rows, cols)
     kept = rng.random(rows * cols) < cfg.keep_fraction
-    lattice.remove_nodes_from([n for n, k in zip(sorted(lattice.nodes), kept, strict=True) if not k])
+    lattice.remove_nodes_from(
+        [n for n, k in zip(sorted(lattice.nodes), kept, strict=True) if not k])
     if lattice.number_of_nodes() < 2:
         lattice = nx.grid_2d_graph(rows, cols)
     biggest = max(nx.connected_components(lattice), key=lambda c: (len(c), min(c)))

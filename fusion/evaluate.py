@@ -1,0 +1,483 @@
+"""Evaluate map merging against ground truth and an oracle: ``python -m fusion.evaluate``.
+
+    python -m fusion.evaluate --synthetic 200 --methods auto,paper_icp,exhaustive,multistart_icp
+    python -m fusion.evaluate PAIRS_DIR --methods auto,paper_icp --out out/eval_dataset
+
+For every pair and method it records whether the merge was accepted, the rotation error and the
+translation error (distance between the true and the estimated position of B's centroid in A's
+frame: ``‖ΔT‖`` alone depends on B's arbitrary origin), and the wall time. A merge **succeeds**
+when it is accepted with rotation error < 2° and translation error < 0.3 m. The **oracle** is the
+SVD fit on the true node correspondences (always "accepted"): the ceiling any point-based
+estimate can reach — noise, dropped nodes and the thresholds cap it below 100%. On pairs without
+overlap, any accepted merge is a **false accept**.
+
+Printed: per noise level, success per overlap bin (with the oracle), then per method the success
+on pairs with ≥ 40% overlap, median errors, median time and false-accept rate, and success per
+true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). Written to
+``--out``: ``results.json`` (every record and the summary), ``error_cdf.png``,
+``success_vs_overlap.png``, ``success_vs_rotation.png`` and ``merged_*.png`` pictures.
+
+Pairs come from :func:`fusion.synthetic.generate_pairs` (``--synthetic N``, once per ``--noise``
+level, with the true correspondences so the oracle can be computed) or from a map-pair dataset
+folder (:func:`load_pair_dir`; the agents' format, read by ``agents.pairs``: it stores no node
+correspondences, so the oracle column is empty).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fusion._config import config_from
+from fusion.icp import best_rotation_angle
+from fusion.merge import METHODS, MergeConfig, merge_maps
+from fusion.rigid import Rigid2D
+from fusion.synthetic import SyntheticConfig, generate_pairs
+from topo.graph import TopoMap
+
+ROTATION_OK_DEG = 2.0
+"""Success threshold on the rotation error (degrees)."""
+TRANSLATION_OK_M = 0.3
+"""Success threshold on the translation error at B's centroid (metres)."""
+OVERLAP_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
+"""Edges of the overlap bins of the tables (the last bin includes 1.0)."""
+ROTATION_BINS_DEG = (0.0, 30.0, 90.0, 180.0)
+"""Edges of the |true rotation| bins of the rotation table."""
+NO_OVERLAP_KINDS = ("disjoint", "other_world", "no_overlap")
+"""Pair kinds on which an accepted merge is a false accept."""
+ORACLE = "oracle"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EvalPair:
+    """A pair to evaluate, whatever its source.
+
+    Attributes:
+        name: identifies the pair in the results (``"synthetic/s0.15/17"``, ``"pair_000017"``).
+        map_a, map_b: the two maps, each in its own frame.
+        transform: the true B → A motion; ``None`` when there is none (two different worlds).
+        correspondences: ``(K, 2)`` true node pairs ``(a, b)``, or ``None`` if unknown.
+        overlap: shared fraction of the explored areas, in ``[0, 1]``.
+        kind: ``"overlap"`` or one of :data:`NO_OVERLAP_KINDS`.
+        noise: node noise std the pair was made with (``None`` if unknown).
+    """
+
+    name: str
+    map_a: TopoMap
+    map_b: TopoMap
+    transform: Rigid2D | None
+    correspondences: np.ndarray | None
+    overlap: float
+    kind: str
+    noise: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    """One method on one pair (a row of ``results.json``)."""
+
+    pair: str
+    method: str
+    kind: str
+    overlap: float
+    noise: float | None
+    true_rotation_deg: float | None
+    accepted: bool
+    rotation_error_deg: float | None
+    translation_error_m: float | None
+    success: bool
+    time_s: float
+    score: float | None
+    reason: str | None
+    nodes_a: int
+    nodes_b: int
+
+
+# ----------------------------------------------------------------------------------- pairs
+def synthetic_pairs(n: int, seed: int = 0, noise_levels: Sequence[float] = (0.05, 0.15, 0.3),
+                    config: SyntheticConfig | dict | None = None) -> list[EvalPair]:
+    """``n`` pairs of :func:`fusion.synthetic.generate_pairs` per noise level (the same worlds
+    and regions at every level: only the noise differs)."""
+    base = config_from(SyntheticConfig, config, "config")
+    out = []
+    for noise in noise_levels:
+        cfg = config_from(SyntheticConfig, {**asdict(base), "noise": float(noise)}, "config")
+        for p in generate_pairs(n, seed, cfg):
+            out.append(EvalPair(f"synthetic/s{noise:g}/{p.index}", p.map_a, p.map_b,
+                                None if p.kind == "other_world" else p.transform,
+                                p.correspondences, p.overlap, p.kind, float(noise)))
+    return out
+
+
+def load_pair_dir(path: str | Path) -> list[EvalPair]:
+    """The pairs of a map-pair dataset folder (the agents' format, read by
+    ``agents.pairs.load_pairs``; imported here only, so :mod:`fusion` does not depend on
+    :mod:`agents`). Pairs with zero overlap count as no-overlap pairs.
+
+    Raises:
+        FileNotFoundError: ``path`` is not a folder.
+        ImportError: ``agents.pairs`` is not available.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise FileNotFoundError(f"PAIRS_DIR {str(path)!r} is not a folder")
+    from agents.pairs import load_pairs  # the dataset format belongs to agents
+
+    out = []
+    for p in load_pairs(path):
+        kind = "overlap" if p.overlap > 0 else "no_overlap"
+        out.append(EvalPair(f"pair_{p.pair_id:06d}", p.map_a, p.map_b, p.transform, None,
+                            float(p.overlap), kind, None))
+    return out
+
+
+def oracle_transform(pair: EvalPair) -> Rigid2D | None:
+    """The SVD fit of B's truly corresponding nodes onto A's (``None`` with fewer than 2)."""
+    c = pair.correspondences
+    if c is None or len(c) < 2:
+        return None
+    P, Q = pair.map_b.xy[c[:, 1]], pair.map_a.xy[c[:, 0]]
+    theta = best_rotation_angle(P, Q)
+    R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    return Rigid2D(theta, Q.mean(axis=0) - R @ P.mean(axis=0))
+
+
+def transform_errors(estimate: Rigid2D, pair: EvalPair) -> tuple[float, float] | None:
+    """(rotation error in degrees, translation error in metres at B's centroid), or ``None``
+    when the pair has no true transform."""
+    if pair.transform is None or pair.map_b.n_nodes == 0:
+        return None
+    centre = pair.map_b.xy.mean(axis=0)
+    return (math.degrees(estimate.rotation_error(pair.transform)),
+            estimate.translation_error(pair.transform, at=centre))
+
+
+# ------------------------------------------------------------------------------ evaluation
+def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bool,
+            time_s: float, score: float | None, reason: str | None) -> Record:
+    errors = transform_errors(transform, pair) if transform is not None else None
+    good = (errors is not None and pair.kind == "overlap"
+            and errors[0] < ROTATION_OK_DEG and errors[1] < TRANSLATION_OK_M)
+    return Record(
+        pair.name, method, pair.kind, pair.overlap, pair.noise,
+        None if pair.transform is None else pair.transform.degrees, bool(accepted),
+        None if errors is None else errors[0], None if errors is None else errors[1],
+        bool(accepted and good), float(time_s), score, reason, pair.map_a.n_nodes,
+        pair.map_b.n_nodes)
+
+
+def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
+             config: MergeConfig | dict | None = None, progress: bool = True) -> list[Record]:
+    """Run every method (and the oracle, where correspondences are known) on every pair."""
+    methods = parse_methods(methods)
+    cfg = config_from(MergeConfig, config, "config")
+    from tqdm import tqdm
+
+    records = []
+    bar = tqdm(total=len(pairs) * len(methods), unit="merge", disable=not progress,
+               desc="merging", file=sys.stderr)
+    for pair in pairs:
+        oracle = oracle_transform(pair)
+        if pair.correspondences is not None:
+            records.append(_record(pair, ORACLE, oracle, oracle is not None, 0.0, None,
+                                   None if oracle is not None else "fewer than 2 true pairs"))
+        for method in methods:
+            r = merge_maps(pair.map_a, pair.map_b, method=method, config=cfg)
+            records.append(_record(pair, method, r.transform, r.accepted, r.time_s, r.score,
+                                   r.reason))
+            bar.update()
+    bar.close()
+    return records
+
+
+def parse_methods(methods: str | Iterable[str]) -> list[str]:
+    """``"auto,paper_icp"`` or a list of names → the list; unknown names are a ``ValueError``."""
+    names = [m.strip() for m in methods.split(",")] if isinstance(methods, str) else list(methods)
+    names = [m for m in names if m]
+    unknown = [m for m in names if m not in METHODS]
+    if unknown or not names:
+        raise ValueError(f"methods must be a comma-separated list of {list(METHODS)}, "
+                         f"got {unknown or names}")
+    return list(dict.fromkeys(names))
+
+
+# ------------------------------------------------------------------------------- summaries
+def _bin_label(lo: float, hi: float, unit: str = "") -> str:
+    return f"{lo:g}-{hi:g}{unit}"
+
+
+def _in_bin(value: float, lo: float, hi: float, last: bool) -> bool:
+    return lo <= value < hi or (last and value == hi)
+
+
+def _rate(rows: list[Record]) -> float | None:
+    return 100.0 * sum(r.success for r in rows) / len(rows) if rows else None
+
+
+def _median(values: Iterable[float | None]) -> float | None:
+    vals = [v for v in values if v is not None]
+    return statistics.median(vals) if vals else None
+
+
+def summarise(records: Sequence[Record]) -> dict[str, Any]:
+    """Per noise level: success rate per overlap bin and per |true rotation| bin, and per
+    method the success on ≥ 40% overlap, median errors, median time and false-accept rate."""
+    out: dict[str, Any] = {}
+    methods = list(dict.fromkeys(r.method for r in records))
+    noises = sorted({r.noise for r in records}, key=lambda v: (v is None, v or 0.0))
+    for noise in noises:
+        rows = [r for r in records if r.noise == noise]
+        key = "unknown" if noise is None else f"{noise:g}"
+        level: dict[str, Any] = {"overlap_bins": {}, "rotation_bins": {}, "methods": {}}
+        edges = OVERLAP_BINS
+        for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+            in_bin = [r for r in rows if r.kind == "overlap"
+                      and _in_bin(r.overlap, lo, hi, i == len(edges) - 2)]
+            level["overlap_bins"][_bin_label(lo, hi)] = {
+                "pairs": len({r.pair for r in in_bin}),
+                **{m: _rate([r for r in in_bin if r.method == m]) for m in methods}}
+        redges = ROTATION_BINS_DEG
+        for i, (lo, hi) in enumerate(zip(redges[:-1], redges[1:], strict=True)):
+            in_bin = [r for r in rows if r.kind == "overlap" and r.overlap >= 0.4
+                      and _in_bin(abs(r.true_rotation_deg), lo, hi, i == len(redges) - 2)]
+            level["rotation_bins"][_bin_label(lo, hi, "°")] = {
+                "pairs": len({r.pair for r in in_bin}),
+                **{m: _rate([r for r in in_bin if r.method == m]) for m in methods}}
+        for m in methods:
+            mine = [r for r in rows if r.method == m]
+            overlap = [r for r in mine if r.kind == "overlap"]
+            none = [r for r in mine if r.kind in NO_OVERLAP_KINDS]
+            level["methods"][m] = {
+                "success_overlap_ge_40": _rate([r for r in overlap if r.overlap >= 0.4]),
+                "median_rotation_error_deg": _median(r.rotation_error_deg for r in overlap),
+                "median_translation_error_m": _median(r.translation_error_m for r in overlap),
+                "median_time_ms": (None if m == ORACLE else
+                                   1000.0 * statistics.median(r.time_s for r in mine)),
+                "accepted_overlap": (100.0 * sum(r.accepted for r in overlap) / len(overlap)
+                                     if overlap else None),
+                "false_accept_rate": (100.0 * sum(r.accepted for r in none) / len(none)
+                                      if none else None),
+                "no_overlap_pairs": len(none),
+            }
+        out[key] = level
+    return out
+
+
+def _fmt(v: float | None, spec: str = ".1f") -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def format_tables(summary: dict[str, Any]) -> str:
+    """The summary as plain-text tables (what the CLI prints)."""
+    lines = []
+    for noise, level in summary.items():
+        methods = list(level["methods"])
+        lines.append(f"\n== node noise σ = {noise} m ==")
+        head = f"{'overlap':<10}{'pairs':>6}" + "".join(f"{m:>16}" for m in methods)
+        lines += ["success rate (%) per overlap bin: accepted, rotation < 2°, translation "
+                  "< 0.3 m", head]
+        for label, row in level["overlap_bins"].items():
+            lines.append(f"{label:<10}{row['pairs']:>6}"
+                         + "".join(f"{_fmt(row[m]):>16}" for m in methods))
+        lines.append("success rate (%) per |true rotation| (overlap ≥ 40%)")
+        lines.append(f"{'rotation':<10}{'pairs':>6}" + "".join(f"{m:>16}" for m in methods))
+        for label, row in level["rotation_bins"].items():
+            lines.append(f"{label:<10}{row['pairs']:>6}"
+                         + "".join(f"{_fmt(row[m]):>16}" for m in methods))
+        lines.append(f"{'method':<16}{'succ≥40%':>10}{'med rot°':>10}{'med m':>9}"
+                     f"{'med ms':>10}{'acc %':>8}{'false acc %':>13}")
+        for m, s in level["methods"].items():
+            fa = s["false_accept_rate"]
+            fa_text = "-" if fa is None else f"{_fmt(fa)} of {s['no_overlap_pairs']}"
+            lines.append(
+                f"{m:<16}{_fmt(s['success_overlap_ge_40']):>10}"
+                f"{_fmt(s['median_rotation_error_deg'], '.2f'):>10}"
+                f"{_fmt(s['median_translation_error_m'], '.2f'):>9}"
+                f"{_fmt(s['median_time_ms'], '.2f'):>10}{_fmt(s['accepted_overlap']):>8}"
+                f"{fa_text:>13}")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------- output
+def write_json(path: str | Path, obj: Any) -> Path:
+    """Write ``obj`` as indented JSON atomically (temporary file in the folder, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=".json", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(obj, fh, indent=1, allow_nan=False)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str | Path,
+                 config: MergeConfig | dict | None = None, pictures: int = 4) -> list[Path]:
+    """Error CDFs, success vs overlap, success vs true rotation, and ``pictures`` merged maps
+    (``auto`` on the first overlapping pairs of the lowest noise level). Returns the files."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topo.plotting import equal_axes, plot_topomap, save_figure
+
+    out = Path(out)
+    methods = list(dict.fromkeys(r.method for r in records))
+    overlap = [r for r in records if r.kind == "overlap"]
+    files = []
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for ax, attr, unit, limit in ((axes[0], "rotation_error_deg", "°", ROTATION_OK_DEG),
+                                  (axes[1], "translation_error_m", "m", TRANSLATION_OK_M)):
+        for m in methods:
+            v = np.sort([getattr(r, attr) for r in overlap
+                         if r.method == m and getattr(r, attr) is not None])
+            if len(v):
+                ax.step(v, np.arange(1, len(v) + 1) / len(v), where="post", label=m)
+        ax.axvline(limit, color="k", ls=":", lw=1)
+        ax.set_xscale("log")
+        ax.set_xlabel(f"{attr.replace('_', ' ')} ({unit}), all overlapping pairs")
+        ax.set_ylabel("fraction of pairs")
+    axes[0].legend()
+    files.append(save_figure(fig, out / "error_cdf.png"))
+    plt.close(fig)
+
+    for attr, edges, fname, xlabel in (
+            ("overlap", OVERLAP_BINS, "success_vs_overlap.png", "overlap"),
+            ("rotation", ROTATION_BINS_DEG, "success_vs_rotation.png",
+             "|true rotation| (°), overlap ≥ 40%")):
+        fig, ax = plt.subplots(figsize=(6, 4))
+        centres = 0.5 * (np.array(edges[:-1]) + np.array(edges[1:]))
+        for m in methods:
+            rates = []
+            for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+                last = i == len(edges) - 2
+                if attr == "overlap":
+                    rows = [r for r in overlap if r.method == m
+                            and _in_bin(r.overlap, lo, hi, last)]
+                else:
+                    rows = [r for r in overlap if r.method == m and r.overlap >= 0.4
+                            and _in_bin(abs(r.true_rotation_deg), lo, hi, last)]
+                rates.append(np.nan if not rows else _rate(rows))
+            ax.plot(centres, rates, marker="o", label=m, ls="--" if m == ORACLE else "-")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("success rate (%)")
+        ax.set_ylim(-2, 102)
+        ax.legend()
+        files.append(save_figure(fig, out / fname))
+        plt.close(fig)
+
+    cfg = config_from(MergeConfig, config, "config")
+    lowest = min((p.noise for p in pairs if p.noise is not None), default=None)
+    shown = [p for p in pairs if p.kind == "overlap" and p.noise == lowest
+             and p.overlap >= 0.3][:pictures]
+    for p in shown:
+        r = merge_maps(p.map_a, p.map_b, config=cfg)
+        fig, ax = plt.subplots(figsize=(6, 6))
+        plot_topomap(ax, p.map_a, edge_colour="tab:blue", label="A")
+        plot_topomap(ax, p.map_b.transformed(r.transform), edge_colour="tab:orange",
+                     marker="s", label="B moved by auto")
+        if p.transform is not None:
+            truth = p.transform.apply(p.map_b.xy)
+            ax.scatter(truth[:, 0], truth[:, 1], marker="x", c="k", s=20, label="B (truth)")
+        err = transform_errors(r.transform, p)
+        ax.set_title(f"{p.name}: overlap {p.overlap:.2f}, "
+                     f"{'accepted' if r.accepted else 'rejected'}"
+                     + (f", errors {err[0]:.2f}° {err[1]:.2f} m" if err else ""), fontsize=9)
+        equal_axes(ax, np.vstack([p.map_a.xy, r.transform.apply(p.map_b.xy)]))
+        ax.legend(fontsize=8)
+        files.append(save_figure(fig, out / f"merged_{p.name.replace('/', '_')}.png"))
+        plt.close(fig)
+    return files
+
+
+# -------------------------------------------------------------------------------------- CLI
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m fusion.evaluate``."""
+    p = argparse.ArgumentParser(
+        prog="python -m fusion.evaluate",
+        description="Evaluate topological map merging against ground truth and an oracle.")
+    p.add_argument("pairs_dir", nargs="?", type=Path,
+                   help="map-pair dataset folder (the agents' format); or use --synthetic")
+    p.add_argument("--synthetic", type=int, metavar="N",
+                   help="evaluate N synthetic pairs per noise level instead of a folder")
+    p.add_argument("--methods", default="auto,paper_icp,multistart_icp,exhaustive",
+                   help=f"comma-separated methods among {', '.join(METHODS)}")
+    p.add_argument("--noise", default="0.05,0.15,0.3",
+                   help="node noise levels (m) of the synthetic pairs, comma-separated")
+    p.add_argument("--seed", type=int, default=0, help="seed of the synthetic pairs")
+    p.add_argument("--synthetic-config", default=None, metavar="JSON",
+                   help="fusion.synthetic.SyntheticConfig fields as a JSON object")
+    p.add_argument("--config", default=None, metavar="JSON",
+                   help="fusion.MergeConfig fields as a JSON object, e.g. '{\"eps\": 0.6}'")
+    p.add_argument("--out", type=Path, default=Path("out/fusion_eval"),
+                   help="output folder for results.json and the plots")
+    p.add_argument("--no-plots", action="store_true", help="write results.json only")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def _json_arg(parser: argparse.ArgumentParser, text: str | None, name: str) -> dict | None:
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        parser.error(f"{name} must be a JSON object, got {text!r} ({exc})")
+    if not isinstance(value, dict):
+        parser.error(f"{name} must be a JSON object, got {text!r}")
+    return value
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI (see the module docstring); returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if (args.pairs_dir is None) == (args.synthetic is None):
+        parser.error("give either PAIRS_DIR or --synthetic N (exactly one)")
+    try:
+        methods = parse_methods(args.methods)
+        config = config_from(MergeConfig, _json_arg(parser, args.config, "--config"), "--config")
+        if args.synthetic is not None:
+            if args.synthetic < 1:
+                raise ValueError(f"--synthetic must be >= 1, got {args.synthetic}")
+            noise = [float(v) for v in args.noise.split(",") if v.strip()]
+            syn = _json_arg(parser, args.synthetic_config, "--synthetic-config")
+            pairs = synthetic_pairs(args.synthetic, args.seed, noise, syn)
+        else:
+            pairs = load_pair_dir(args.pairs_dir)
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
+        parser.error(str(exc))
+    records = evaluate(pairs, methods, config, progress=not args.quiet)
+    summary = summarise(records)
+    print(format_tables(summary))
+    source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
+              if args.synthetic is not None else str(args.pairs_dir))
+    write_json(args.out / "results.json", {
+        "source": source, "methods": methods, "config": asdict(config),
+        "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
+        "summary": summary, "records": [asdict(r) for r in records]})
+    if not args.no_plots:
+        plot_results(records, pairs, args.out, config)
+    print(f"\nwrote {args.out / 'results.json'}" + ("" if args.no_plots else " and plots"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
