@@ -8,28 +8,28 @@ merge built from the maps' structure:
    nearest nodes, at least ``min_pair_distance`` apart.
 2. **2-point consensus**: every A pair and B pair whose lengths agree within ``pair_tolerance``
    and whose end kinds are compatible (:data:`KIND_COMPATIBLE`) gives one rigid hypothesis.
-3. **Coarse score**: how many B nodes the hypothesis puts within ``coarse_tolerance`` of an A node
-   of a compatible kind (a raster lookup per node, so thousands of hypotheses cost ~1 ms).
-4. **Candidates**: the ``candidates`` best *distinct* hypotheses (non-maximum suppression on
-   angle and on where B's centroid lands), each refined by gated nearest-compatible-node SVD fits.
-5. **Evidence** per candidate (:class:`MergeEvidence`): mutual nearest matches within ``eps``
-   (the paper's ω with a tolerance, one-to-one), matched paths (B paths whose ends match A nodes
-   joined by a path, or two paths with a node between), and **conflicts** — junctions and corners
-   of one map lying on a path of the other with no node there: the other robot was there and saw
-   no such place. ``score = inliers + matched_edges − conflicts``.
-6. **Refinement** of the best candidate with the paper's ICP-SVD (:func:`fusion.icp_svd`) gated at
-   ``eps`` and trimmed (TrICP) to the estimated overlap, then a least-squares SVD fit on the
-   final matches — what the oracle does with the true correspondences.
-7. **Accept/reject** (:func:`decide`): enough inliers and matched paths, small residual, few
-   conflicts, matched nodes not collinear, and a margin over the best *distinct* runner-up
-   (a symmetric map has several equally good alignments: rejected as ambiguous).
+3. **Coarse score** of every hypothesis from a bit raster of A: +1 per B node landing within
+   ``coarse_tolerance`` of an A node of a compatible kind, −1 per B junction/corner landing on an
+   A path far from any A node (thousands of hypotheses cost about a millisecond).
+4. **Candidates**: the ``candidates`` best *distinct* hypotheses (non-maximum suppression on angle
+   and on where B's centroid lands), each refined by gated nearest-compatible-node SVD fits, and
+   fully scored (:class:`MergeEvidence`): soft one-to-one matches within ``eps`` (the paper's ω
+   with a tolerance), matched paths, **conflicts** (a junction or corner of one map on a path of
+   the other with no node there: the other robot passed and saw no such place), **crossings**
+   (paths crossing without a junction) and the agreement of the paths leaving matched nodes.
+   The score is the calibrated log-odds that the alignment is right (:data:`CONFIDENCE_WEIGHTS`).
+5. **Refinement** of the best candidate with the paper's ICP-SVD (:func:`fusion.icp_svd`), gated
+   at ``eps`` and trimmed (TrICP) to the estimated overlap, then least-squares SVD fits on mutually
+   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences.
+6. **Accept/reject** (:func:`decide`): enough matches, not collinear, log-odds at least
+   ``min_score``, and a margin of ``min_margin`` over the best *distinct* runner-up (a symmetric
+   map has several equally good alignments: rejected as ambiguous).
 
-The baselines share steps 5–7 so that their difference is the search alone: ``"paper_icp"`` is the
+The baselines share steps 4–6 so that their difference is the search alone: ``"paper_icp"`` is the
 paper's ICP-SVD from its own initialisation (no refinement), ``"exhaustive"`` the paper's search
-(:func:`fusion.exhaustive_search`, ``exhaustive_step_deg``) then the refinement, and
-``"multistart_icp"`` the paper's ICP from ``multistart_starts`` rotations, best by score, then the
-refinement. Thresholds were calibrated with ``python -m fusion.evaluate --synthetic`` (see the
-issue report): false accepts on no-overlap pairs stay well under 1%.
+(:func:`fusion.exhaustive_search`, ``exhaustive_step_deg``; its tied optima all refined, the best
+by score kept, the others its runner-up), and ``"multistart_icp"`` the paper's ICP from
+``multistart_starts`` rotations about the centroids, the 4 best refined.
 """
 
 from __future__ import annotations
@@ -513,15 +513,25 @@ def _paper_icp(map_a: TopoMap, map_b: TopoMap, pa: _Prepared, pb: _Prepared,
     return _with(_evaluate(pa, pb, res.transform.theta, res.transform.T, cfg), hypotheses=1)
 
 
+def _best_polished(pa: _Prepared, pb: _Prepared, starts: list[_Eval], cfg: MergeConfig,
+                   top: int = 4) -> _Eval:
+    """Polish the ``top`` best-scoring ``starts`` (:func:`_polish`); the best of them, with the
+    runner-up among the other polished ones and the remaining starts."""
+    ranked = sorted(starts, key=_Eval.key, reverse=True)
+    polished = [_polish(pa, pb, e, cfg) for e in ranked[:top]]
+    order = sorted(range(len(polished)), key=lambda i: polished[i].key(), reverse=True)
+    best = polished[order[0]]
+    others = [polished[i] for i in order[1:]] + ranked[top:]
+    return _with(best, runner_up=_runner_up_of(best, others, pb.xy, cfg))
+
+
 def _exhaustive(map_a: TopoMap, map_b: TopoMap, pa: _Prepared, pb: _Prepared,
                 cfg: MergeConfig) -> _Eval:
     found = exhaustive_search(map_a if len(map_a.endpoints()) else map_a.xy,
                               map_b if len(map_b.endpoints()) else map_b.xy,
                               step_deg=cfg.exhaustive_step_deg, eps=cfg.eps)
-    placements = [_evaluate(pa, pb, p.transform.theta, p.transform.T, cfg) for p in found.ties]
-    best = _polish(pa, pb, placements[0], cfg)
-    runner = _runner_up_of(best, placements[1:], pb.xy, cfg)
-    return _with(best, runner_up=runner, hypotheses=found.evaluations)
+    ties = [_evaluate(pa, pb, p.transform.theta, p.transform.T, cfg) for p in found.ties]
+    return _with(_best_polished(pa, pb, ties, cfg, top=8), hypotheses=found.evaluations)
 
 
 def _multistart(map_a: TopoMap, map_b: TopoMap, pa: _Prepared, pb: _Prepared,
@@ -534,9 +544,7 @@ def _multistart(map_a: TopoMap, map_b: TopoMap, pa: _Prepared, pb: _Prepared,
         start = Rigid2D(theta, M.mean(axis=0) - np.array([[c, -s], [s, c]]) @ D.mean(axis=0))
         res = icp_svd(M, D, tau=0.1, max_iter=100, init=start)
         evals.append(_evaluate(pa, pb, res.transform.theta, res.transform.T, cfg))
-    best = _polish(pa, pb, max(evals, key=_Eval.key), cfg)
-    runner = _runner_up_of(best, evals, pb.xy, cfg)
-    return _with(best, runner_up=runner, hypotheses=cfg.multistart_starts)
+    return _with(_best_polished(pa, pb, evals, cfg), hypotheses=cfg.multistart_starts)
 
 
 # ------------------------------------------------------------------------------ decision
@@ -624,6 +632,12 @@ def _check_map(value: object, name: str) -> TopoMap:
     return value
 
 
+def _not_tried(map_a: TopoMap, method: str, start: float, reason: str) -> MergeResult:
+    """The result when no alignment could be tried (too small, degenerate, no hypothesis)."""
+    return MergeResult(Rigid2D.identity(), False, 0.0, np.empty((0, 2), dtype=np.int64), map_a,
+                       method, time.perf_counter() - start, reason)
+
+
 def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
                config: MergeConfig | dict | None = None) -> MergeResult:
     """Align ``map_b`` onto ``map_a`` and merge them, or say why not.
@@ -662,8 +676,11 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
     small = [f"{name} has {m.n_nodes} node(s); at least 3 are needed"
              for name, m in (("map_a", map_a), ("map_b", map_b)) if m.n_nodes < 3]
     if small:
-        return MergeResult(Rigid2D.identity(), False, 0.0, np.empty((0, 2), dtype=np.int64),
-                           map_a, method, time.perf_counter() - start, "; ".join(small))
+        return _not_tried(map_a, method, start, "; ".join(small))
+    flat = [d for name, m in (("map_a", map_a), ("map_b", map_b))
+            if (d := degeneracy(m.xy, name)) is not None]
+    if flat:
+        return _not_tried(map_a, method, start, "; ".join(flat))
     pa, pb = _prepare(map_a, cfg), _prepare(map_b, cfg)
     if method == "auto":
         found = _auto(pa, pb, cfg)
@@ -674,8 +691,7 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
     else:
         found = _multistart(map_a, map_b, pa, pb, cfg)
     if isinstance(found, str):
-        return MergeResult(Rigid2D.identity(), False, 0.0, np.empty((0, 2), dtype=np.int64),
-                           map_a, method, time.perf_counter() - start, found)
+        return _not_tried(map_a, method, start, found)
     reason = decide(found.evidence, cfg)
     transform = found.transform
     merged = map_a if reason else fuse_maps(map_a, map_b, transform, found.matches, cfg.eps)

@@ -1,0 +1,92 @@
+"""The evaluation CLI: tables, JSON and plots, the oracle, dataset folders, bad arguments."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fusion.evaluate import (
+    EvalPair,
+    evaluate,
+    load_pair_dir,
+    main,
+    oracle_transform,
+    parse_methods,
+    summarise,
+    synthetic_pairs,
+)
+from fusion.synthetic import make_pair
+
+
+def test_cli_writes_results_and_plots(tmp_path, capsys):
+    out = tmp_path / "eval"
+    assert main(["--synthetic", "5", "--noise", "0.1", "--methods", "auto,paper_icp",
+                 "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "node noise σ = 0.1 m" in printed and "oracle" in printed and "false acc" in printed
+    data = json.loads((out / "results.json").read_text())
+    assert data["methods"] == ["auto", "paper_icp"]
+    assert {r["method"] for r in data["records"]} == {"oracle", "auto", "paper_icp"}
+    assert len(data["records"]) == 5 * 3
+    for name in ("error_cdf.png", "success_vs_overlap.png", "success_vs_rotation.png"):
+        assert (out / name).stat().st_size > 0
+    assert list(out.glob("merged_*.png"))
+    assert not list(out.glob(".*"))  # no temporary files left behind
+
+
+def test_cli_argument_errors(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([])
+    assert exc.value.code == 2
+    assert "give either PAIRS_DIR or --synthetic N" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--synthetic", "2", "--methods", "auto,icp"])
+    assert "got ['icp']" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([str(tmp_path / "missing")])
+    assert "is not a folder" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--synthetic", "2", "--config", "{\"eps\": -1}"])
+    assert "eps must be > 0.0, got -1" in capsys.readouterr().err
+
+
+def test_parse_methods():
+    assert parse_methods("auto, exhaustive,auto") == ["auto", "exhaustive"]
+    with pytest.raises(ValueError, match=r"methods must be a comma-separated list of \['auto'"):
+        parse_methods("auto,ransac")
+
+
+def test_oracle_is_exact_without_noise():
+    p = make_pair(np.random.default_rng(4), {"noise": 0.0}, overlap=0.7, nodes=(20, 20))
+    pair = EvalPair("p", p.map_a, p.map_b, p.transform, p.correspondences, p.overlap,
+                    p.kind, 0.0)
+    assert oracle_transform(pair).allclose(p.transform, atol=1e-9)
+    empty = EvalPair("q", p.map_a, p.map_b, None, np.empty((0, 2), int), 0.0, "disjoint", 0.0)
+    assert oracle_transform(empty) is None
+
+
+def test_summary_counts_false_accepts_and_bins():
+    pairs = synthetic_pairs(10, seed=2, noise_levels=(0.05,))
+    records = evaluate(pairs, ["auto"], progress=False)
+    level = summarise(records)["0.05"]
+    assert sum(row["pairs"] for row in level["overlap_bins"].values()) == 8
+    assert level["methods"]["auto"]["no_overlap_pairs"] == 2
+    assert level["methods"]["oracle"]["false_accept_rate"] == 0.0
+
+
+def test_reads_a_map_pair_dataset(tmp_path):
+    pairs_mod = pytest.importorskip("agents.pairs")
+    grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
+    pairs_mod.atomic_write_json(tmp_path / "dataset.json",
+                                {"format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
+    for i, kind in enumerate(["overlap", "disjoint"]):
+        p = make_pair(np.random.default_rng(i), overlap=0.8, kind=kind, nodes=(25, 25))
+        pairs_mod.write_pair(tmp_path, pairs_mod.MapPair(
+            i, p.map_a, p.map_b, grid, grid, p.transform, p.overlap, "w", i, "test", 0, 0, 0))
+    loaded = load_pair_dir(tmp_path)
+    assert [p.kind for p in loaded] == ["overlap", "no_overlap"]
+    assert loaded[0].correspondences is None
+    records = evaluate(loaded, ["auto"], progress=False)
+    assert [r.method for r in records] == ["auto", "auto"]  # no oracle without correspondences

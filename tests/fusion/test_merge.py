@@ -1,0 +1,238 @@
+"""merge_maps: recovery from any rotation, ambiguity, rejection of unrelated maps, merged-map
+invariants, determinism and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fusion.merge import (
+    METHODS,
+    MergeConfig,
+    MergeEvidence,
+    MergeResult,
+    decide,
+    fuse_maps,
+    merge_maps,
+)
+from fusion.rigid import Rigid2D
+from fusion.synthetic import SyntheticConfig, make_pair
+from topo.graph import TopoMap
+
+QUIET = SyntheticConfig(noise=0.05, drop_rate=0.05)
+
+
+def errors(estimate: Rigid2D, truth: Rigid2D, b: TopoMap) -> tuple[float, float]:
+    centre = b.xy.mean(axis=0)
+    return math.degrees(estimate.rotation_error(truth)), estimate.translation_error(truth, centre)
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return make_pair(np.random.default_rng(11), QUIET, overlap=0.9, nodes=(35, 35))
+
+
+def rotated(pair, extra: Rigid2D):
+    """The pair with B's frame moved by ``extra`` (B' = extra(B)); truth' = truth ∘ extra⁻¹."""
+    return pair.map_b.transformed(extra), pair.transform @ extra.inverse()
+
+
+@pytest.mark.parametrize("degrees", range(0, 360, 45))
+def test_recovers_any_rotation(pair, degrees):
+    b, truth = rotated(pair, Rigid2D.from_degrees(degrees + 7.0, (3.0, -40.0)))
+    result = merge_maps(pair.map_a, b)
+    assert result.accepted, result.reason
+    rot, trans = errors(result.transform, truth, b)
+    assert rot < 2.0 and trans < 0.3
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(theta=st.floats(-math.pi, math.pi), tx=st.floats(-100, 100), ty=st.floats(-100, 100))
+def test_identical_maps_are_aligned_exactly(pair, theta, tx, ty):
+    motion = Rigid2D(theta, (tx, ty))
+    result = merge_maps(pair.map_a, pair.map_a.transformed(motion.inverse()))
+    assert result.accepted, result.reason
+    assert result.transform.allclose(motion, atol=1e-6)
+    assert len(result.matches) == pair.map_a.n_nodes
+
+
+def square_loop_with_spurs() -> TopoMap:
+    """A square corridor loop with a side corridor out of the middle of each side: it looks
+    the same after every quarter turn."""
+    corners = [(0, 0), (10, 0), (10, 10), (0, 10)]
+    mids = [(5, 0), (10, 5), (5, 10), (0, 5)]
+    spurs = [(5, -3), (13, 5), (5, 13), (-3, 5)]
+    xy = np.array(corners + mids + spurs, dtype=float)
+    edges = []
+    for k in range(4):
+        edges += [(k, 4 + k), (4 + k, (k + 1) % 4), (4 + k, 8 + k)]
+    return TopoMap.from_arrays(xy, edges)
+
+
+@pytest.mark.parametrize("method", ["auto", "exhaustive", "multistart_icp"])
+def test_symmetric_map_is_ambiguous_not_confidently_wrong(method):
+    a = square_loop_with_spurs()
+    b = a.transformed(Rigid2D.from_degrees(33.0, (4.0, -2.0)))
+    result = merge_maps(a, b, method=method)
+    assert not result.accepted
+    assert "ambiguous" in result.reason
+
+
+def test_bare_square_loop_rejected():
+    a = TopoMap.from_arrays([(0, 0), (8, 0), (8, 8), (0, 8)], [(0, 1), (1, 2), (2, 3), (3, 0)])
+    result = merge_maps(a, a.transformed(Rigid2D.from_degrees(120.0, (1.0, 1.0))))
+    assert not result.accepted and result.reason
+
+
+@pytest.mark.parametrize("kind", ["disjoint", "other_world"])
+@pytest.mark.parametrize("seed", range(4))
+def test_no_overlap_pairs_rejected(kind, seed):
+    p = make_pair(np.random.default_rng([7, seed]), SyntheticConfig(noise=0.15), kind=kind,
+                  nodes=(40, 40))
+    result = merge_maps(p.map_a, p.map_b)
+    assert not result.accepted
+    assert result.merged is p.map_a
+
+
+def test_merged_map_has_no_duplicates_and_keeps_a(pair):
+    cfg = MergeConfig()
+    result = merge_maps(pair.map_a, pair.map_b, config=cfg)
+    assert result.accepted
+    m = result.merged
+    d = np.linalg.norm(m.xy[:, None] - m.xy[None, :], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    assert d.min() > cfg.eps
+    assert pair.map_a.n_nodes <= m.n_nodes < pair.map_a.n_nodes + pair.map_b.n_nodes
+    assert m.n_edges >= pair.map_a.n_edges
+    assert np.all(m.lengths >= np.linalg.norm(m.xy[m.edges[:, 0]] - m.xy[m.edges[:, 1]], axis=1))
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20)), min_size=3, max_size=25),
+       st.floats(0.2, 2.0))
+def test_fusing_has_no_two_nodes_within_eps(points, eps):
+    a = TopoMap.from_arrays(np.array(points), [(i, i + 1) for i in range(len(points) - 1)
+                                               if points[i] != points[i + 1]])
+    fused = fuse_maps(a, a, Rigid2D.from_degrees(3.0, (0.1, 0.0)), np.empty((0, 2)), eps)
+    d = np.linalg.norm(fused.xy[:, None] - fused.xy[None, :], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    assert d.min(initial=np.inf) > eps
+    assert np.all(fused.edges[:, 0] != fused.edges[:, 1])
+
+
+def test_deterministic(pair):
+    runs = [merge_maps(pair.map_a, pair.map_b) for _ in range(2)]
+    again = make_pair(np.random.default_rng(11), QUIET, overlap=0.9, nodes=(35, 35))
+    runs.append(merge_maps(again.map_a, again.map_b))
+    for r in runs[1:]:
+        assert r.transform.allclose(runs[0].transform, atol=0.0)
+        np.testing.assert_array_equal(r.matches, runs[0].matches)
+        assert r.score == runs[0].score
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_every_method_returns_a_result(pair, method):
+    result = merge_maps(pair.map_a, pair.map_b, method=method)
+    assert isinstance(result, MergeResult) and result.method == method
+    assert result.time_s > 0 and result.evidence is not None
+    assert result.accepted == (result.reason is None)
+
+
+def test_paper_icp_works_near_identity_and_fails_at_half_turn(pair):
+    a = pair.map_a
+    near = merge_maps(a, a.transformed(Rigid2D.from_degrees(-10.0, (0.5, 0.3))),
+                      method="paper_icp")
+    assert near.accepted
+    assert near.transform.allclose(Rigid2D.from_degrees(-10.0, (0.5, 0.3)).inverse(), 1e-6)
+    far = merge_maps(a, a.transformed(Rigid2D.from_degrees(180.0)), method="paper_icp")
+    assert math.degrees(far.transform.rotation_error(Rigid2D.from_degrees(180.0))) > 2.0
+
+
+def test_auto_beats_exhaustive_speed_independent_agreement(pair):
+    auto = merge_maps(pair.map_a, pair.map_b)
+    exhaustive = merge_maps(pair.map_a, pair.map_b, method="exhaustive")
+    assert auto.transform.rotation_error(exhaustive.transform) < math.radians(1.0)
+
+
+# ------------------------------------------------------------------------------ degenerate
+def test_too_small_maps_rejected_with_reason():
+    tiny = TopoMap.from_arrays([(0, 0), (1, 0)], [(0, 1)])
+    result = merge_maps(tiny, tiny)
+    assert not result.accepted
+    assert "map_a has 2 node(s); at least 3 are needed" in result.reason
+    assert result.evidence is None
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_collinear_maps_rejected_not_raised(method):
+    line = TopoMap.from_arrays([(x, 0.0) for x in (0, 2, 5, 9, 14)],
+                               [(0, 1), (1, 2), (2, 3), (3, 4)])
+    result = merge_maps(line, line.transformed(Rigid2D.from_degrees(30.0)), method=method)
+    assert not result.accepted and result.reason
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_coincident_nodes_rejected_not_raised(method):
+    same = TopoMap.from_arrays([(1.0, 1.0)] * 5)
+    result = merge_maps(same, same, method=method)
+    assert not result.accepted and result.reason
+
+
+# ------------------------------------------------------------------------------- bad input
+def test_nan_coordinates():
+    good = square_loop_with_spurs()
+    xy = good.xy.copy()
+    xy[3, 1] = np.nan
+    bad = TopoMap(xy, good.kinds, good.edges, good.lengths)
+    with pytest.raises(ValueError, match=r"map_b.xy must be finite, got \[0.0, nan\] at node 3"):
+        merge_maps(good, bad)
+
+
+def test_wrong_types():
+    good = square_loop_with_spurs()
+    with pytest.raises(TypeError, match="map_a must be a topo.TopoMap, got ndarray"):
+        merge_maps(good.xy, good)
+    with pytest.raises(TypeError, match="config must be a MergeConfig, a dict of its fields"):
+        merge_maps(good, good, config=[("eps", 1.0)])
+
+
+def test_unknown_method_lists_valid_ones():
+    good = square_loop_with_spurs()
+    with pytest.raises(ValueError, match=r"method must be one of \['auto', 'paper_icp', "
+                                         r"'exhaustive', 'multistart_icp'\], got 'icp'"):
+        merge_maps(good, good, method="icp")
+
+
+@pytest.mark.parametrize("eps", [0.0, -0.5])
+def test_eps_must_be_positive(eps):
+    with pytest.raises(ValueError, match=f"eps must be > 0.0, got {eps}"):
+        MergeConfig(eps=eps)
+    with pytest.raises(ValueError, match="eps must be > 0.0"):
+        merge_maps(square_loop_with_spurs(), square_loop_with_spurs(), config={"eps": eps})
+
+
+def test_unknown_config_keys():
+    with pytest.raises(ValueError, match=r"MergeConfig has unknown keys \['tolerance'\]"):
+        MergeConfig.from_dict({"tolerance": 0.3})
+    with pytest.raises(ValueError, match=r"config has unknown keys \['tolerance'\]; allowed"):
+        merge_maps(square_loop_with_spurs(), square_loop_with_spurs(),
+                   config={"tolerance": 0.3})
+
+
+def test_config_type_errors():
+    with pytest.raises(TypeError, match="candidates must be an integer, got float"):
+        MergeConfig(candidates=3.5)
+
+
+def test_decide_names_every_failed_criterion():
+    weak = MergeEvidence(inliers=2, closeness=1.0, matched_edges=0, conflicts=3, crossings=1,
+                         branches_agree=0, branches_disagree=4, rmse=0.4, collinear=True,
+                         n_a=30, n_b=30, runner_up=5.0)
+    reason = decide(weak)
+    for part in ("too few matched nodes", "collinear", "weak evidence", "ambiguous"):
+        assert part in reason
+    assert 0.0 < weak.confidence < 0.5
