@@ -1,0 +1,71 @@
+"""TopoExplorerExtractor: shapes, padding is ignored, node order does not matter."""
+
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+
+from agents.policy import TopoExplorerExtractor
+
+torch.set_num_threads(1)
+N = 12
+
+
+def obs_space() -> spaces.Dict:
+    return spaces.Dict({
+        "sonar": spaces.Box(0, 1, (8,), np.float32),
+        "odometry": spaces.Box(np.array([-30, -30, -1, -1], np.float32),
+                               np.array([30, 30, 1, 1], np.float32)),
+        "graph_nodes": spaces.Box(-60, 60, (N, 6), np.float32),
+        "graph_mask": spaces.Box(0, 1, (N,), np.float32),
+        "graph_adjacency": spaces.Box(0, 1, (N, N), np.float32),
+        "local_map": spaces.Box(0, 255, (1, 64, 64), np.uint8),
+        "teammate": spaces.Box(-60, 60, (5,), np.float32),
+    })
+
+
+def batch(rng: np.random.Generator, n_real: int) -> dict[str, torch.Tensor]:
+    sp = obs_space()
+    obs = {k: torch.as_tensor(np.stack([s.sample() for _ in range(3)]), dtype=torch.float32)
+           for k, s in sp.spaces.items()}
+    mask = np.zeros((3, N), np.float32)
+    mask[:, :n_real] = 1
+    adj = (rng.uniform(size=(3, N, N)) < 0.3).astype(np.float32)
+    adj = np.maximum(adj, adj.transpose(0, 2, 1)) * mask[:, :, None] * mask[:, None, :]
+    obs["graph_mask"] = torch.as_tensor(mask)
+    obs["graph_adjacency"] = torch.as_tensor(adj)
+    obs["local_map"] = obs["local_map"] / 255.0
+    return obs
+
+
+def test_output_shape_and_finiteness():
+    ex = TopoExplorerExtractor(obs_space())
+    out = ex(batch(np.random.default_rng(0), 5))
+    assert out.shape == (3, ex.features_dim) and torch.isfinite(out).all()
+
+
+def test_graph_encoding_is_permutation_invariant_and_ignores_padding():
+    torch.manual_seed(0)
+    ex = TopoExplorerExtractor(obs_space())
+    rng = np.random.default_rng(1)
+    obs = batch(rng, 7)
+    base = ex(obs)
+    perm = torch.as_tensor(rng.permutation(N))
+    permuted = dict(obs)
+    permuted["graph_nodes"] = obs["graph_nodes"][:, perm]
+    permuted["graph_mask"] = obs["graph_mask"][:, perm]
+    permuted["graph_adjacency"] = obs["graph_adjacency"][:, perm][:, :, perm]
+    torch.testing.assert_close(ex(permuted), base, atol=1e-5, rtol=1e-5)
+    padded = dict(obs)  # garbage in padded slots changes nothing
+    nodes = obs["graph_nodes"].clone()
+    nodes[:, 7:] = 1e3
+    padded["graph_nodes"] = nodes
+    torch.testing.assert_close(ex(padded), base, atol=1e-5, rtol=1e-5)
+
+
+def test_needs_the_env_keys():
+    with pytest.raises(ValueError, match=r"lacks keys \['graph_mask'\]"):
+        TopoExplorerExtractor(spaces.Dict({k: v for k, v in obs_space().spaces.items()
+                                           if k != "graph_mask"}))
+    with pytest.raises(TypeError, match="needs a Dict observation space, got Box"):
+        TopoExplorerExtractor(spaces.Box(0, 1, (3,)))
