@@ -1,0 +1,230 @@
+"""Speed of ``two_robot_explore_v0``: env steps/s, a per-stage breakdown, the raw floor, world
+size scaling, and memory over a long run.
+
+The **raw floor** is what no implementation of this env can avoid, measured in the same run on
+the same world: the pymunk substeps of both robots plus the same sonar ray casts
+(``segments × rays × 2`` ``segment_query_first`` calls per step), nothing else. The env is
+reported as steps/s and as a ratio to that floor.
+
+Usage::
+
+    python benchmarks/env_speed.py                 # defaults, ~1 min
+    python benchmarks/env_speed.py --soak 100000   # plus a 100k-step memory/free-space soak
+
+Stage timings wrap the env's hooks with ``time.perf_counter`` (a few % overhead, so the
+breakdown's total is a little above the untimed run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import math
+import platform
+import resource
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from envs import two_robot_explore_v0  # noqa: E402
+from envs.two_robot_explore import env as env_module  # noqa: E402
+from envs.two_robot_explore import mapping, robot, sonar  # noqa: E402
+
+
+def _actions(n: int, seed: int) -> list[dict[str, np.ndarray]]:
+    """A fixed action sequence: a new random command every 10 steps, mostly forward."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        if k % 10 == 0:
+            cmd = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)], dtype=np.float32)
+                   for a in ("robot_0", "robot_1")}
+        out.append(cmd)
+    return out
+
+
+def run_env(steps: int, seed: int = 0, **kwargs) -> tuple[float, object]:
+    """Steps/s of the env over ``steps`` steps (resetting when an episode ends)."""
+    par = two_robot_explore_v0.parallel_env(max_cycles=steps, **kwargs)
+    par.reset(seed=seed)
+    acts = _actions(steps, seed)
+    t0 = time.perf_counter()
+    for k in range(steps):
+        if not par.agents:
+            par.reset()
+        par.step(acts[k])
+    return steps / (time.perf_counter() - t0), par
+
+
+def run_floor(par, steps: int, seed: int = 0) -> float:
+    """Steps/s of physics + ray casts alone, on ``par``'s current world and start poses."""
+    world = par.world
+    cfg = par.config
+    starts = np.array([r.start for r in par.robots])
+    robots = [robot.Robot(i, starts[i], cfg.robot) for i in range(2)]
+    space = robot.build_space(world.segments, robots)
+    son = sonar.Sonar(cfg.sonar, cfg.robot.radius)
+    acts = _actions(steps, seed)
+    w_max = math.radians(cfg.robot.max_turn_rate)
+    dt, substeps = cfg.robot.dt, cfg.robot.substeps
+    query = space.segment_query_first
+    t0 = time.perf_counter()
+    for k in range(steps):
+        for r, name in zip(robots, ("robot_0", "robot_1"), strict=True):
+            v, w = acts[k][name]
+            r.command(float(v) * cfg.robot.max_speed, float(w) * w_max)
+        robot.simulate(space, robots, dt, substeps)
+        for r in robots:
+            p = r.body.position
+            starts_, ends = son.ray_segments(np.array([p.x, p.y, r.body.angle]))
+            f = r.sensor_filter
+            for a, b in zip(starts_.tolist(), ends.tolist(), strict=True):
+                query(a, b, 0.0, f)
+    return steps / (time.perf_counter() - t0)
+
+
+class StageTimer:
+    """Wraps functions/methods to accumulate their wall time under a stage name."""
+
+    def __init__(self) -> None:
+        self.total = defaultdict(float)
+        self._saved = []
+
+    def wrap(self, owner, name: str, stage: str) -> None:
+        fn = getattr(owner, name)
+        self._saved.append((owner, name, fn))
+        total = self.total
+
+        @functools.wraps(fn)
+        def timed(*args, **kwargs):
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                total[stage] += time.perf_counter() - t
+
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        for owner, name, fn in reversed(self._saved):
+            setattr(owner, name, fn)
+        self._saved.clear()
+
+
+def breakdown(steps: int, seed: int = 0) -> tuple[dict[str, float], float]:
+    """Seconds per stage over ``steps`` steps, and the whole run's seconds."""
+    timer = StageTimer()
+    env_cls = env_module.TwoRobotExploreEnv
+    timer.wrap(env_cls, "_parse_actions", "actions")
+    timer.wrap(env_cls, "_simulate", "physics (substeps)")
+    timer.wrap(robot.Robot, "update_odometry", "odometry")
+    timer.wrap(sonar.Sonar, "measure", "sonar ray casts")
+    timer.wrap(mapping.RobotMap, "integrate", "grid update (topo.OccupancyGrid)")
+    timer.wrap(mapping.SharedMap, "add", "shared map")
+    timer.wrap(mapping.OracleCoverage, "add", "true coverage")
+    timer.wrap(mapping.RobotMap, "extract", "topo extraction (every 10)")
+    timer.wrap(env_module, "run_merge", "merge_maps (every 25)")
+    timer.wrap(env_cls, "_rewards", "rewards/ends")
+    timer.wrap(env_cls, "_observe", "observations")
+    timer.wrap(env_cls, "_infos", "infos")
+    try:
+        t0 = time.perf_counter()
+        run_env(steps, seed)
+        whole = time.perf_counter() - t0
+    finally:
+        timer.restore()
+    return dict(timer.total), whole
+
+
+def _current_rss_mib() -> float:
+    """Resident set size now (Linux ``/proc``; NaN elsewhere)."""
+    status = Path("/proc/self/status")
+    if not status.exists():
+        return math.nan
+    for line in status.read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+def soak(steps: int, seed: int = 1) -> None:
+    """Long run: RSS every 10 % of the way, and robots checked to stay in free space."""
+    par = two_robot_explore_v0.parallel_env(max_cycles=1000)
+    par.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    act = {a: np.zeros(2, dtype=np.float32) for a in par.possible_agents}
+    marks = []
+    outside = 0
+    t0 = time.perf_counter()
+    for k in range(steps):
+        if not par.agents:
+            par.reset()
+        if k % 10 == 0:
+            act = {a: np.array([rng.uniform(0.2, 1), rng.uniform(-1, 1)], dtype=np.float32)
+                   for a in par.possible_agents}
+        par.step(act)
+        poses = np.array([r.true_pose()[:2] for r in par.robots])
+        outside += int((~par.world.is_free(poses)).sum())
+        if (k + 1) % max(steps // 10, 1) == 0:
+            marks.append((k + 1, _current_rss_mib(),
+                          resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))
+    dt = time.perf_counter() - t0
+    print(f"\n## Soak: {steps} steps ({steps // 1000} episodes of 1000), {steps / dt:,.0f} "
+          f"steps/s")
+    print("| steps | RSS (MiB) | peak RSS (MiB) |\n|---|---|---|")
+    for k, rss, peak in marks:
+        print(f"| {k:,} | {rss:,.1f} | {peak:,.1f} |")
+    print(f"robot positions outside free space: {outside}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=3000, help="steps per measurement")
+    parser.add_argument("--soak", type=int, default=0, help="steps of the memory soak (0: skip)")
+    args = parser.parse_args()
+    print(f"# two_robot_explore_v0 speed ({platform.processor() or platform.machine()}, "
+          f"Python {platform.python_version()}, single process)\n")
+
+    print("## Defaults (20x20 m procedural, sonar + grid every step, topo every 10, merge "
+          "every 25)")
+    run_env(200)  # warm-up (imports, first merge)
+    env_sps, par = run_env(args.steps)
+    floor_sps = run_floor(par, args.steps)
+    print("| what | steps/s | ratio to floor |\n|---|---|---|")
+    print(f"| raw floor (pymunk substeps + {par.sonars[0].ray_angles.size * 2} ray casts) | "
+          f"{floor_sps:,.0f} | 1.00 |")
+    print(f"| env, defaults | {env_sps:,.0f} | {env_sps / floor_sps:.2f} |")
+    for label, kw in (("env, no topo/merge", {"mapping": {"topo_every": 0, "merge_every": 0}}),
+                      ("env, no merge", {"mapping": {"merge_every": 0}})):
+        sps, _ = run_env(args.steps, **kw)
+        print(f"| {label} | {sps:,.0f} | {sps / floor_sps:.2f} |")
+
+    print("\n## Per-stage breakdown (defaults)")
+    stages, whole = breakdown(args.steps)
+    print("| stage | µs/step | share |\n|---|---|---|")
+    for name, sec in sorted(stages.items(), key=lambda kv: -kv[1]):
+        print(f"| {name} | {sec / args.steps * 1e6:,.0f} | {sec / whole:.0%} |")
+    rest = whole - sum(stages.values())
+    print(f"| rest (step glue) | {rest / args.steps * 1e6:,.0f} | {rest / whole:.0%} |")
+    print(f"| **whole step** | {whole / args.steps * 1e6:,.0f} | 100% |")
+
+    print("\n## World size")
+    print("| world | env steps/s | floor steps/s | ratio | wall segments |\n|---|---|---|---|---|")
+    for side in (20.0, 40.0, 80.0):
+        sps, p = run_env(args.steps // 2, world={"size": (side, side)})
+        fl = run_floor(p, args.steps // 2)
+        print(f"| {side:.0f}x{side:.0f} m | {sps:,.0f} | {fl:,.0f} | {sps / fl:.2f} | "
+              f"{len(p.world.segments)} |")
+    print(f"\npeak RSS so far: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.1f} "
+          f"MiB")
+    if args.soak:
+        soak(args.soak)
+
+
+if __name__ == "__main__":
+    main()

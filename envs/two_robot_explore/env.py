@@ -1,0 +1,728 @@
+"""Two sonar robots explore an unknown building and merge their maps.
+
+## Description
+
+Two Pioneer3-DX-like robots (``robot_0``, ``robot_1``) start at random, unknown-to-each-other
+poses in a 2-D indoor world simulated with pymunk. Each drives by a velocity command, senses
+with a ring of 8 sonars, and builds an occupancy grid and a topological map (places and the
+paths between them) **in its own odometry frame**. Every ``merge_every`` steps the two
+topological maps are aligned with ``fusion.merge_maps`` (the ICP-SVD paper's method and the
+project's global merges); when a merge is accepted, robot 1's map joins robot 0's in the
+**shared map**. The team is rewarded for growing the shared map, so a wrong merge costs
+reward. It is a cooperative PettingZoo ``ParallelEnv``; ``env()`` gives the AEC version.
+
+## Action Space
+
+``Box(-1, 1, (2,), float32)`` per robot (``action_type="continuous"``):
+
+| index | meaning                  | unit              | min | max |
+|-------|--------------------------|-------------------|-----|-----|
+| 0     | forward speed ``v``      | × ``robot.max_speed`` (0.7 m/s)     | -1 | 1 |
+| 1     | turn rate ``ω`` (CCW)    | × ``robot.max_turn_rate`` (100°/s)  | -1 | 1 |
+
+Finite values outside ``[-1, 1]`` are clipped; NaN, inf or a wrong shape is a ``ValueError``.
+With ``action_type="discrete"``, ``Discrete(5)``: 0 stop, 1 forward, 2 turn left in place,
+3 turn right in place, 4 backward (full speed/turn rate).
+
+## Observation Space
+
+A ``Dict`` per robot (spaces built once; ``R`` = the frame radius, the world's diagonal plus
+the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size``):
+
+| key | shape, dtype | meaning | min | max |
+|---|---|---|---|---|
+| ``sonar`` | (8,) f32 | range / ``max_range`` per sonar (1 = no echo) | 0 | 1 |
+| ``odometry`` | (4,) f32 | ``x, y`` (m, own start frame), ``cos θ, sin θ`` | -R, -1 | R, 1 |
+| ``graph_nodes`` | (N, 6) f32 | per node, nearest first (a) | -2R, 0 | 2R, 16 |
+| ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
+| ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
+| ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
+| ``teammate`` | (5,) f32 | teammate's estimated pose (c) | -2R, -1, 0 | 2R, 1, 1 |
+
+(a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
+one-hot (junction, dead end, corner; 0–1), degree (0–16) — of the robot's own topological map.
+(b) robot at the centre facing up, its left on the image's left, ``mapping.local_map_resolution``
+m/pixel; 0 occupied, 128 unknown, 255 free.
+(c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
+is accepted; all 0 before).
+
+Before a merge is accepted a robot's ``local_map`` shows only its own map. Raw maps are in
+``infos`` (below).
+
+## Sensors
+
+The Pioneer front ring: 8 sonars at -90, -50, -30, -10, 10, 30, 50, 90° from the heading, on the
+robot's rim (ranges are measured from there). Each is a 15° cone sampled by ``sonar.rays`` rays
+(3); a ray is a pymunk segment query from the robot's centre that skips the robot's own disc and
+sees walls and the teammate — **the very segments the robots collide with**. Range 0.15–5 m,
+Gaussian noise (σ = 0.01 m), an echo hitting a wall more than 60° off its normal is lost with
+probability 0.5 (specular reflection). A sonar reads its nearest surviving echo; 5 m means no
+echo. ``sonar.measure_every = 0.1`` scans only
+every 10 cm of travel, as the paper's robots did.
+
+## Maps
+
+``world.source = "procedural"`` (default): a seeded ``world.size`` building (20 × 20 m) of
+rooms (3–6 m), corridors, doors and loops, with furniture; a new building every reset. Or a
+file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` m/pixel) or
+HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
+of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
+``mapping.grid_resolution``) covers a square of half-side ``R`` around its start; its
+topological map (``topo.extract_topomap``) is re-extracted every ``mapping.topo_every`` steps.
+
+## Rewards
+
+Team reward (both robots get it), every step:
+
+    coverage_reward · (new shared-map area, m²) − collision_penalty · (new contacts of either
+    robot) − time_penalty
+
+The shared map is robot 0's known cells plus robot 1's moved by the latest accepted merge
+transform. When a new merge changes the transform the shared map is rebuilt and the change of
+its area (possibly negative: a wrong merge overlaps what it should not) enters the reward.
+``reward_mode="oracle"`` uses the true union of both maps in the world frame instead (for
+ablations); ``"individual"`` gives each robot its own new area and its own contacts.
+
+Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
+``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
+merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map grows by
+(120 + 50) · 0.01 = 1.7 m²; robot 1 also bumps a wall: reward = 0.1 · 1.7 − 0.5 · 1 − 0.01 =
+−0.34 for both robots.
+
+## Starting State
+
+Two random drivable cells at least ``world.start_clearance`` (0.45 m) from any wall and
+``world.min_start_separation`` (2 m) apart, in the same connected region, random headings;
+each robot's odometry starts at ``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first
+scan is taken at reset.
+
+## Episode End
+
+* Termination: the true covered fraction of the reachable free area (``info["true_coverage"]``)
+  reaches ``target_coverage`` (0.95) — both robots terminate.
+* Truncation: ``max_cycles`` steps (1000) — both robots truncate.
+
+After that ``agents`` is empty and ``step()`` raises until ``reset()``.
+
+## Infos
+
+Per robot: ``true_coverage`` (fraction), ``true_area_m2``, ``shared_area_m2``,
+``shared_coverage`` (shared area / reachable area; an estimate, it includes walls and
+mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot map also known by
+the other, true frame), ``collisions``, ``merge_accepted`` (a transform is in use),
+``merge_rotation_error_deg`` / ``merge_translation_error_m`` (of the transform in use against
+ground truth, translation error measured at the centroid of robot 1's map; NaN before a
+merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``pose`` (true world pose),
+``odometry``, ``topomap`` (own ``topo.TopoMap``), ``grid`` (own ``topo.OccupancyGrid``, live:
+do not modify), ``merge`` (the last ``fusion.MergeResult`` or ``None``).
+
+## Arguments
+
+``parallel_env(config=None, *, render_mode=None, **kwargs)``; ``kwargs`` are
+:class:`~envs.two_robot_explore.config.EnvConfig` fields, groups as dicts, e.g.
+``parallel_env(max_cycles=500, sonar={"rays": 1}, world={"size": (40, 40)})``. Unknown keys
+are a ``ValueError``.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| ``world.source`` | str | ``"procedural"`` | procedural building or a map file |
+| ``world.size`` | (float, float) | (20, 20) | procedural building size, m |
+| ``world.room_size`` | (float, float) | (3, 6) | procedural room side range, m |
+| ``world.corridor_prob`` | float | 0.25 | chance a room row/column is a corridor |
+| ``world.loop_prob`` | float | 0.3 | chance of an extra door (loops) |
+| ``world.obstacle_density`` | float | 0.5 | furniture boxes per 10 m² |
+| ``world.png_resolution`` | float | 0.1 | m/pixel of PNG maps |
+| ``robot.radius`` | float | 0.25 | disc radius, m |
+| ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
+| ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |
+| ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of odometry increments |
+| ``sonar.rays`` / ``cone`` | int / float | 3 / 15 | rays per cone, cone width (°) |
+| ``sonar.min_range`` / ``max_range`` | float | 0.15 / 5 | m |
+| ``sonar.noise_std`` | float | 0.01 | m |
+| ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout |
+| ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
+| ``mapping.grid_resolution`` | float | 0.1 | m/cell |
+| ``mapping.topo_every`` / ``merge_every`` | int | 10 / 25 | steps (0 = never) |
+| ``mapping.merge_method`` | str | ``"auto"`` | ``fusion.merge_maps`` method or ``"none"`` |
+| ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
+| ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
+| ``mapping.max_nodes`` | int | 32 | graph nodes observed |
+| ``max_cycles`` | int | 1000 | truncation |
+| ``target_coverage`` | float | 0.95 | termination |
+| ``reward_mode`` | str | ``"shared"`` | ``"shared"``, ``"oracle"``, ``"individual"`` |
+| ``coverage_reward`` | float | 0.1 | reward per new m² |
+| ``collision_penalty`` | float | 0.5 | per new contact |
+| ``time_penalty`` | float | 0.01 | per step |
+| ``action_type`` | str | ``"continuous"`` | or ``"discrete"`` |
+| ``render_mode`` | str or None | None | ``"human"`` (pygame-ce window) or ``"rgb_array"`` |
+
+Reset options: ``{"start_poses": [[x, y, θ], [x, y, θ]]}`` (world frame, radians) places the
+robots; other keys are ignored with a warning.
+
+## Version History
+
+* v0: initial release.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from envs.two_robot_explore.config import EnvConfig
+from envs.two_robot_explore.mapping import (
+    LOCAL_MAP_VALUES,
+    Geometry,
+    LocalMapSampler,
+    OracleCoverage,
+    RobotMap,
+    SharedMap,
+    compose_pose,
+    run_merge,
+)
+from envs.two_robot_explore.robot import Robot, build_space, simulate
+from envs.two_robot_explore.sonar import Sonar
+from envs.two_robot_explore.worlds import World, load_world, procedural_world
+from fusion.rigid import Rigid2D
+from topo.graph import NodeKind, TopoMap
+
+AGENTS = ("robot_0", "robot_1")
+
+DISCRETE_ACTIONS = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [-1.0, 0.0]])
+"""``(v, ω)`` of each discrete action: stop, forward, turn left, turn right, backward."""
+
+MAX_DEGREE = 16
+"""Upper bound of the ``graph_nodes`` degree feature (larger degrees are clipped)."""
+
+N_NODE_FEATURES = 2 + len(NodeKind) + 1
+
+
+class TwoRobotExploreEnv(ParallelEnv):
+    """The two-robot sonar exploration env; the module docstring is its manual.
+
+    Read-only state for metrics, datasets and rendering (valid after ``reset``):
+    ``world`` (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``,
+    ``maps`` (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
+    (:class:`~envs.two_robot_explore.mapping.SharedMap`), ``oracle``
+    (:class:`~envs.two_robot_explore.mapping.OracleCoverage`), ``frames`` (each robot's map
+    frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
+    transform), ``merge`` (the last ``MergeResult``), ``steps``.
+    """
+
+    metadata = {
+        "name": "two_robot_explore_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+                 **kwargs: Any) -> None:
+        if config is not None and not isinstance(config, EnvConfig):
+            raise TypeError(f"config must be an EnvConfig or None, got {type(config).__name__}")
+        if config is None:
+            config = EnvConfig.from_kwargs(**kwargs)
+        elif kwargs:
+            config = config.replace(**kwargs)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                f"got {render_mode!r}"
+            )
+        self.config = config
+        self.render_mode = render_mode
+        self.possible_agents = list(AGENTS)
+        self.agents: list[str] = []
+        self._max_cycles = config.max_cycles
+        cfg = config
+        # A world file is loaded (and validated) once, here; procedural worlds every reset.
+        self._file_world: World | None = None
+        if cfg.world.source != "procedural":
+            self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
+            x0, y0, x1, y1 = self._file_world.extent
+            diag = math.hypot(x1 - x0, y1 - y0)
+        else:
+            diag = math.hypot(*cfg.world.size)
+        self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
+        self._build_spaces()
+        self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
+                                        cfg.mapping.local_map_resolution)
+        self._rng: np.random.Generator | None = None
+        self._renderer = None
+        self._ready = False
+
+    # ------------------------------------------------------------------ spaces
+    def _build_spaces(self) -> None:
+        cfg = self.config
+        r = self.frame_radius
+        n = cfg.mapping.max_nodes
+        size = cfg.mapping.local_map_size
+        f32 = np.float32
+        node_lo = np.zeros((n, N_NODE_FEATURES), dtype=f32)
+        node_hi = np.ones((n, N_NODE_FEATURES), dtype=f32)
+        node_lo[:, :2] = -2 * r
+        node_hi[:, :2] = 2 * r
+        node_hi[:, -1] = MAX_DEGREE
+        obs = spaces.Dict({
+            "sonar": spaces.Box(0.0, 1.0, (len(cfg.sonar.angles),), f32),
+            "odometry": spaces.Box(np.array([-r, -r, -1, -1], f32), np.array([r, r, 1, 1], f32)),
+            "graph_nodes": spaces.Box(node_lo, node_hi, dtype=f32),
+            "graph_mask": spaces.Box(0.0, 1.0, (n,), f32),
+            "graph_adjacency": spaces.Box(0.0, 1.0, (n, n), f32),
+            "local_map": spaces.Box(0, 255, (1, size, size), np.uint8),
+            "teammate": spaces.Box(np.array([-2 * r, -2 * r, -1, -1, 0], f32),
+                                   np.array([2 * r, 2 * r, 1, 1, 1], f32)),
+        })
+        if cfg.action_type == "continuous":
+            act: spaces.Space = spaces.Box(-1.0, 1.0, (2,), f32)
+        else:
+            act = spaces.Discrete(len(DISCRETE_ACTIONS))
+        self._observation_spaces = {a: obs for a in AGENTS}
+        self._action_spaces = {a: act for a in AGENTS}
+        self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
+        self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The (one, shared) observation space of ``agent``."""
+        try:
+            return self._observation_spaces[agent]
+        except KeyError:
+            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The (one, shared) action space of ``agent``."""
+        try:
+            return self._action_spaces[agent]
+        except KeyError:
+            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+
+    @property
+    def max_cycles(self) -> int:
+        """Truncation step count (settable, as PettingZoo's test suite does)."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self._max_cycles = self.config.replace(max_cycles=value).max_cycles
+
+    @property
+    def world(self) -> World:
+        """The current episode's world (after ``reset``)."""
+        self._require_reset()
+        return self._world
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+        """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        starts = self._parse_options(options)
+        cfg = self.config
+        rng = self._rng
+        if self._file_world is not None:
+            self._world = self._file_world
+        else:
+            self._world = procedural_world(cfg.world, rng, robot_radius=cfg.robot.radius)
+        world = self._world
+        if starts is None:
+            starts = world.sample_starts(rng, cfg.world.start_clearance,
+                                         cfg.world.min_start_separation)
+        else:
+            self._check_starts(starts)
+        self.robots = [Robot(i, starts[i], cfg.robot) for i in range(2)]
+        self.space = build_space(world.segments, self.robots)
+        self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(2)]
+        # map frames: each robot's start; the truth frame_i -> world is its start pose
+        self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
+        self.true_merge = self.frames[0].inverse() @ self.frames[1]
+        x0, y0, x1, y1 = world.extent
+        corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
+        self.maps = []
+        for s in starts:
+            reach = float(np.max(np.hypot(*(corners - s[:2]).T)))
+            radius = min(reach + cfg.sonar.max_range + 1.0, self.frame_radius)
+            self.maps.append(RobotMap(radius, cfg.mapping))
+        self.shared = SharedMap(self.maps[0].geometry)
+        self.oracle = OracleCoverage(
+            Geometry(world.origin, world.resolution, world.shape), world.reachable)
+        self.merge = None
+        self.merges = 0
+        self.merge_time_s = math.nan
+        self.steps = 0
+        self._prev_collisions = [0, 0]
+        self._shared_delta = 0
+        self._own_delta = [0, 0]
+        self._oracle_delta = 0
+        self._coll_delta = [0, 0]
+        self._graph_cache: list[tuple] = [(None, None, None), (None, None, None)]
+        self.agents = list(AGENTS)
+        self._ready = True
+        self._sense_and_map(travelled=[0.0, 0.0])
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), self._infos()
+
+    def _parse_options(self, options: dict[str, Any] | None) -> np.ndarray | None:
+        if options is None:
+            return None
+        if not isinstance(options, dict):
+            raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
+        unknown = sorted(str(k) for k in options if k != "start_poses")
+        if unknown:
+            warnings.warn(
+                f"reset options {unknown} are not used by two_robot_explore_v0; known: "
+                f"['start_poses']", stacklevel=3)
+        if "start_poses" not in options:
+            return None
+        try:
+            starts = np.asarray(options["start_poses"], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise TypeError("options['start_poses'] must be numeric [[x, y, theta], "
+                            "[x, y, theta]]") from exc
+        if starts.shape != (2, 3) or not np.all(np.isfinite(starts)):
+            raise ValueError(f"options['start_poses'] must be finite with shape (2, 3), got "
+                             f"{starts.tolist()}")
+        return starts
+
+    def _check_starts(self, starts: np.ndarray) -> None:
+        world = self._world
+        ij = world.cell_of(starts[:, :2])
+        h, w = world.shape
+        for k, (iy, ix) in enumerate(ij):
+            if not (0 <= iy < h and 0 <= ix < w) or not world.drivable[iy, ix]:
+                raise ValueError(
+                    f"options['start_poses'][{k}] = {starts[k, :2].tolist()} is not a drivable "
+                    f"position of world {world.name!r} (free with robot clearance)")
+        if math.dist(starts[0, :2], starts[1, :2]) < 2 * self.config.robot.radius:
+            raise ValueError("options['start_poses'] put the two robots on top of each other")
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance both robots one step (``robot.dt`` seconds); see the manual."""
+        self._require_reset()
+        if not self.agents:
+            raise RuntimeError(
+                "step() called after the episode ended (all agents terminated or truncated); "
+                "call reset() to start a new episode")
+        commands = self._parse_actions(actions)
+        self._apply_actions(commands)
+        self._simulate()
+        self.steps += 1
+        travelled = [0.0, 0.0]
+        for i, robot in enumerate(self.robots):
+            before = robot.travelled
+            robot.update_odometry(self.config.robot.odometry_noise, self._rng)
+            travelled[i] = robot.travelled - before
+        self._sense_and_map(travelled)
+        self._fuse()
+        rewards = self._rewards()
+        terminations = self._terminations()
+        truncations = self._truncations()
+        observations = self._observe()
+        infos = self._infos()
+        if any(terminations.values()) or any(truncations.values()):
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def _require_reset(self) -> None:
+        if not self._ready:
+            raise RuntimeError("call reset() before step(), render() or world")
+
+    def _parse_actions(self, actions: dict[str, Any]) -> list[tuple[float, float]]:
+        if not isinstance(actions, dict):
+            raise TypeError(f"actions must be a dict {{agent: action}}, got "
+                            f"{type(actions).__name__}")
+        unknown = sorted(str(a) for a in actions if a not in self.agents)
+        if unknown:
+            raise ValueError(f"actions has unknown or finished agents {unknown}; live agents: "
+                             f"{self.agents}")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions is missing agents {missing}; every live agent acts "
+                             f"every step")
+        return [self._parse_action(agent, actions[agent]) for agent in AGENTS]
+
+    def _parse_action(self, agent: str, action: Any) -> tuple[float, float]:
+        if self.config.action_type == "discrete":
+            if isinstance(action, (bool, np.bool_)) or not isinstance(
+                    action, (int, np.integer)) and not (
+                    isinstance(action, np.ndarray) and action.shape == ()
+                    and np.issubdtype(action.dtype, np.integer)):
+                raise TypeError(f"action of {agent} must be an int in [0, "
+                                f"{len(DISCRETE_ACTIONS)}), got {action!r}")
+            a = int(action)
+            if not 0 <= a < len(DISCRETE_ACTIONS):
+                raise ValueError(f"action of {agent} must be in [0, {len(DISCRETE_ACTIONS)}), "
+                                 f"got {a}")
+            v, w = DISCRETE_ACTIONS[a]
+            return float(v), float(w)
+        try:
+            arr = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"action of {agent} must be a numeric (v, w) pair, got "
+                            f"{action!r}") from exc
+        if arr.shape != (2,):
+            raise ValueError(f"action of {agent} must have shape (2,) (v, w), got shape "
+                             f"{arr.shape}")
+        if not (math.isfinite(arr[0]) and math.isfinite(arr[1])):
+            raise ValueError(f"action of {agent} must be finite, got {arr.tolist()}")
+        return min(max(float(arr[0]), -1.0), 1.0), min(max(float(arr[1]), -1.0), 1.0)
+
+    def _apply_actions(self, commands: list[tuple[float, float]]) -> None:
+        rcfg = self.config.robot
+        w_max = math.radians(rcfg.max_turn_rate)
+        for robot, (v, w) in zip(self.robots, commands, strict=True):
+            robot.command(v * rcfg.max_speed, w * w_max)
+
+    def _simulate(self) -> None:
+        rcfg = self.config.robot
+        simulate(self.space, self.robots, rcfg.dt, rcfg.substeps)
+        for i, robot in enumerate(self.robots):
+            self._coll_delta[i] = robot.collisions - self._prev_collisions[i]
+            self._prev_collisions[i] = robot.collisions
+
+    def _sense_and_map(self, travelled: list[float]) -> None:
+        cfg = self.config
+        scfg = cfg.sonar
+        half = math.radians(scfg.cone) / 2.0
+        self._shared_delta = 0
+        self._oracle_delta = 0
+        for i, (robot, sonar) in enumerate(zip(self.robots, self.sonars, strict=True)):
+            sonar.measure(self.space, robot.true_pose(), robot.sensor_filter, self._rng,
+                          travelled[i])
+            if not sonar.fresh:
+                self._own_delta[i] = 0
+                continue
+            rmap = self.maps[i]
+            window, new = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
+                                         sonar.mount_radius, scfg.max_range, half)
+            self._own_delta[i] = new
+            if new:
+                self._shared_delta += self.shared.add(i, rmap, window)
+                self._oracle_delta += self.oracle.add(i, rmap, window, self.frames[i])
+        every = cfg.mapping.topo_every
+        if every and self.steps % every == 0:
+            for i, rmap in enumerate(self.maps):
+                rmap.extract()
+                self._cache_graph(i)
+
+    def _fuse(self) -> None:
+        mcfg = self.config.mapping
+        if not mcfg.merge_every or mcfg.merge_method == "none" or self.steps % mcfg.merge_every:
+            return
+        map_a, map_b = self.maps[0].topomap, self.maps[1].topomap
+        if map_a.n_edges == 0 or map_b.n_edges == 0:
+            return
+        result = run_merge(map_a, map_b, mcfg.merge_method)
+        self.merge = result
+        self.merges += 1
+        self.merge_time_s = float(result.time_s)
+        if result.accepted and (self.shared.transform is None
+                                or not result.transform.allclose(self.shared.transform)):
+            self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
+                                                      result.transform)
+
+    # ------------------------------------------------------------------ rewards, ends
+    def _rewards(self) -> dict[str, float]:
+        cfg = self.config
+        coll = self._coll_delta
+        if cfg.reward_mode == "individual":
+            area = self.maps[0].geometry.resolution ** 2
+            return {a: float(cfg.coverage_reward * self._own_delta[i] * area
+                             - cfg.collision_penalty * coll[i] - cfg.time_penalty)
+                    for i, a in enumerate(self.agents)}
+        if cfg.reward_mode == "shared":
+            gained = self._shared_delta * self.shared.geometry.resolution ** 2
+        else:
+            gained = self._oracle_delta * self.oracle.geometry.resolution ** 2
+        r = float(cfg.coverage_reward * gained - cfg.collision_penalty * (coll[0] + coll[1])
+                  - cfg.time_penalty)
+        return dict.fromkeys(self.agents, r)
+
+    def _terminations(self) -> dict[str, bool]:
+        done = self.oracle.fraction >= self.config.target_coverage
+        return dict.fromkeys(self.agents, bool(done))
+
+    def _truncations(self) -> dict[str, bool]:
+        return dict.fromkeys(self.agents, self.steps >= self._max_cycles)
+
+    # ------------------------------------------------------------------ observations
+    def _peer_pose(self, i: int) -> np.ndarray | None:
+        """The teammate's odometry pose in robot ``i``'s frame, via the merge transform."""
+        t = self.shared.transform
+        if t is None:
+            return None
+        other = self.robots[1 - i].odometry
+        return compose_pose(t if i == 0 else t.inverse(), other)
+
+    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+        return {a: self._observe_one(i) for i, a in enumerate(AGENTS) if a in self.agents}
+
+    def _observe_one(self, i: int) -> dict[str, np.ndarray]:
+        cfg = self.config
+        robot = self.robots[i]
+        odo = robot.odometry
+        lo, hi = self._obs_low, self._obs_high
+        c, s = math.cos(odo[2]), math.sin(odo[2])
+        odometry = np.array([odo[0], odo[1], c, s], dtype=np.float32)
+        np.clip(odometry, lo["odometry"], hi["odometry"], out=odometry)
+        sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
+        nodes, mask, adj = self._graph_obs(i, odo, c, s)
+        teammate = np.zeros(5, dtype=np.float32)
+        peer = self._peer_pose(i)
+        if peer is not None:
+            dx, dy = peer[0] - odo[0], peer[1] - odo[1]
+            dth = peer[2] - odo[2]
+            teammate[:] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
+            np.clip(teammate, lo["teammate"], hi["teammate"], out=teammate)
+        return {
+            "sonar": sonar,
+            "odometry": odometry,
+            "graph_nodes": nodes,
+            "graph_mask": mask,
+            "graph_adjacency": adj,
+            "local_map": self._local_map(i),
+            "teammate": teammate,
+        }
+
+    def _graph_obs(self, i: int, odo: np.ndarray, c: float, s: float):
+        n_max = self.config.mapping.max_nodes
+        nodes = np.zeros((n_max, N_NODE_FEATURES), dtype=np.float32)
+        mask = np.zeros(n_max, dtype=np.float32)
+        topo: TopoMap = self.maps[i].topomap
+        n = topo.n_nodes
+        if n == 0:
+            return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
+        static, last_order, last_adj = self._graph_cache[i]
+        rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
+        order = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
+        k = len(order)
+        lim = 2 * self.frame_radius
+        nodes[:k, :2] = np.clip(rel[order], -lim, lim)
+        nodes[:k, 2:] = static[order]
+        mask[:k] = 1.0
+        if last_order is not None and np.array_equal(order, last_order):
+            return nodes, mask, last_adj.copy()
+        adj = np.zeros((n_max, n_max), dtype=np.float32)
+        if topo.n_edges:
+            slot = np.full(n, -1, dtype=np.int64)
+            slot[order] = np.arange(k)
+            e = slot[topo.edges]
+            e = e[(e >= 0).all(axis=1)]
+            adj[e[:, 0], e[:, 1]] = 1.0
+            adj[e[:, 1], e[:, 0]] = 1.0
+        self._graph_cache[i] = (static, order, adj)
+        return nodes, mask, adj.copy()
+
+    def _cache_graph(self, i: int) -> None:
+        """Per-node features that change only when the map is re-extracted."""
+        topo = self.maps[i].topomap
+        static = np.zeros((topo.n_nodes, N_NODE_FEATURES - 2), dtype=np.float32)
+        static[np.arange(topo.n_nodes), topo.kinds] = 1.0
+        static[:, -1] = np.minimum(topo.degree(), MAX_DEGREE)
+        self._graph_cache[i] = (static, None, None)
+
+    def _local_map(self, i: int) -> np.ndarray:
+        size = self.config.mapping.local_map_size
+        pose = self.robots[i].odometry
+        own = self.maps[i]
+        st = self._sampler.sample(own.states, own.geometry, pose)
+        t = self.shared.transform
+        if t is not None:
+            other = self.maps[1 - i]
+            moved = compose_pose(t if i == 1 else t.inverse(), pose)
+            np.maximum(st, self._sampler.sample(other.states, other.geometry, moved), out=st)
+        return LOCAL_MAP_VALUES[st].reshape(1, size, size)
+
+    # ------------------------------------------------------------------ infos
+    def merge_errors(self) -> tuple[float, float]:
+        """Rotation error (degrees) and translation error (metres, at the centroid of robot
+        1's map) of the merge transform in use against ground truth; NaN before a merge."""
+        t = self.shared.transform
+        if t is None:
+            return math.nan, math.nan
+        xy = self.maps[1].topomap.xy
+        at = xy.mean(axis=0) if len(xy) else self.robots[1].odometry[:2]
+        return (math.degrees(t.rotation_error(self.true_merge)),
+                t.translation_error(self.true_merge, at))
+
+    def _infos(self) -> dict[str, dict[str, Any]]:
+        world_area = self._world.reachable_area
+        rot_err, trans_err = self.merge_errors()
+        common = {
+            "true_coverage": self.oracle.fraction,
+            "true_area_m2": self.oracle.area,
+            "shared_area_m2": self.shared.area,
+            "shared_coverage": self.shared.area / world_area,
+            "overlap": self.oracle.overlap,
+            "merge_accepted": self.shared.transform is not None,
+            "merge_rotation_error_deg": rot_err,
+            "merge_translation_error_m": trans_err,
+            "merge_time_s": self.merge_time_s,
+            "merges": self.merges,
+            "merge": self.merge,
+        }
+        out = {}
+        for i, a in enumerate(AGENTS):
+            if a not in self.agents:
+                continue
+            rmap = self.maps[i]
+            info = dict(common)
+            info.update(
+                own_area_m2=rmap.n_ever * rmap.geometry.resolution ** 2,
+                collisions=self.robots[i].collisions,
+                pose=self.robots[i].true_pose(),
+                odometry=self.robots[i].odometry.copy(),
+                topomap=rmap.topomap,
+                grid=rmap.grid,
+            )
+            out[a] = info
+        return out
+
+    # ------------------------------------------------------------------ render, close
+    def render(self) -> np.ndarray | None:
+        """``"rgb_array"``: an ``(H, W, 3)`` uint8 image; ``"human"``: draw to a window."""
+        if self.render_mode is None:
+            gymnasium.logger.warn(
+                "You are calling render method without specifying any render mode. "
+                "Pass render_mode='rgb_array' or 'human' to the env.")
+            return None
+        self._require_reset()
+        if self._renderer is None:
+            from envs.two_robot_explore.render import Renderer
+
+            self._renderer = Renderer(self.render_mode, self.metadata["render_fps"])
+        return self._renderer.draw(self)
+
+    def close(self) -> None:
+        """Close the render window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def parallel_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+                 **kwargs: Any) -> TwoRobotExploreEnv:
+    """The native ``ParallelEnv`` (arguments: see the manual's Arguments table)."""
+    return TwoRobotExploreEnv(config, render_mode=render_mode, **kwargs)
+
+
+raw_env = TwoRobotExploreEnv
+"""The unwrapped env class (native parallel; there is no separate AEC implementation)."""
+
+
+def env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+        **kwargs: Any) -> AECEnv:
+    """The AEC version: PettingZoo's ``parallel_to_aec`` (order-enforcing) around
+    :func:`parallel_env`."""
+    return parallel_to_aec(parallel_env(config, render_mode=render_mode, **kwargs))

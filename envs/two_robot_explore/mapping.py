@@ -1,0 +1,377 @@
+"""Mapping and fusion in the loop: per-robot grids and topological maps, the shared map, and
+the bookkeeping of covered area.
+
+Frames: robot ``i`` maps in its own start frame (its odometry frame). The **shared map** lives
+in robot 0's frame ("A"); robot 1's map ("B") enters it through the latest accepted
+``fusion.merge_maps`` transform (``p_A = R p_B + T``). Ground truth is the world frame.
+
+Per step only a window around each robot is touched (the bounding box of its sonar cones):
+the grid update, the cell-state image, the "ever known" masks, the shared map and the oracle
+coverage all work on that window, so a step costs the same in a 20 m and an 80 m world. Whole
+maps are re-warped only when a merge changes the transform.
+
+Cell states are :class:`topo.grid.CellState` codes (``UNKNOWN = 0``, ``FREE = 1``,
+``OCCUPIED = 2``); :data:`LOCAL_MAP_VALUES` is the one table turning them into ``local_map``
+pixels. Where two maps overlap, the shared state is the larger code (occupied wins over free,
+known over unknown).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.two_robot_explore.config import MappingConfig
+from fusion.rigid import Rigid2D
+from topo.graph import TopoMap
+from topo.grid import CellState, OccupancyGrid
+
+LOCAL_MAP_VALUES = np.array([128, 255, 0], dtype=np.uint8)
+"""``local_map`` pixel value of each cell state: unknown 128, free 255, occupied 0."""
+
+_MARGIN_CELLS = 2
+"""Extra cells around a sonar window (the inverse model marks a band behind the echo)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Geometry:
+    """Where a grid lies: ``origin`` (lower-left corner of cell (0, 0)), ``resolution`` and
+    ``shape`` ``(H, W)``, CONTRIBUTING.md conventions."""
+
+    origin: tuple[float, float]
+    resolution: float
+    shape: tuple[int, int]
+
+    def window(self, xy: np.ndarray, margin: int = _MARGIN_CELLS) -> tuple[slice, slice] | None:
+        """Row and column slices of the cells covering points ``xy`` (``(N, 2)``) plus
+        ``margin`` cells, clipped to the grid; ``None`` if that is empty."""
+        inv = 1.0 / self.resolution
+        lo = xy.min(axis=0)
+        hi = xy.max(axis=0)
+        c0 = max(int(math.floor((lo[0] - self.origin[0]) * inv)) - margin, 0)
+        r0 = max(int(math.floor((lo[1] - self.origin[1]) * inv)) - margin, 0)
+        c1 = min(int(math.floor((hi[0] - self.origin[0]) * inv)) + margin + 1, self.shape[1])
+        r1 = min(int(math.floor((hi[1] - self.origin[1]) * inv)) + margin + 1, self.shape[0])
+        if r0 >= r1 or c0 >= c1:
+            return None
+        return slice(r0, r1), slice(c0, c1)
+
+
+def geometry_of(grid: OccupancyGrid) -> Geometry:
+    """The :class:`Geometry` of an ``OccupancyGrid``."""
+    return Geometry((float(grid.origin[0]), float(grid.origin[1])), float(grid.resolution),
+                    tuple(int(n) for n in grid.shape))
+
+
+def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
+                window: tuple[slice, slice], transform: Rigid2D
+                ) -> tuple[tuple[slice, slice], np.ndarray] | None:
+    """Nearest-cell resampling of ``src_mask[window]`` into ``dst`` through ``transform``
+    (src frame → dst frame).
+
+    Returns ``(dst_window, values)``: the slices of ``dst`` covered by the moved window and the
+    resampled values there (``False``/0 outside the source window); ``None`` if the window
+    lands outside ``dst``.
+    """
+    rs, cs = window
+    sres = src.resolution
+    x0 = src.origin[0] + cs.start * sres
+    x1 = src.origin[0] + cs.stop * sres
+    y0 = src.origin[1] + rs.start * sres
+    y1 = src.origin[1] + rs.stop * sres
+    corners = transform.apply(np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]))
+    dwin = dst.window(corners, margin=1)
+    if dwin is None:
+        return None
+    drs, dcs = dwin
+    dres = dst.resolution
+    xs = dst.origin[0] + (np.arange(dcs.start, dcs.stop) + 0.5) * dres
+    ys = dst.origin[1] + (np.arange(drs.start, drs.stop) + 0.5) * dres
+    inv = transform.inverse()
+    r, t = inv.R, inv.T
+    # source coordinates of every destination cell centre, relative to the window corner
+    u = (r[0, 0] * xs[None, :] + r[0, 1] * ys[:, None] + (t[0] - x0)) / sres
+    v = (r[1, 0] * xs[None, :] + r[1, 1] * ys[:, None] + (t[1] - y0)) / sres
+    iu = np.floor(u).astype(np.intp)
+    iv = np.floor(v).astype(np.intp)
+    h, w = rs.stop - rs.start, cs.stop - cs.start
+    ok = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+    patch = src_mask[window]
+    out = np.zeros(ok.shape, dtype=src_mask.dtype)
+    out[ok] = patch[iv[ok], iu[ok]]
+    return dwin, out
+
+
+class RobotMap:
+    """One robot's maps in its own start frame.
+
+    Attributes:
+        grid: the ``topo.OccupancyGrid`` (extent ``[-radius, radius]²`` around the start).
+        geometry: its :class:`Geometry`.
+        states: ``(H, W)`` int8 cell states, refreshed in each step's window.
+        ever: ``(H, W)`` bool, cells known at least once (coverage never shrinks).
+        n_ever: ``ever.sum()``, kept incrementally.
+        bbox: ``[r0, r1, c0, c1]`` bounding box of :attr:`ever` (``None`` before the first scan).
+        topomap: the latest extracted ``topo.TopoMap`` (own frame).
+    """
+
+    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
+
+    def __init__(self, radius: float, cfg: MappingConfig) -> None:
+        self.grid = OccupancyGrid(resolution=cfg.grid_resolution,
+                                  extent=(-radius, -radius, radius, radius))
+        self.geometry = geometry_of(self.grid)
+        self.states = np.zeros(self.geometry.shape, dtype=np.int8)
+        self.ever = np.zeros(self.geometry.shape, dtype=bool)
+        self.n_ever = 0
+        self.bbox: list[int] | None = None
+        self.topomap = TopoMap.empty()
+
+    def integrate(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
+                  mount_radius: float, max_range: float, half_cone: float
+                  ) -> tuple[tuple[slice, slice] | None, int]:
+        """Fold one sonar scan (taken at odometry ``pose``) into the grid.
+
+        Readings are measured from the transducers on the rim; the grid's sensor model puts all
+        sensors at the robot centre, so ``mount_radius`` is added to ranges and to
+        ``max_range``. Returns the bounding box of the cells that became known for the first
+        time (``None`` if none did) and how many they are.
+        """
+        self.grid.update(pose, ranges + mount_radius, angles, max_range + mount_radius,
+                         half_cone)
+        reach = np.minimum(ranges, max_range) + mount_radius
+        th = pose[2] + np.concatenate([angles - half_cone, angles + half_cone])
+        rr = np.concatenate([reach, reach])
+        pts = np.empty((len(th) + 1, 2))
+        pts[:-1, 0] = pose[0] + rr * np.cos(th)
+        pts[:-1, 1] = pose[1] + rr * np.sin(th)
+        pts[-1] = pose[:2]
+        window = self.geometry.window(pts)
+        if window is None:
+            return None, 0
+        st = cell_states(self.grid, window)
+        self.states[window] = st
+        ever = self.ever[window]
+        fresh = (st != CellState.UNKNOWN) & ~ever
+        rows = np.flatnonzero(fresh.any(axis=1))
+        if len(rows) == 0:
+            return None, 0
+        cols = np.flatnonzero(fresh.any(axis=0))
+        new = int(np.count_nonzero(fresh))
+        ever |= fresh
+        self.n_ever += new
+        rs, cs = window
+        r0, r1 = rs.start + int(rows[0]), rs.start + int(rows[-1]) + 1
+        c0, c1 = cs.start + int(cols[0]), cs.start + int(cols[-1]) + 1
+        if self.bbox is None:
+            self.bbox = [r0, r1, c0, c1]
+        else:
+            b = self.bbox
+            b[0], b[1] = min(b[0], r0), max(b[1], r1)
+            b[2], b[3] = min(b[2], c0), max(b[3], c1)
+        return (slice(r0, r1), slice(c0, c1)), new
+
+    def known_window(self) -> tuple[slice, slice] | None:
+        """Slices of :attr:`bbox` (``None`` before the first scan)."""
+        if self.bbox is None:
+            return None
+        return slice(self.bbox[0], self.bbox[1]), slice(self.bbox[2], self.bbox[3])
+
+    def extract(self) -> TopoMap:
+        """Re-extract :attr:`topomap` from the free cells inside :attr:`bbox`."""
+        from topo.extract import extract_topomap
+
+        win = self.known_window()
+        if win is None:
+            return self.topomap
+        rs, cs = win
+        g = self.geometry
+        free = self.states[win] == CellState.FREE
+        origin = (g.origin[0] + cs.start * g.resolution, g.origin[1] + rs.start * g.resolution)
+        self.topomap = extract_topomap(free, resolution=g.resolution, origin=origin)
+        return self.topomap
+
+
+def cell_states(grid: OccupancyGrid, window: tuple[slice, slice]) -> np.ndarray:
+    """``CellState`` codes (int8) of ``grid`` inside ``window``."""
+    return grid.states()[window]
+
+
+class SharedMap:
+    """The team's map in robot 0's frame: ``map_0 ∪ transform · map_1`` (known cells).
+
+    Attributes:
+        ever: ``(H, W)`` bool cells known in the shared map, robot 0's geometry.
+        count: ``ever.sum()`` kept incrementally.
+        transform: the merge transform in use (B → A), ``None`` until a merge is accepted.
+    """
+
+    __slots__ = ("geometry", "ever", "count", "transform")
+
+    def __init__(self, geometry: Geometry) -> None:
+        self.geometry = geometry
+        self.ever = np.zeros(geometry.shape, dtype=bool)
+        self.count = 0
+        self.transform: Rigid2D | None = None
+
+    @property
+    def area(self) -> float:
+        """Known area in m²."""
+        return self.count * self.geometry.resolution ** 2
+
+    def add(self, index: int, robot_map: RobotMap, window: tuple[slice, slice] | None) -> int:
+        """OR robot ``index``'s newly known cells in ``window`` into the shared map; returns how
+        many shared cells became known (robot 1 counts only once a merge is accepted)."""
+        if window is None:
+            return 0
+        if index == 0:
+            dst = self.ever[window]
+            src = robot_map.ever[window]
+            new = int(np.count_nonzero(src & ~dst))
+            dst |= src
+        else:
+            if self.transform is None:
+                return 0
+            res = warp_window(self.geometry, robot_map.geometry, robot_map.ever, window,
+                              self.transform)
+            if res is None:
+                return 0
+            dwin, vals = res
+            dst = self.ever[dwin]
+            new = int(np.count_nonzero(vals & ~dst))
+            dst |= vals
+        self.count += new
+        return new
+
+    def rebuild(self, map_0: RobotMap, map_1: RobotMap, transform: Rigid2D) -> int:
+        """Start over with a new merge transform; returns the change of the known cell count
+        (negative if the new transform overlaps more)."""
+        before = self.count
+        self.transform = transform
+        self.ever[...] = map_0.ever
+        self.count = map_0.n_ever
+        win = map_1.known_window()
+        if win is not None:
+            self.add(1, map_1, win)
+        return self.count - before
+
+
+class OracleCoverage:
+    """True coverage: each robot's known cells moved into the world by its true start frame.
+
+    Attributes:
+        masks: two ``(H, W)`` bool world-grid masks, one per robot.
+        counts: cells known by each robot; ``both``: by both; ``covered``: reachable cells known
+            by either (the coverage numerator).
+    """
+
+    __slots__ = ("geometry", "reachable", "n_reachable", "masks", "counts", "both", "covered",
+                 "union")
+
+    def __init__(self, geometry: Geometry, reachable: np.ndarray) -> None:
+        self.geometry = geometry
+        self.reachable = reachable
+        self.n_reachable = int(np.count_nonzero(reachable))
+        self.masks = [np.zeros(geometry.shape, dtype=bool) for _ in range(2)]
+        self.counts = [0, 0]
+        self.both = 0
+        self.covered = 0
+        self.union = 0
+
+    @property
+    def fraction(self) -> float:
+        """Covered fraction of the reachable free area."""
+        return self.covered / self.n_reachable
+
+    @property
+    def overlap(self) -> float:
+        """Fraction of the smaller robot map's known world area also known by the other."""
+        small = min(self.counts)
+        return self.both / small if small else 0.0
+
+    @property
+    def area(self) -> float:
+        """Area known by either robot, m² (world frame)."""
+        return self.union * self.geometry.resolution ** 2
+
+    def add(self, index: int, robot_map: RobotMap, window: tuple[slice, slice] | None,
+            frame: Rigid2D) -> int:
+        """Move robot ``index``'s window into the world by ``frame`` (its true start pose);
+        returns how many world cells became known to the team."""
+        if window is None:
+            return 0
+        res = warp_window(self.geometry, robot_map.geometry, robot_map.ever, window, frame)
+        if res is None:
+            return 0
+        dwin, vals = res
+        mine = self.masks[index][dwin]
+        other = self.masks[1 - index][dwin]
+        new = vals & ~mine
+        if not new.any():
+            return 0
+        mine |= new
+        self.counts[index] += int(np.count_nonzero(new))
+        shared = new & other
+        n_shared = int(np.count_nonzero(shared))
+        self.both += n_shared
+        team_new = new & ~other
+        self.covered += int(np.count_nonzero(team_new & self.reachable[dwin]))
+        n_team = int(np.count_nonzero(team_new))
+        self.union += n_team
+        return n_team
+
+
+class LocalMapSampler:
+    """The egocentric ``local_map``: a heading-up square around a pose, nearest-cell sampling.
+
+    Pixel ``(r, c)`` of the ``size × size`` image lies ``(size/2 - r - 0.5) · resolution`` ahead
+    of the robot and ``(size/2 - c - 0.5) · resolution`` to its left: the robot is at the
+    centre facing up, its left on the image's left.
+    """
+
+    __slots__ = ("size", "_offsets", "_corners")
+
+    def __init__(self, size: int, resolution: float) -> None:
+        self.size = size
+        k = (size / 2.0 - np.arange(size) - 0.5) * resolution
+        fwd, left = np.meshgrid(k, k, indexing="ij")
+        self._offsets = np.stack([fwd.ravel(), left.ravel()]).astype(np.float32)
+        self._corners = ((k[0], k[0]), (k[0], k[-1]), (k[-1], k[0]), (k[-1], k[-1]))
+
+    def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray) -> np.ndarray:
+        """``(size*size,)`` int8 states of ``states`` (in ``geometry``) around ``pose`` (that
+        grid's frame); outside the grid is unknown."""
+        inv = 1.0 / geometry.resolution
+        c, s = math.cos(pose[2]) * inv, math.sin(pose[2]) * inv
+        x = (pose[0] - geometry.origin[0]) * inv
+        y = (pose[1] - geometry.origin[1]) * inv
+        uv = np.array([[c, -s], [s, c]], dtype=np.float32) @ self._offsets
+        uv[0] += x
+        uv[1] += y
+        h, w = geometry.shape
+        idx = uv.astype(np.intp)  # truncation == floor wherever the cell is inside
+        flat = idx[1] * w
+        flat += idx[0]
+        out = states.ravel().take(flat, mode="clip")
+        # the square's extreme points are its corners: test those before masking
+        inside = all(0.0 <= x + c * f - s * g < w and 0.0 <= y + s * f + c * g < h
+                     for f, g in self._corners)
+        if not inside:
+            out[(uv[0] < 0) | (uv[0] >= w) | (uv[1] < 0) | (uv[1] >= h)] = 0
+        return out
+
+
+def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:
+    """``pose`` ``(x, y, heading)`` moved by ``transform``."""
+    xy = transform.R @ pose[:2] + transform.T
+    th = pose[2] + transform.theta
+    return np.array([xy[0], xy[1], math.atan2(math.sin(th), math.cos(th))])
+
+
+def run_merge(map_a: TopoMap, map_b: TopoMap, method: str):
+    """The one place fusion is called: ``fusion.merge_maps(map_a, map_b, method=method)``."""
+    from fusion.merge import merge_maps
+
+    return merge_maps(map_a, map_b, method=method)
