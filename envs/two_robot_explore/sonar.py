@@ -43,7 +43,8 @@ class Sonar:
     """
 
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "last_pose", "fresh",
-                 "_local_dir", "_length", "_cos_dropout", "_since", "_n_rays", "_rays")
+                 "_local_dir", "_local_dirs", "_length", "_cos_dropout", "_since", "_n_rays",
+                 "_rays")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -56,6 +57,7 @@ class Sonar:
         self._n_rays = self.ray_angles.size
         ra = self.ray_angles.ravel()
         self._local_dir = np.stack([np.cos(ra), np.sin(ra)], axis=1)
+        self._local_dirs = [tuple(d) for d in self._local_dir.tolist()]
         self._length = self.mount_radius + cfg.max_range
         self._cos_dropout = math.cos(math.radians(cfg.dropout_incidence))
         self.last = np.full(len(self.angles), cfg.max_range)
@@ -82,21 +84,32 @@ class Sonar:
              shape_filter: pymunk.ShapeFilter) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free ray casts: ``(S*K,)`` hit distances from the transducers (``inf`` =
         nothing within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
-        starts, ends = self.ray_segments(pose)
-        query = space.segment_query_first
+        dist, cos_inc = self._cast(space, pose, shape_filter)
+        return np.asarray(dist), np.asarray(cos_inc)
+
+    def _cast(self, space: pymunk.Space, pose: np.ndarray,
+              shape_filter: pymunk.ShapeFilter) -> tuple[list[float], list[float]]:
+        # plain floats and lists: per ray this is a pymunk call plus a few multiplications
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+        c, s = math.cos(th), math.sin(th)
         length = self._length
         mount = self.mount_radius
-        dist = [math.inf] * self._n_rays
-        cos_inc = [1.0] * self._n_rays
-        dirs = (ends - starts).tolist()
-        for i, (a, b) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
-            hit = query(a, b, 0.0, shape_filter)
-            if hit is not None:
-                dist[i] = hit.alpha * length - mount
+        start = (x, y)
+        query = space.segment_query_first
+        dist: list[float] = []
+        cos_inc: list[float] = []
+        for lc, ls in self._local_dirs:
+            dx = c * lc - s * ls
+            dy = s * lc + c * ls
+            hit = query(start, (x + length * dx, y + length * dy), 0.0, shape_filter)
+            if hit is None:
+                dist.append(math.inf)
+                cos_inc.append(1.0)
+            else:
+                dist.append(hit.alpha * length - mount)
                 n = hit.normal
-                d = dirs[i]
-                cos_inc[i] = abs(n.x * d[0] + n.y * d[1]) / length
-        return np.asarray(dist), np.asarray(cos_inc)
+                cos_inc.append(abs(n.x * dx + n.y * dy))
+        return dist, cos_inc
 
     def measure(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter,
                 rng: np.random.Generator, travelled: float = 0.0) -> np.ndarray:
@@ -107,7 +120,7 @@ class Sonar:
             space: the physics space to cast rays in.
             pose: the robot's true world pose ``(x, y, heading)``.
             shape_filter: the robot's :attr:`Robot.sensor_filter`.
-            rng: the env's generator (dropout and noise).
+            rng: the env's generator (dropout and noise; the same draws every scan).
             travelled: metres driven since the previous call.
         """
         cfg = self.cfg
@@ -116,14 +129,20 @@ class Sonar:
             self.fresh = False
             return self.last
         self._since = 0.0
-        dist, cos_inc = self.cast(space, pose, shape_filter)
-        drop = (cos_inc < self._cos_dropout) & (rng.random(self._n_rays) < cfg.dropout_prob)
-        dist[drop] = math.inf
-        nearest = dist.reshape(-1, self._rays).min(axis=1)
-        echo = np.isfinite(nearest)
-        noise = rng.standard_normal(len(nearest)) * cfg.noise_std
-        reading = np.where(echo, nearest + noise, cfg.max_range)
-        self.last = np.clip(reading, cfg.min_range, cfg.max_range)
+        dist, cos_inc = self._cast(space, pose, shape_filter)
+        u = rng.random(self._n_rays).tolist()
+        noise = rng.standard_normal(len(self.angles)).tolist()
+        steep, p_drop = self._cos_dropout, cfg.dropout_prob
+        lo, hi, std, k_rays = cfg.min_range, cfg.max_range, cfg.noise_std, self._rays
+        reading = []
+        for k, z in enumerate(noise):
+            best = math.inf
+            for i in range(k * k_rays, (k + 1) * k_rays):
+                if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
+                    best = dist[i]
+            r = best + z * std if best != math.inf else hi
+            reading.append(lo if r < lo else hi if r > hi else r)
+        self.last = np.array(reading)
         self.last_pose = np.array(pose, dtype=np.float64)
         self.fresh = True
         return self.last
