@@ -16,6 +16,98 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
+def node_pairs(xy, edges, knn, min_dist):
+    """The node pairs 2-point consensus uses, and which nodes are near in the graph.
+
+    Returns ``(near, i, j, length)``: ``near[a, b]`` when ``a`` and ``b`` are joined by a path or
+    by two; pairs ``i < j`` that are near or among each other's ``knn`` nearest nodes, at least
+    ``min_dist`` apart, and their distances.
+    """
+    n = xy.shape[0]
+    adj = np.zeros((n, n), dtype=np.bool_)
+    for e in range(edges.shape[0]):
+        adj[edges[e, 0], edges[e, 1]] = True
+        adj[edges[e, 1], edges[e, 0]] = True
+    near = adj.copy()
+    for k in range(n):
+        for a in range(n):
+            if adj[k, a]:
+                for b in range(n):
+                    if adj[k, b]:
+                        near[a, b] = True
+    for a in range(n):
+        near[a, a] = False
+    dist = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            dist[a, b] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
+    cand = near.copy()
+    k = min(knn, n - 1)
+    if k > 0:
+        for a in range(n):
+            order = np.argsort(dist[a])
+            m = 0
+            for b in order:
+                if b == a:
+                    continue
+                cand[a, b] = True
+                cand[b, a] = True
+                m += 1
+                if m == k:
+                    break
+    count = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            if cand[a, b] and dist[a, b] >= min_dist:
+                count += 1
+    pi = np.empty(count, dtype=np.int64)
+    pj = np.empty(count, dtype=np.int64)
+    plen = np.empty(count)
+    c = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            if cand[a, b] and dist[a, b] >= min_dist:
+                pi[c], pj[c], plen[c] = a, b, dist[a, b]
+                c += 1
+    return near, pi, pj, plen
+
+
+@njit(cache=True, nogil=True)
+def mutual_pairs(A, B, theta, tx, ty, dist):
+    """``(K, 2)`` pairs ``(a, b)``: A node and B node (moved by the motion) mutually nearest and
+    within ``dist``, any kinds."""
+    c, s = math.cos(theta), math.sin(theta)
+    X = np.empty_like(B)
+    for b in range(B.shape[0]):
+        X[b, 0] = c * B[b, 0] - s * B[b, 1] + tx
+        X[b, 1] = s * B[b, 0] + c * B[b, 1] + ty
+    nn_b = np.empty(B.shape[0], dtype=np.int64)
+    d_b = np.empty(B.shape[0])
+    for b in range(B.shape[0]):
+        best, arg = np.inf, -1
+        for a in range(A.shape[0]):
+            dd = (X[b, 0] - A[a, 0]) ** 2 + (X[b, 1] - A[a, 1]) ** 2
+            if dd < best:
+                best, arg = dd, a
+        nn_b[b], d_b[b] = arg, best
+    out = np.empty((B.shape[0], 2), dtype=np.int64)
+    n = 0
+    for b in range(B.shape[0]):
+        a = nn_b[b]
+        if d_b[b] > dist * dist:
+            continue
+        mutual = True
+        for o in range(B.shape[0]):
+            if o != b and (X[o, 0] - A[a, 0]) ** 2 + (X[o, 1] - A[a, 1]) ** 2 < d_b[b]:
+                mutual = False
+                break
+        if mutual:
+            out[n, 0], out[n, 1] = a, b
+            n += 1
+    return out[:n]
+
+
+@njit(cache=True, nogil=True)
 def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol, compat):
     """2-point consensus: every (A pair, B pair) whose lengths agree within ``tol`` and whose end
     kinds are compatible gives the rigid motion putting the B pair onto the A pair.
@@ -62,6 +154,41 @@ NEAR_ANY_NODE = 3
 (bits 0–2: of a kind compatible with B kind 0–2)."""
 ON_PATH = 4
 """Bit of a :func:`raster_scores` cell: on one of A's paths."""
+
+
+@njit(cache=True, nogil=True)
+def paint_disks(grid, x0, y0, cell, points, radius, bits):
+    """OR ``bits[p]`` into every cell of ``grid[iy, ix]`` (cells ``cell`` wide, cell (0, 0) at
+    ``(x0, y0)``) whose centre is within ``radius + cell / 2`` of point ``p``."""
+    ny, nx = grid.shape
+    r = int(math.ceil(radius / cell))
+    reach2 = (radius + 0.5 * cell) ** 2
+    for p in range(points.shape[0]):
+        cx = int(math.floor((points[p, 0] - x0) / cell))
+        cy = int(math.floor((points[p, 1] - y0) / cell))
+        for iy in range(max(0, cy - r), min(ny, cy + r + 1)):
+            for ix in range(max(0, cx - r), min(nx, cx + r + 1)):
+                dx = x0 + (ix + 0.5) * cell - points[p, 0]
+                dy = y0 + (iy + 0.5) * cell - points[p, 1]
+                if dx * dx + dy * dy <= reach2:
+                    grid[iy, ix] |= bits[p]
+
+
+@njit(cache=True, nogil=True)
+def paint_segments(grid, x0, y0, cell, P, edges, radius, bit):
+    """OR ``bit`` into the cells within ~``radius`` of each segment ``P[u]``–``P[v]``
+    (disks painted every half cell along it)."""
+    one = np.empty((1, 2))
+    bits = np.full(1, bit, dtype=np.uint8)
+    for e in range(edges.shape[0]):
+        ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
+        vx, vy = P[edges[e, 1], 0], P[edges[e, 1], 1]
+        steps = max(1, int(math.ceil(math.hypot(vx - ux, vy - uy) / (0.5 * cell))))
+        for k in range(steps + 1):
+            f = k / steps
+            one[0, 0] = ux + f * (vx - ux)
+            one[0, 1] = uy + f * (vy - uy)
+            paint_disks(grid, x0, y0, cell, one, radius, bits)
 
 
 @njit(cache=True, nogil=True)
@@ -186,9 +313,14 @@ def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
 
 @njit(cache=True, nogil=True)
 def _near_segment(x, y, P, edges, dist2):
+    d = math.sqrt(dist2)
     for e in range(edges.shape[0]):
         ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
-        vx, vy = P[edges[e, 1], 0] - ux, P[edges[e, 1], 1] - uy
+        wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
+        if (x < min(ux, wx) - d or x > max(ux, wx) + d or y < min(uy, wy) - d
+                or y > max(uy, wy) + d):
+            continue
+        vx, vy = wx - ux, wy - uy
         ll = vx * vx + vy * vy
         t = 0.0 if ll == 0.0 else ((x - ux) * vx + (y - uy) * vy) / ll
         t = min(1.0, max(0.0, t))

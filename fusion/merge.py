@@ -102,8 +102,8 @@ class MergeConfig:
     min_pair_distance: float = 1.0
     knn: int = 4
     coarse_tolerance: float = 0.7
-    max_hypotheses: int = 3000
-    candidates: int = 32
+    max_hypotheses: int = 2000
+    candidates: int = 16
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
@@ -257,27 +257,13 @@ class _Prepared:
 
 
 def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
-    n = m.n_nodes
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
-    adj = np.zeros((n, n), dtype=np.int32)
-    adj[m.edges[:, 0], m.edges[:, 1]] = 1
-    adj[m.edges[:, 1], m.edges[:, 0]] = 1
-    near = (adj + adj @ adj) > 0
-    dist = np.sqrt(((xy[:, None, :] - xy[None, :, :]) ** 2).sum(axis=-1))
-    candidate = near.copy()
-    k = min(cfg.knn, n - 1)
-    if k > 0:
-        nearest = np.argsort(dist, axis=1, kind="stable")[:, 1:k + 1]
-        candidate[np.repeat(np.arange(n), k), nearest.ravel()] = True
-    candidate |= candidate.T
-    candidate &= dist >= max(cfg.min_pair_distance, 1e-9)
-    i, j = np.nonzero(np.triu(candidate, 1))
-    np.fill_diagonal(near, False)
-    seg = dist[m.edges[:, 0], m.edges[:, 1]]
+    edges = np.ascontiguousarray(m.edges, dtype=np.int64)
+    near, i, j, length = K.node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
+    seg = np.linalg.norm(xy[edges[:, 0]] - xy[edges[:, 1]], axis=1)
     margin = np.minimum(0.5, cfg.eps / np.maximum(seg, 1e-12))
-    return _Prepared(xy, m.kinds.astype(np.int64), np.ascontiguousarray(m.edges, np.int64),
-                     near, i.astype(np.int64), j.astype(np.int64), dist[i, j], margin,
-                     _branches(xy, m.edges))
+    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
+                     _branches(xy, edges))
 
 
 def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -366,22 +352,11 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
         best = max((best, ev), key=_Eval.key)
     theta, t, moved = best.theta, best.t, False
     for _ in range(3):
-        c, s = math.cos(theta), math.sin(theta)
-        pairs = _mutual_pairs(pa.xy, pb.xy @ np.array([[c, s], [-s, c]]) + t, cfg.fit_eps)
+        pairs = K.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
         if len(pairs) < 3:
             break
         theta, t, moved = *_least_squares(pa, pb, pairs), True
     return _evaluate(pa, pb, theta, t, cfg) if moved else best
-
-
-def _mutual_pairs(A: np.ndarray, X: np.ndarray, dist: float) -> np.ndarray:
-    """``(K, 2)`` pairs ``(a, b)`` of mutually nearest points within ``dist``, any node kinds."""
-    d2 = ((X[:, None, :] - A[None, :, :]) ** 2).sum(axis=-1)
-    nearest_a = d2.argmin(axis=1)
-    nearest_b = d2.argmin(axis=0)
-    b = np.flatnonzero((nearest_b[nearest_a] == np.arange(len(X)))
-                       & (d2[np.arange(len(X)), nearest_a] <= dist * dist))
-    return np.column_stack([nearest_a[b], b])
 
 
 def _centroid_image(theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
@@ -418,13 +393,6 @@ def _runner_up_of(best: _Eval, others: list[_Eval], b_xy: np.ndarray, cfg: Merge
 
 
 # ------------------------------------------------------------------------------- methods
-def _disk(radius: float, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    r = max(0, math.ceil(radius / cell - 0.5))
-    oy, ox = np.mgrid[-r:r + 1, -r:r + 1]
-    inside = (ox ** 2 + oy ** 2) * cell * cell <= (radius + 0.5 * cell) ** 2
-    return oy[inside], ox[inside]
-
-
 def _hit_grid(pa: _Prepared, tol: float, path_tol: float) -> tuple[np.ndarray, float, float, float]:
     """The bit raster of A scored by :func:`fusion._merge_kernels.raster_scores`: cells within
     ~``tol`` of an A node compatible with each B kind (bits 0–2), of any A node
@@ -433,31 +401,14 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float) -> tuple[np.ndarray, f
     cell = tol / 2.0
     lo = pa.xy.min(axis=0) - tol - cell
     shape = (np.ceil((pa.xy.max(axis=0) - lo + tol) / cell) + 2).astype(np.int64)
-    grid = np.zeros(int(shape[0] * shape[1]), dtype=np.uint8)
-    node_bits = (KIND_COMPATIBLE[pa.kinds].astype(np.uint8) << np.arange(len(NodeKind),
-                                                                        dtype=np.uint8)).sum(
-        axis=1).astype(np.uint8) | np.uint8(1 << K.NEAR_ANY_NODE)
-
-    def mark(points: np.ndarray, radius: float, bits: np.ndarray | np.uint8) -> None:
-        oy, ox = _disk(radius, cell)
-        c = np.floor((points - lo) / cell).astype(np.int64)
-        iy = np.clip(c[:, 1, None] + oy[None, :], 0, shape[1] - 1)
-        ix = np.clip(c[:, 0, None] + ox[None, :], 0, shape[0] - 1)
-        flat = (iy * shape[0] + ix).ravel()
-        per_cell = np.repeat(np.broadcast_to(bits, len(points)), len(oy))
-        for bit in np.unique(per_cell):  # one bit pattern per statement: repeats are harmless
-            sel = flat[per_cell == bit]
-            grid[sel] |= bit
-
-    mark(pa.xy, tol, node_bits)
-    if len(pa.edges):
-        u, v = pa.xy[pa.edges[:, 0]], pa.xy[pa.edges[:, 1]]
-        steps = np.maximum(1, np.ceil(np.linalg.norm(v - u, axis=1) / (0.5 * cell))).astype(int)
-        e = np.repeat(np.arange(len(u)), steps + 1)
-        k = np.arange(len(e)) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
-        f = k / steps[e]
-        mark(u[e] + f[:, None] * (v[e] - u[e]), path_tol, np.uint8(1 << K.ON_PATH))
-    return grid.reshape(shape[1], shape[0]), float(lo[0]), float(lo[1]), 1.0 / cell
+    grid = np.zeros((shape[1], shape[0]), dtype=np.uint8)
+    node_bits = ((KIND_COMPATIBLE[pa.kinds].astype(np.uint8)
+                  << np.arange(len(NodeKind), dtype=np.uint8)).sum(axis=1).astype(np.uint8)
+                 | np.uint8(1 << K.NEAR_ANY_NODE))
+    K.paint_disks(grid, lo[0], lo[1], cell, pa.xy, tol, node_bits)
+    K.paint_segments(grid, lo[0], lo[1], cell, pa.xy, pa.edges, path_tol,
+                     np.uint8(1 << K.ON_PATH))
+    return grid, float(lo[0]), float(lo[1]), 1.0 / cell
 
 
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
