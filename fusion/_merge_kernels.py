@@ -29,12 +29,25 @@ def node_pairs(xy, edges, knn, min_dist):
         adj[edges[e, 0], edges[e, 1]] = True
         adj[edges[e, 1], edges[e, 0]] = True
     near = adj.copy()
+    degree = np.zeros(n, dtype=np.int64)
+    for e in range(edges.shape[0]):
+        degree[edges[e, 0]] += 1
+        degree[edges[e, 1]] += 1
+    start = np.zeros(n + 1, dtype=np.int64)
     for k in range(n):
-        for a in range(n):
-            if adj[k, a]:
-                for b in range(n):
-                    if adj[k, b]:
-                        near[a, b] = True
+        start[k + 1] = start[k] + degree[k]
+    nbr = np.empty(start[n], dtype=np.int64)
+    fill = start[:n].copy()
+    for e in range(edges.shape[0]):
+        u, v = edges[e, 0], edges[e, 1]
+        nbr[fill[u]] = v
+        fill[u] += 1
+        nbr[fill[v]] = u
+        fill[v] += 1
+    for k in range(n):  # two paths through k
+        for p in range(start[k], start[k + 1]):
+            for q in range(start[k], start[k + 1]):
+                near[nbr[p], nbr[q]] = True
     for a in range(n):
         near[a, a] = False
     dist = np.empty((n, n))
@@ -246,7 +259,9 @@ def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
 def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
     """Refine each hypothesis in place: per gate in ``gates``, pair every B node with its nearest
     compatible A node within the gate and refit the rigid motion to those pairs (closed-form 2-D
-    SVD step). A hypothesis with fewer than 2 pairs keeps its motion."""
+    SVD step). A hypothesis with fewer than 2 pairs keeps its motion. Returns the number of pairs
+    each hypothesis had at the last gate."""
+    counts = np.zeros(theta.shape[0], dtype=np.int64)
     for h in range(theta.shape[0]):
         for g in range(gates.shape[0]):
             gate2 = gates[g] * gates[g]
@@ -275,6 +290,7 @@ def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
                     sqx += A[arg, 0]
                     sqy += A[arg, 1]
                     n += 1
+            counts[h] = n
             if n < 2:
                 continue
             spx /= n
@@ -294,6 +310,7 @@ def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
             theta[h] = ang
             tx[h] = sqx - (c * spx - s * spy)
             ty[h] = sqy - (s * spx + c * spy)
+    return counts
 
 
 @njit(cache=True, nogil=True)
@@ -460,3 +477,4 @@ def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_
                           b_margin, b_branch, theta[h], tx[h], ty[h], eps, compat, loose_kind,
                           branch_tol, min_sin, match_b, d2_b)
     return out
+

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
@@ -82,7 +81,8 @@ class MergeConfig:
         knn: each node is also paired with its ``knn`` nearest nodes.
         coarse_tolerance: hit radius of the coarse hypothesis score.
         max_hypotheses: most hypotheses scored (the longest pairs are kept).
-        candidates: distinct hypotheses refined and fully scored.
+        candidates: distinct hypotheses refined.
+        scored: of those, how many (the most matched after refinement) are fully scored.
         distinct_angle_deg, distinct_distance: two alignments are distinct when their angles
             differ by at least ``distinct_angle_deg`` or they put B's centroid at least
             ``distinct_distance`` apart.
@@ -102,8 +102,9 @@ class MergeConfig:
     min_pair_distance: float = 1.0
     knn: int = 4
     coarse_tolerance: float = 0.7
-    max_hypotheses: int = 2000
-    candidates: int = 16
+    max_hypotheses: int = 1500
+    candidates: int = 32
+    scored: int = 12
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
@@ -122,7 +123,7 @@ class MergeConfig:
         check_real(self.min_score, "min_score")
         check_real(self.min_margin, "min_margin", low=0.0, low_inclusive=True)
         for name, low in (("knn", 0), ("max_hypotheses", 1), ("candidates", 1),
-                          ("icp_max_iter", 1), ("min_inliers", 3),
+                          ("icp_max_iter", 1), ("scored", 1), ("min_inliers", 3),
                           ("multistart_starts", 1)):
             check_int(getattr(self, name), name, low=low)
 
@@ -133,15 +134,15 @@ class MergeConfig:
 
 
 CONFIDENCE_WEIGHTS: dict[str, float] = {
-    "bias": -5.804,
-    "closeness": 2.954,
-    "inliers": -0.43,
-    "matched_edges": -0.365,
-    "conflicts": -0.896,
-    "crossings": -1.788,
-    "branches_agree": 0.467,
-    "branches_disagree": -0.579,
-    "log_pairs": -0.451,
+    "bias": -3.34,
+    "closeness": 3.637,
+    "inliers": -0.373,
+    "matched_edges": -0.603,
+    "conflicts": -1.105,
+    "crossings": -2.132,
+    "branches_agree": 0.489,
+    "branches_disagree": -0.652,
+    "log_pairs": -1.068,
 }
 """Weights of :attr:`MergeEvidence.score`, the log-odds that an alignment is right: a logistic
 regression fitted on the best alignments ``"auto"`` finds on synthetic pairs
@@ -435,7 +436,10 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
                                cfg.distinct_distance, cfg.candidates)
     th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
     gates = np.array([cfg.coarse_tolerance, 0.5 * (cfg.coarse_tolerance + cfg.eps), cfg.eps])
-    K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE, gates)
+    counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,
+                            gates)
+    keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
+    th, txc, tyc = th[keep], txc[keep], tyc[keep]
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
                                 int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN)
     scores = _scores(features, len(pa.xy), len(pb.xy))
@@ -538,24 +542,26 @@ def fuse_maps(map_a: TopoMap, map_b: TopoMap, transform: Rigid2D, matches: np.nd
     xy = np.vstack([map_a.xy, moved])
     matches = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
     xy[matches[:, 0]] = 0.5 * (map_a.xy[matches[:, 0]] + moved[matches[:, 1]])
-    rows = [matches[:, 0], matches[:, 1] + n_a]
-    close = cKDTree(xy).query_pairs(eps, output_type="ndarray")
-    links = np.concatenate([np.column_stack(rows), close]) if len(close) else np.column_stack(rows)
     n = len(xy)
-    graph = coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n, n))
+    close_i, close_j = np.nonzero(np.triu(((xy[:, None] - xy[None]) ** 2).sum(-1) <= eps ** 2, 1))
+    rows = np.concatenate([matches[:, 0], close_i])
+    cols = np.concatenate([matches[:, 1] + n_a, close_j])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
-    first = np.full(label.max() + 1, n, dtype=np.int64)
+    first = np.full(label.max() + 1, n, dtype=np.int64)  # clusters in order of first node
     np.minimum.at(first, label, np.arange(n))
     order = np.argsort(first, kind="stable")
-    new_id = np.empty_like(order)
-    new_id[order] = np.arange(len(order))
-    node = new_id[label]
+    rename = np.empty_like(order)
+    rename[order] = np.arange(len(order))
+    node = rename[label]
+    first = first[order]
+    n_out = len(first)
     kinds = np.concatenate([map_a.kinds, map_b.kinds]).astype(np.int64)
     rank = np.array([_KIND_PRIORITY[NodeKind(k)] for k in range(len(NodeKind))])[kinds]
-    best = np.full(len(order), 99, dtype=np.int64)
+    best = np.full(n_out, 99, dtype=np.int64)
     np.minimum.at(best, node, rank)
     by_rank = np.array(sorted(_KIND_PRIORITY, key=_KIND_PRIORITY.get), dtype=np.int64)
-    out_xy = xy[first[order]]
+    out_xy = xy[first]
     edges = np.concatenate([map_a.edges, map_b.edges + n_a]).astype(np.int64)
     lengths = np.concatenate([map_a.lengths, map_b.lengths])
     e = np.sort(node[edges], axis=1) if len(edges) else np.empty((0, 2), dtype=np.int64)
