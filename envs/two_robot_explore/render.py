@@ -1,9 +1,9 @@
 """Rendering with pygame-ce (the ``render`` extra): four panels in one frame.
 
 Top left, the world: free space, what the team has truly seen (tinted), the wall segments,
-both robots with their sonar readings. Top right, the shared map in robot 0's frame with the
-merged topological map (once a merge is accepted). Bottom, each robot's own occupancy grid
-and topological map in its own frame.
+both robots with their sonar cones drawn out to each reading. Top right, the shared map in
+robot 0's frame with the merged topological map (once a merge is accepted). Bottom, each
+robot's own occupancy grid and topological map in its own frame.
 
 pygame is imported here, never at package import; without it rendering raises an
 ``ImportError`` that names the extra to install. ``"rgb_array"`` needs no display;
@@ -127,12 +127,15 @@ class Renderer:
         for i, (robot, sonar) in enumerate(zip(env.robots, env.sonars, strict=True)):
             pose = robot.true_pose()
             origins = sonar.origins(pose)
+            half = math.radians(sonar.cfg.cone) / 2
+            colour = (240, 120, 100) if i == 0 else (100, 140, 240)
             for (ox, oy), a, r in zip(origins.tolist(), sonar.angles.tolist(),
                                       sonar.last.tolist(), strict=True):
                 th = pose[2] + a
-                end = (ox + r * math.cos(th), oy + r * math.sin(th))
-                colour = (255, 170, 160) if i == 0 else (160, 190, 255)
-                pg.draw.line(self.surface, colour, view.px(ox, oy), view.px(*end), 1)
+                cone = [view.px(ox, oy)] + [
+                    view.px(ox + r * math.cos(th + d), oy + r * math.sin(th + d))
+                    for d in (-half, 0.0, half)]
+                pg.draw.polygon(self.surface, colour, cone, 1)
             centre = view.px(pose[0], pose[1])
             rad = max(int(env.config.robot.radius * view.scale), 3)
             pg.draw.circle(self.surface, ROBOT_COLOURS[i], centre, rad)
