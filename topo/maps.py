@@ -1,0 +1,165 @@
+"""Floor plans from real map files: ROS ``map_server`` PGM + YAML and DungeonMaps PNG.
+
+A :class:`FloorPlan` is a free/occupied mask with a resolution and an origin, in the project's
+grid convention (CONTRIBUTING.md): arrays ``[iy, ix]`` with **row 0 at the bottom** (image files
+have row 0 at the top, so loaders flip them), ``origin`` = world position of the lower-left
+corner of cell ``(0, 0)``. The env turns floor plans into worlds; ``topo.extract_topomap`` turns
+them into ground-truth topological maps.
+
+* ROS (``load_ros_map``): the YAML's ``image`` (PGM/PNG, relative to the YAML), ``resolution``,
+  ``origin [x, y, yaw]``, ``negate``, ``occupied_thresh``, ``free_thresh`` and optional ``mode``
+  (``trinary``/``scale``: ``p = (255 − v) / 255``, or ``1 − p`` with ``negate``; ``raw``:
+  ``p = v / 100``). ``p > occupied_thresh`` is occupied, ``p < free_thresh`` free, the rest
+  unknown — map_server's rule.
+* DungeonMaps (``load_dungeon_png``): grey > 150 is free (the 208-grey start square too),
+  darker is an obstacle; no scale is stored, so ``resolution`` is an argument.
+
+Every problem with a file (missing, truncated, bad header, missing YAML key) raises
+:class:`MapFileError` naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from topo._checks import check_real
+
+DUNGEON_FREE_ABOVE = 150
+"""DungeonMaps grey levels above this are free space."""
+
+
+class MapFileError(ValueError):
+    """A map file that cannot be read; the message names the file and the problem."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FloorPlan:
+    """A known map: ``free`` and ``occupied`` boolean masks ``(H, W)`` (neither = unknown),
+    ``resolution`` in m/cell, ``origin`` of cell (0, 0)'s lower-left corner, and a ``name``."""
+
+    free: np.ndarray
+    occupied: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    name: str
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.free.shape)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in metres."""
+        h, w = self.free.shape
+        x0, y0 = self.origin
+        return (x0, y0, x0 + w * self.resolution, y0 + h * self.resolution)
+
+    def free_area_m2(self) -> float:
+        return float(self.free.sum()) * self.resolution ** 2
+
+
+def _read_image(path: Path, what: str) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    if not path.is_file():
+        raise MapFileError(f"{path}: {what} file not found")
+    try:
+        with Image.open(path) as im:
+            im.load()
+            if im.mode not in ("L", "P", "RGB", "RGBA", "LA", "I", "I;16"):
+                raise MapFileError(f"{path}: unsupported image mode {im.mode!r}")
+            grey = np.asarray(im.convert("L"), dtype=np.uint8)
+    except MapFileError:
+        raise
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise MapFileError(f"{path}: cannot read the image (truncated or bad header: {exc})"
+                           ) from exc
+    if grey.ndim != 2 or min(grey.shape) < 2:
+        raise MapFileError(f"{path}: image must be 2-D and at least 2x2, got {grey.shape}")
+    return grey
+
+
+def _yaml_number(meta: dict[str, Any], key: str, path: Path, **bounds: Any) -> float:
+    if key not in meta:
+        raise MapFileError(f"{path}: missing key {key!r}")
+    try:
+        return check_real(meta[key], key, **bounds)
+    except (TypeError, ValueError) as exc:
+        raise MapFileError(f"{path}: {exc}") from exc
+
+
+def load_ros_map(yaml_path: str | Path) -> FloorPlan:
+    """Load a ROS ``map_server`` map (YAML + image) as a :class:`FloorPlan`."""
+    import yaml
+
+    path = Path(yaml_path)
+    if not path.is_file():
+        raise MapFileError(f"{path}: map YAML file not found")
+    try:
+        meta = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise MapFileError(f"{path}: not valid YAML ({exc})") from exc
+    if not isinstance(meta, dict):
+        raise MapFileError(f"{path}: expected a YAML mapping, got {type(meta).__name__}")
+    if not isinstance(meta.get("image"), str):
+        raise MapFileError(f"{path}: missing key 'image' (the map image file name)")
+    resolution = _yaml_number(meta, "resolution", path, low=0.0)
+    occ_t = _yaml_number(meta, "occupied_thresh", path, low=0.0, high=1.0)
+    free_t = _yaml_number(meta, "free_thresh", path, low=0.0, low_inclusive=True, high=1.0)
+    origin = meta.get("origin")
+    if (not isinstance(origin, list) or len(origin) != 3
+            or not all(isinstance(v, (int, float)) for v in origin)):
+        raise MapFileError(f"{path}: 'origin' must be [x, y, yaw], got {origin!r}")
+    if origin[2] != 0:
+        raise MapFileError(f"{path}: origin yaw must be 0 (rotated map origins are not "
+                           f"supported), got {origin[2]}")
+    mode = meta.get("mode", "trinary")
+    if mode not in ("trinary", "scale", "raw"):
+        raise MapFileError(f"{path}: mode must be 'trinary', 'scale' or 'raw', got {mode!r}")
+    negate = meta.get("negate", 0)
+    if negate not in (0, 1, True, False):
+        raise MapFileError(f"{path}: negate must be 0 or 1, got {negate!r}")
+
+    image_path = Path(meta["image"])
+    if not image_path.is_absolute():
+        image_path = path.parent / image_path
+    grey = _read_image(image_path, "map image")[::-1].astype(np.float64)  # row 0 at the bottom
+    if mode == "raw":
+        p = grey / 100.0
+    else:
+        p = grey / 255.0 if negate else (255.0 - grey) / 255.0
+    return FloorPlan(free=np.ascontiguousarray(p < free_t),
+                     occupied=np.ascontiguousarray(p > occ_t), resolution=resolution,
+                     origin=(float(origin[0]), float(origin[1])), name=path.stem)
+
+
+def load_dungeon_png(png_path: str | Path, resolution: float = 0.1) -> FloorPlan:
+    """Load a DungeonMaps PNG (grey > 150 free, darker obstacle) at ``resolution`` m/pixel;
+    the origin is the image's lower-left corner at (0, 0)."""
+    resolution = check_real(resolution, "resolution", low=0.0)
+    path = Path(png_path)
+    grey = _read_image(path, "DungeonMaps PNG")[::-1]
+    free = grey > DUNGEON_FREE_ABOVE
+    return FloorPlan(free=np.ascontiguousarray(free), occupied=np.ascontiguousarray(~free),
+                     resolution=resolution, origin=(0.0, 0.0), name=path.stem)
+
+
+def load_floor_plan(path: str | Path, resolution: float | None = None) -> FloorPlan:
+    """Load a map file by its suffix: ``.yaml``/``.yml`` (ROS) or ``.png`` (DungeonMaps, at
+    ``resolution`` m/pixel, default 0.1). ``resolution`` is refused for ROS maps (their YAML
+    sets it)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        if resolution is not None:
+            raise ValueError(f"resolution is set by the ROS map's YAML ({path.name}); "
+                             f"got resolution={resolution}")
+        return load_ros_map(path)
+    if suffix == ".png":
+        return load_dungeon_png(path, 0.1 if resolution is None else resolution)
+    raise MapFileError(f"{path}: unknown map format {suffix!r}; expected .yaml/.yml (ROS "
+                       "map_server) or .png (DungeonMaps)")
