@@ -329,8 +329,10 @@ def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
 
 
 @njit(cache=True, nogil=True)
-def _near_segment(x, y, P, edges, dist2):
-    d = math.sqrt(dist2)
+def _segment_distance2(x, y, P, edges, limit2):
+    """Squared distance from ``(x, y)`` to the nearest segment, or ``limit2`` if none is nearer."""
+    best = limit2
+    d = math.sqrt(limit2)
     for e in range(edges.shape[0]):
         ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
         wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
@@ -342,9 +344,8 @@ def _near_segment(x, y, P, edges, dist2):
         t = 0.0 if ll == 0.0 else ((x - ux) * vx + (y - uy) * vy) / ll
         t = min(1.0, max(0.0, t))
         dx, dy = ux + t * vx - x, uy + t * vy - y
-        if dx * dx + dy * dy <= dist2:
-            return True
-    return False
+        best = min(best, dx * dx + dy * dy)
+    return best
 
 
 @njit(cache=True, nogil=True)
@@ -382,9 +383,10 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
     return n
 
 
-N_FEATURES = 8
+N_FEATURES = 9
 """Columns of :func:`evidence`'s feature vector: closeness, inliers, matched paths, conflicts,
-crossings, branches agreeing, branches disagreeing, sum of squared match distances."""
+crossings, branches agreeing, branches disagreeing, sum of squared match distances, near
+misses."""
 
 
 @njit(cache=True, nogil=True)
@@ -394,8 +396,8 @@ def _angle_gap(a, b):
 
 @njit(cache=True, nogil=True)
 def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
-             b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin, match_b,
-             d2_b):
+             b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin, near_miss,
+             match_b, d2_b):
     """The evidence for B moved by ``(theta, tx, ty)`` onto A (see ``MergeEvidence``).
 
     Fills ``match_b[b]`` (the A node mutually nearest to B node ``b`` among compatible kinds
@@ -403,7 +405,9 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
     :data:`N_FEATURES` features. A *conflict* is a node of either map (other than
     ``loose_kind``, the dead ends that frontier artefacts make) with no node of the other map
     within ``eps`` but lying within ``eps`` of one of its paths: the other robot went there and
-    saw no such place. ``a_near[i, j]``: A nodes joined by a path or two. ``a_branch``,
+    saw no such place; a *near miss* is such a node between ``eps`` and ``near_miss`` from the
+    other map's nearest path (two corridors that close would be one). ``a_near[i, j]``: A nodes
+    joined by a path or two. ``a_branch``,
     ``b_branch``: direction of each path leaving each node, NaN padded.
     """
     out = np.zeros(N_FEATURES)
@@ -452,14 +456,21 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
         u, v = match_b[b_edges[e, 0]], match_b[b_edges[e, 1]]
         if u >= 0 and v >= 0 and a_near[u, v]:
             out[2] += 1.0
+    miss2 = near_miss * near_miss
     for b in range(B.shape[0]):
         if b_kind[b] != loose_kind and not _any_node_within(X[b, 0], X[b, 1], A, eps2):
-            if _near_segment(X[b, 0], X[b, 1], A, a_edges, eps2):
+            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, miss2)
+            if d2 <= eps2:
                 out[3] += 1.0
+            elif d2 < miss2:
+                out[8] += 1.0
     for a in range(A.shape[0]):
         if a_kind[a] != loose_kind and not _any_node_within(A[a, 0], A[a, 1], X, eps2):
-            if _near_segment(A[a, 0], A[a, 1], X, b_edges, eps2):
+            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, miss2)
+            if d2 <= eps2:
                 out[3] += 1.0
+            elif d2 < miss2:
+                out[8] += 1.0
     out[4] = _crossings(A, a_edges, a_margin, X, b_edges, b_margin, min_sin)
     return out
 
@@ -467,7 +478,7 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
 @njit(cache=True, nogil=True)
 def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
                    b_margin, b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol,
-                   min_sin):
+                   min_sin, near_miss):
     """:func:`evidence` for every hypothesis: an ``(H, N_FEATURES)`` array."""
     out = np.empty((theta.shape[0], N_FEATURES))
     match_b = np.empty(B.shape[0], dtype=np.int64)
@@ -475,6 +486,6 @@ def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_
     for h in range(theta.shape[0]):
         out[h] = evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
                           b_margin, b_branch, theta[h], tx[h], ty[h], eps, compat, loose_kind,
-                          branch_tol, min_sin, match_b, d2_b)
+                          branch_tol, min_sin, near_miss, match_b, d2_b)
     return out
 

@@ -75,6 +75,7 @@ class MergeConfig:
             paper's ω tolerance); also the gate of the ICP refinement and the conflict distance.
         fit_eps: the final least-squares fit pairs mutually nearest nodes of any kinds within
             this (a node at the edge of explored space may have another kind in each map).
+        near_miss: see :attr:`MergeEvidence.near_misses`.
         pair_tolerance: most difference between an A pair's and a B pair's length for a 2-point
             hypothesis (about 2σ of the difference for node noise σ = 0.15 and more).
         min_pair_distance: node pairs closer than this fix the angle too poorly to be used.
@@ -98,6 +99,7 @@ class MergeConfig:
 
     eps: float = 0.5
     fit_eps: float = 0.9
+    near_miss: float = 2.0
     pair_tolerance: float = 0.7
     min_pair_distance: float = 1.0
     knn: int = 4
@@ -115,8 +117,8 @@ class MergeConfig:
     exhaustive_step_deg: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("eps", "fit_eps", "pair_tolerance", "coarse_tolerance", "distinct_angle_deg",
-                     "distinct_distance"):
+        for name in ("eps", "fit_eps", "near_miss", "pair_tolerance", "coarse_tolerance",
+                     "distinct_angle_deg", "distinct_distance"):
             check_real(getattr(self, name), name, low=0.0)
         check_real(self.min_pair_distance, "min_pair_distance", low=0.0, low_inclusive=True)
         check_real(self.exhaustive_step_deg, "exhaustive_step_deg", low=0.0, high=360.0)
@@ -134,15 +136,16 @@ class MergeConfig:
 
 
 CONFIDENCE_WEIGHTS: dict[str, float] = {
-    "bias": -3.34,
-    "closeness": 3.637,
-    "inliers": -0.373,
-    "matched_edges": -0.603,
-    "conflicts": -1.105,
-    "crossings": -2.132,
-    "branches_agree": 0.489,
-    "branches_disagree": -0.652,
-    "log_pairs": -1.068,
+    "bias": -6.644,
+    "closeness": 3.258,
+    "inliers": 0.14,
+    "matched_edges": -0.917,
+    "conflicts": -0.961,
+    "crossings": -1.158,
+    "branches_agree": 0.462,
+    "branches_disagree": -0.694,
+    "near_misses": -0.519,
+    "log_pairs": -0.471,
 }
 """Weights of :attr:`MergeEvidence.score`, the log-odds that an alignment is right: a logistic
 regression fitted on the best alignments ``"auto"`` finds on synthetic pairs
@@ -166,6 +169,9 @@ class MergeEvidence:
             junction, so a crossing without one is a contradiction).
         branches_agree, branches_disagree: over matched nodes, paths leaving both nodes in the
             same direction (within 25°), and paths of either without a counterpart.
+        near_misses: junctions/corners of either map farther than ``eps`` but nearer than
+            ``near_miss`` to a path of the other, with no node there (corridors that close
+            would be the same corridor).
         rmse: root-mean-square distance of the matched nodes (``inf`` without matches).
         collinear: fewer than 3 matches, or the matched nodes lie on a line (rotation not
             determined).
@@ -182,6 +188,7 @@ class MergeEvidence:
     crossings: int
     branches_agree: int
     branches_disagree: int
+    near_misses: int
     rmse: float
     collinear: bool
     n_a: int
@@ -200,6 +207,7 @@ class MergeEvidence:
             "crossings": float(self.crossings),
             "branches_agree": float(self.branches_agree),
             "branches_disagree": float(self.branches_disagree),
+            "near_misses": float(self.near_misses),
             "log_pairs": math.log(max(1, self.n_a * self.n_b)),
         }
 
@@ -299,8 +307,10 @@ class _Eval:
 
 _BRANCH_TOL = math.radians(25.0)
 _MIN_CROSSING_SIN = 0.5  # paths within 30° of parallel are one corridor seen twice
-_FEATURE_NAMES = ("closeness", "inliers", "matched_edges", "conflicts", "crossings",
-                  "branches_agree", "branches_disagree")
+_FEATURE_COLUMNS = {"closeness": 0, "inliers": 1, "matched_edges": 2, "conflicts": 3,
+                   "crossings": 4, "branches_agree": 5, "branches_disagree": 6,
+                   "near_misses": 8}
+"""Where each :attr:`MergeEvidence.features` entry is in the compiled evidence vector."""
 
 
 def _evidence_args(pa: _Prepared, pb: _Prepared) -> tuple:
@@ -310,9 +320,10 @@ def _evidence_args(pa: _Prepared, pb: _Prepared) -> tuple:
 
 def _scores(features: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
     """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features."""
-    w = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_NAMES])
+    cols = list(_FEATURE_COLUMNS.values())
+    w = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
-    return features[:, :len(w)] @ w + const
+    return features[:, cols] @ w + const
 
 
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
@@ -321,13 +332,14 @@ def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
     d2_b = np.empty(len(pb.xy))
     f = K.evidence(*_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
                    KIND_COMPATIBLE, int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
-                   match_b, d2_b)
+                   cfg.near_miss, match_b, d2_b)
     b_idx = np.flatnonzero(match_b >= 0)
     matches = np.column_stack([match_b[b_idx], b_idx]).astype(np.int64)
     n = len(b_idx)
     collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
     ev = MergeEvidence(n, float(f[0]), int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
-                       math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy), len(pb.xy))
+                       int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
+                       len(pb.xy))
     return _Eval(float(wrap_angle(theta)), np.asarray(t, dtype=np.float64), matches, ev)
 
 
@@ -441,7 +453,8 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
     th, txc, tyc = th[keep], txc[keep], tyc[keep]
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
-                                int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN)
+                                int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
+                                cfg.near_miss)
     scores = _scores(features, len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
     best = _polish(pa, pb, _evaluate(pa, pb, th[k], np.array([txc[k], tyc[k]]), cfg), cfg)

@@ -230,7 +230,8 @@ def test_config_type_errors():
 
 def test_decide_names_every_failed_criterion():
     weak = MergeEvidence(inliers=2, closeness=1.0, matched_edges=0, conflicts=3, crossings=1,
-                         branches_agree=0, branches_disagree=4, rmse=0.4, collinear=True,
+                         branches_agree=0, branches_disagree=4, near_misses=2, rmse=0.4,
+                         collinear=True,
                          n_a=30, n_b=30, runner_up=5.0)
     reason = decide(weak)
     for part in ("too few matched nodes", "collinear", "weak evidence", "ambiguous"):
