@@ -11,9 +11,9 @@ coverage all work on that window, so a step costs the same in a 20 m and an 80 m
 maps are re-warped only when a merge changes the transform.
 
 Cell states are :class:`topo.grid.CellState` codes (``UNKNOWN = 0``, ``FREE = 1``,
-``OCCUPIED = 2``); :data:`LOCAL_MAP_VALUES` is the one table turning them into ``local_map``
-pixels. Where two maps overlap, the shared state is the larger code (occupied wins over free,
-known over unknown).
+``OCCUPIED = 2``); ``topo.grid.IMAGE_VALUES`` is the one table turning them into ``local_map``
+pixels (unknown 128, free 255, occupied 0). Where two maps overlap, the shared state is the
+larger code (occupied wins over free, known over unknown).
 """
 
 from __future__ import annotations
@@ -26,10 +26,11 @@ import numpy as np
 from envs.two_robot_explore.config import MappingConfig
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
-from topo.grid import CellState, OccupancyGrid
+from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
 
-LOCAL_MAP_VALUES = np.array([128, 255, 0], dtype=np.uint8)
-"""``local_map`` pixel value of each cell state: unknown 128, free 255, occupied 0."""
+LOCAL_MAP_VALUES = IMAGE_VALUES
+"""``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
+255, occupied 0)."""
 
 _MARGIN_CELLS = 2
 """Extra cells around a sonar window (the inverse model marks a band behind the echo)."""
@@ -110,7 +111,7 @@ class RobotMap:
     Attributes:
         grid: the ``topo.OccupancyGrid`` (extent ``[-radius, radius]²`` around the start).
         geometry: its :class:`Geometry`.
-        states: ``(H, W)`` int8 cell states, refreshed in each step's window.
+        states: ``(H, W)`` int8 cell states (the grid's own read-only view).
         ever: ``(H, W)`` bool, cells known at least once (coverage never shrinks).
         n_ever: ``ever.sum()``, kept incrementally.
         bbox: ``[r0, r1, c0, c1]`` bounding box of :attr:`ever` (``None`` before the first scan).
@@ -123,7 +124,7 @@ class RobotMap:
         self.grid = OccupancyGrid(resolution=cfg.grid_resolution,
                                   extent=(-radius, -radius, radius, radius))
         self.geometry = geometry_of(self.grid)
-        self.states = np.zeros(self.geometry.shape, dtype=np.int8)
+        self.states = self.grid.states()
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
         self.n_ever = 0
         self.bbox: list[int] | None = None
@@ -151,8 +152,7 @@ class RobotMap:
         window = self.geometry.window(pts)
         if window is None:
             return None, 0
-        st = cell_states(self.grid, window)
-        self.states[window] = st
+        st = self.states[window]
         ever = self.ever[window]
         fresh = (st != CellState.UNKNOWN) & ~ever
         rows = np.flatnonzero(fresh.any(axis=1))
@@ -192,11 +192,6 @@ class RobotMap:
         origin = (g.origin[0] + cs.start * g.resolution, g.origin[1] + rs.start * g.resolution)
         self.topomap = extract_topomap(free, resolution=g.resolution, origin=origin)
         return self.topomap
-
-
-def cell_states(grid: OccupancyGrid, window: tuple[slice, slice]) -> np.ndarray:
-    """``CellState`` codes (int8) of ``grid`` inside ``window``."""
-    return grid.states()[window]
 
 
 class SharedMap:

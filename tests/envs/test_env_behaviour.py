@@ -1,0 +1,161 @@
+"""Behaviour over many steps: determinism, rewards, maps and frames, episode end."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import SMALL
+
+from envs import two_robot_explore_v0
+from envs.two_robot_explore.mapping import compose_pose
+
+
+def _flatten(obs, rewards, terms, truncs, infos):
+    out = []
+    for agent in sorted(obs):
+        out += [obs[agent][k].tobytes() for k in sorted(obs[agent])]
+    for d in (rewards, terms, truncs):
+        out.append(repr(sorted(d.items())))
+    for agent in sorted(infos):
+        info = infos[agent]
+        out.append(repr([(k, info[k]) for k in sorted(info)
+                         if isinstance(info[k], (int, float, bool, str))
+                         and not k.endswith("time_s")]))  # wall-clock
+        out.append(info["pose"].tobytes() + info["odometry"].tobytes())
+        out.append(info["topomap"].xy.tobytes())
+    return out
+
+
+def _episode(seed, steps, **kw):
+    par = two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": steps, **kw})
+    rng = np.random.default_rng(seed + 100)
+    obs, infos = par.reset(seed=seed)
+    trace = [_flatten(obs, {}, {}, {}, infos)]
+    while par.agents:
+        act = {a: rng.uniform(-1, 1, 2) for a in par.agents}
+        # change course only every 5 steps so the robots get somewhere
+        if len(trace) % 5:
+            act = {a: np.array([0.8, 0.1]) for a in par.agents}
+        trace.append(_flatten(*par.step(act)))
+    return trace, par
+
+
+def test_same_seed_same_episode_for_520_steps():
+    noise = {"robot": {"odometry_noise": (0.05, 0.05)}, "sonar": {"measure_every": 0.05}}
+    a, _ = _episode(11, 520, **noise)
+    b, _ = _episode(11, 520, **noise)
+    assert len(a) == len(b) == 521
+    for k, (x, y) in enumerate(zip(a, b, strict=True)):
+        assert x == y, f"episodes diverge at step {k}"
+
+
+def test_other_seed_other_episode():
+    a, _ = _episode(1, 5)
+    b, _ = _episode(2, 5)
+    assert a[0] != b[0]
+
+
+def test_reward_is_the_documented_formula():
+    par = two_robot_explore_v0.parallel_env(**SMALL)
+    _, infos = par.reset(seed=5)
+    rng = np.random.default_rng(5)
+    cfg = par.config
+    for _ in range(60):
+        prev_area = infos["robot_0"]["shared_area_m2"]
+        prev_coll = infos["robot_0"]["collisions"] + infos["robot_1"]["collisions"]
+        _, rewards, _, _, infos = par.step({a: rng.uniform(-1, 1, 2) for a in par.agents})
+        coll = infos["robot_0"]["collisions"] + infos["robot_1"]["collisions"]
+        expected = (cfg.coverage_reward * (infos["robot_0"]["shared_area_m2"] - prev_area)
+                    - cfg.collision_penalty * (coll - prev_coll) - cfg.time_penalty)
+        assert rewards["robot_0"] == pytest.approx(expected, abs=1e-9)
+        assert rewards["robot_1"] == rewards["robot_0"]
+
+
+def test_individual_rewards_are_per_robot():
+    par = two_robot_explore_v0.parallel_env(reward_mode="individual", **SMALL)
+    _, infos = par.reset(seed=6)
+    for _ in range(20):
+        prev = {a: infos[a]["own_area_m2"] for a in infos}
+        _, rewards, _, _, infos = par.step({"robot_0": [1.0, 0.3], "robot_1": [0.0, 0.0]})
+        for a in rewards:
+            assert rewards[a] == pytest.approx(
+                0.1 * (infos[a]["own_area_m2"] - prev[a]) - 0.01, abs=0.5 + 1e-9)
+    assert rewards["robot_1"] == pytest.approx(-0.01)  # stands still, sees nothing new
+
+
+def test_oracle_reward_counts_true_new_area():
+    par = two_robot_explore_v0.parallel_env(reward_mode="oracle", **SMALL)
+    _, infos = par.reset(seed=6)
+    start_area = infos["robot_0"]["true_area_m2"]
+    start_coll = infos["robot_0"]["collisions"] + infos["robot_1"]["collisions"]
+    total = 0.0
+    for _ in range(30):
+        _, rewards, _, _, infos = par.step({"robot_0": [1.0, 0.3], "robot_1": [1.0, -0.3]})
+        total += rewards["robot_0"] + 0.01
+    coll = infos["robot_0"]["collisions"] + infos["robot_1"]["collisions"] - start_coll
+    gained = infos["robot_0"]["true_area_m2"] - start_area
+    assert gained > 1.0
+    assert total == pytest.approx(0.1 * gained - 0.5 * coll, abs=1e-9)
+
+
+def test_windowed_maps_match_the_whole_grid():
+    _, par = _episode(4, 120)
+    for rmap in par.maps:
+        full = rmap.grid.states()
+        np.testing.assert_array_equal(rmap.states, full)
+        np.testing.assert_array_equal(rmap.ever | (full != 0), rmap.ever)
+        assert rmap.n_ever == int(rmap.ever.sum())
+
+
+def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
+    # without dropouts (whose "no echo" clears space through walls, out of the world) every
+    # known cell lies inside the world, so the oracle sees all of it
+    _, par = _episode(8, 150, sonar={"dropout_prob": 0.0})
+    par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
+    # the shared map with the true transform covers what the team truly knows
+    assert par.shared.area == pytest.approx(par.oracle.area, rel=0.05)
+    obs = par._observe_one(0)
+    truth = np.array([r.true_pose() for r in par.robots])
+    dx, dy = truth[1, :2] - truth[0, :2]
+    c, s = math.cos(truth[0, 2]), math.sin(truth[0, 2])
+    np.testing.assert_allclose(obs["teammate"][:2], [c * dx + s * dy, -s * dx + c * dy],
+                               atol=1e-4)
+    dth = truth[1, 2] - truth[0, 2]
+    np.testing.assert_allclose(obs["teammate"][2:], [math.cos(dth), math.sin(dth), 1.0],
+                               atol=1e-5)
+    # robot 1's pose moved into robot 0's frame is robot 1's true pose seen from robot 0's start
+    moved = compose_pose(par.true_merge, par.robots[1].odometry)
+    start0 = par.robots[0].start
+    c0, s0 = math.cos(start0[2]), math.sin(start0[2])
+    d = truth[1, :2] - start0[:2]
+    np.testing.assert_allclose(moved[:2], [c0 * d[0] + s0 * d[1], -s0 * d[0] + c0 * d[1]],
+                               atol=1e-6)
+    rot_err, trans_err = par.merge_errors()
+    assert rot_err == pytest.approx(0.0, abs=1e-9)
+    assert trans_err == pytest.approx(0.0, abs=1e-9)
+
+
+def test_local_map_is_egocentric_and_heading_up():
+    par = two_robot_explore_v0.parallel_env(**SMALL)
+    obs, _ = par.reset(seed=9)
+    img = obs["robot_0"]["local_map"][0]
+    size = img.shape[0]
+    # the robot stands on free space it has just seen (the centre), unknown behind it
+    centre = img[size // 2 - 2:size // 2 + 2, size // 2 - 2:size // 2 + 2]
+    assert (centre != 0).all()
+    sonar = par.sonars[0]
+    ahead = img[: size // 2 - 4, size // 2 - 3: size // 2 + 3]  # straight ahead: ±10° sonars
+    behind = img[size // 2 + 8:, :]
+    assert (ahead == 255).mean() > (behind == 255).mean()
+    assert (behind == 128).mean() > 0.9
+    assert sonar.fresh
+
+
+def test_coverage_target_terminates_both_robots():
+    par = two_robot_explore_v0.parallel_env(**{**SMALL, "target_coverage": 0.02})
+    par.reset(seed=0)
+    _, _, term, trunc, infos = par.step({a: np.array([0.5, 0.0]) for a in par.agents})
+    assert term == {"robot_0": True, "robot_1": True}
+    assert trunc == {"robot_0": False, "robot_1": False}
+    assert infos["robot_0"]["true_coverage"] >= 0.02
+    assert par.agents == []

@@ -1,0 +1,97 @@
+"""Window resampling and the egocentric local map, on synthetic grids."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from envs.two_robot_explore.mapping import (
+    LOCAL_MAP_VALUES,
+    Geometry,
+    LocalMapSampler,
+    compose_pose,
+    warp_window,
+)
+from fusion.rigid import Rigid2D
+
+G = Geometry((-2.0, -3.0), 0.1, (60, 40))
+FULL = (slice(0, 60), slice(0, 40))
+
+
+def _random_mask(seed):
+    return np.random.default_rng(seed).random(G.shape) < 0.3
+
+
+def test_identity_warp_is_a_copy():
+    mask = _random_mask(0)
+    (rows, cols), vals = warp_window(G, G, mask, FULL, Rigid2D.identity())
+    out = np.zeros_like(mask)
+    out[rows, cols] = vals
+    np.testing.assert_array_equal(out, mask)
+
+
+def test_quarter_turn_about_the_grid_centre_is_rot90():
+    g = Geometry((-2.0, -2.0), 0.1, (40, 40))
+    mask = np.random.default_rng(1).random(g.shape) < 0.3
+    # cell centres sit at ±(k + 0.5) * 0.1 about the origin (0, 0), so +90° maps cells to cells
+    (rows, cols), vals = warp_window(g, g, mask, (slice(0, 40), slice(0, 40)),
+                                     Rigid2D.from_degrees(90.0))
+    out = np.zeros_like(mask)
+    out[rows, cols] = vals
+    # (x, y) -> (-y, x): out[ix, n-1-iy] = mask[iy, ix], i.e. np.rot90(k=-1) of the [iy, ix]
+    # array (row 0 at the bottom turns a CCW world rotation into a clockwise array one)
+    np.testing.assert_array_equal(out, np.rot90(mask, k=-1))
+
+
+def test_translation_by_whole_cells_shifts_the_window():
+    mask = np.zeros(G.shape, bool)
+    mask[10:14, 5:9] = True
+    win = (slice(8, 16), slice(3, 11))
+    (rows, cols), vals = warp_window(G, G, mask, win, Rigid2D(0.0, (0.5, -0.2)))
+    out = np.zeros_like(mask)
+    out[rows, cols] = vals
+    expected = np.zeros_like(mask)
+    expected[8:12, 10:14] = True
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_window_landing_outside_is_none():
+    assert warp_window(G, G, _random_mask(2), FULL, Rigid2D(0.0, (100.0, 0.0))) is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(theta=st.floats(-math.pi, math.pi), x=st.floats(-1.0, 1.0), y=st.floats(-1.0, 1.0))
+def test_local_map_puts_what_is_ahead_at_the_top(theta, x, y):
+    g = Geometry((-5.0, -5.0), 0.1, (100, 100))
+    states = np.zeros(g.shape, dtype=np.int8)
+    ahead = (x + 1.2 * math.cos(theta), y + 1.2 * math.sin(theta))
+    left = (x - 1.2 * math.sin(theta), y + 1.2 * math.cos(theta))
+    for (px, py), code in ((ahead, 2), (left, 1)):
+        ix, iy = int((px + 5.0) / 0.1), int((py + 5.0) / 0.1)
+        states[iy - 1:iy + 2, ix - 1:ix + 2] = code
+    sampler = LocalMapSampler(64, 0.1)
+    img = sampler.sample(states, g, np.array([x, y, theta])).reshape(64, 64)
+    # 1.2 m ahead = 12 pixels above the centre; 1.2 m left = 12 pixels left of it
+    assert img[32 - 12 - 1, 31] == 2 or img[32 - 12, 31] == 2 or img[32 - 12 - 1, 32] == 2
+    assert img[31, 32 - 12 - 1] == 1 or img[31, 32 - 12] == 1 or img[32, 32 - 12 - 1] == 1
+    assert img[63, :].max() == 0  # behind: nothing there
+
+
+def test_local_map_outside_the_grid_is_unknown():
+    g = Geometry((0.0, 0.0), 0.1, (20, 20))
+    states = np.ones(g.shape, dtype=np.int8)
+    img = LocalMapSampler(64, 0.1).sample(states, g, np.array([1.0, 1.0, 0.3])).reshape(64, 64)
+    assert (img == 1).sum() == pytest.approx(400, rel=0.1)
+    assert (img == 0).sum() > 3000
+    assert list(LOCAL_MAP_VALUES) == [128, 255, 0]
+
+
+def test_compose_pose_matches_rigid_apply():
+    t = Rigid2D.from_degrees(33.0, (1.0, -2.0))
+    pose = np.array([0.4, 0.7, 2.9])
+    out = compose_pose(t, pose)
+    np.testing.assert_allclose(out[:2], t.apply(pose[:2]))
+    assert math.cos(out[2]) == pytest.approx(math.cos(2.9 + math.radians(33.0)))
+    assert -math.pi <= out[2] <= math.pi
