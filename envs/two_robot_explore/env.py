@@ -642,7 +642,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             other = self.maps[1 - i]
             moved = compose_pose(t if i == 1 else t.inverse(), pose)
             np.maximum(st, self._sampler.sample(other.states, other.geometry, moved), out=st)
-        return LOCAL_MAP_VALUES[st].reshape(1, size, size)
+        return LOCAL_MAP_VALUES.take(st).reshape(1, size, size)
 
     # ------------------------------------------------------------------ infos
     def merge_errors(self) -> tuple[float, float]:
