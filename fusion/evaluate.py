@@ -178,10 +178,16 @@ def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bo
 
 
 def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
-             config: MergeConfig | dict | None = None, progress: bool = True) -> list[Record]:
-    """Run every method (and the oracle, where correspondences are known) on every pair."""
+             config: MergeConfig | dict | None = None, progress: bool = True,
+             for_noise: bool = False) -> list[Record]:
+    """Run every method (and the oracle, where correspondences are known) on every pair.
+
+    With ``for_noise``, each pair with a known noise level is merged with
+    :meth:`MergeConfig.for_noise` of that level (``config``, a dict, overriding its fields).
+    """
     methods = parse_methods(methods)
-    cfg = config_from(MergeConfig, config, "config")
+    base = config_from(MergeConfig, config, "config")
+    overrides = config if isinstance(config, dict) else {}
     from tqdm import tqdm
 
     records = []
@@ -192,6 +198,9 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
         if pair.correspondences is not None:
             records.append(_record(pair, ORACLE, oracle, oracle is not None, 0.0, None,
                                    None if oracle is not None else "fewer than 2 true pairs"))
+        cfg = base
+        if for_noise and pair.noise is not None:
+            cfg = MergeConfig.for_noise(pair.noise, **overrides)
         for method in methods:
             r = merge_maps(pair.map_a, pair.map_b, method=method, config=cfg)
             records.append(_record(pair, method, r.transform, r.accepted, r.time_s, r.score,
@@ -426,6 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fusion.synthetic.SyntheticConfig fields as a JSON object")
     p.add_argument("--config", default=None, metavar="JSON",
                    help="fusion.MergeConfig fields as a JSON object, e.g. '{\"eps\": 0.6}'")
+    p.add_argument("--for-noise", action="store_true",
+                   help="merge each synthetic noise level with MergeConfig.for_noise(level)")
     p.add_argument("--out", type=Path, default=Path("out/fusion_eval"),
                    help="output folder for results.json and the plots")
     p.add_argument("--no-plots", action="store_true", help="write results.json only")
@@ -464,13 +475,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             pairs = load_pair_dir(args.pairs_dir)
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         parser.error(str(exc))
-    records = evaluate(pairs, methods, config, progress=not args.quiet)
+    overrides = _json_arg(parser, args.config, "--config")
+    records = evaluate(pairs, methods, overrides if args.for_noise else config,
+                       progress=not args.quiet, for_noise=args.for_noise)
     summary = summarise(records)
     print(format_tables(summary))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
               if args.synthetic is not None else str(args.pairs_dir))
     write_json(args.out / "results.json", {
         "source": source, "methods": methods, "config": asdict(config),
+        "config_for_noise": args.for_noise,
         "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
         "summary": summary, "records": [asdict(r) for r in records]})
     if not args.no_plots:

@@ -36,6 +36,16 @@ def test_cli_writes_results_and_plots(tmp_path, capsys):
     assert not list(out.glob(".*"))  # no temporary files left behind
 
 
+def test_cli_config_per_noise_level(tmp_path):
+    out = tmp_path / "eval"
+    assert main(["--synthetic", "2", "--noise", "0.3", "--methods", "auto", "--for-noise",
+                 "--config", "{\"candidates\": 8}", "--out", str(out), "--quiet",
+                 "--no-plots"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["config_for_noise"] is True
+    assert not list(out.glob("*.png"))
+
+
 def test_cli_argument_errors(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main([])

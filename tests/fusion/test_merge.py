@@ -237,3 +237,15 @@ def test_decide_names_every_failed_criterion():
     for part in ("too few matched nodes", "collinear", "weak evidence", "ambiguous"):
         assert part in reason
     assert 0.0 < weak.confidence < 0.5
+
+
+def test_config_for_noise_scales_tolerances_and_bar():
+    assert MergeConfig.for_noise(0.1) == MergeConfig()
+    noisy = MergeConfig.for_noise(0.3)
+    assert noisy.eps == pytest.approx(0.9) and noisy.fit_eps == pytest.approx(1.2)
+    assert noisy.min_score > MergeConfig().min_score
+    assert MergeConfig.for_noise(0.3, eps=1.0).eps == 1.0
+    with pytest.raises(ValueError, match="sigma must be >= 0.0, got -0.1"):
+        MergeConfig.for_noise(-0.1)
+    with pytest.raises(ValueError, match=r"MergeConfig has unknown keys \['tolerance'\]"):
+        MergeConfig.for_noise(0.3, tolerance=1.0)
