@@ -260,6 +260,14 @@ class TwoRobotExploreEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
+        """One observation and one action space object per agent, built once."""
+        self._observation_spaces = {a: self._observation_space() for a in AGENTS}
+        self._action_spaces = {a: self._action_space() for a in AGENTS}
+        obs = self._observation_spaces[AGENTS[0]]
+        self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
+        self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
+
+    def _observation_space(self) -> spaces.Dict:
         cfg = self.config
         r = self.frame_radius
         n = cfg.mapping.max_nodes
@@ -270,7 +278,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         node_lo[:, :2] = -2 * r
         node_hi[:, :2] = 2 * r
         node_hi[:, -1] = MAX_DEGREE
-        obs = spaces.Dict({
+        return spaces.Dict({
             "sonar": spaces.Box(0.0, 1.0, (len(cfg.sonar.angles),), f32),
             "odometry": spaces.Box(np.array([-r, -r, -1, -1], f32), np.array([r, r, 1, 1], f32)),
             "graph_nodes": spaces.Box(node_lo, node_hi, dtype=f32),
@@ -280,24 +288,21 @@ class TwoRobotExploreEnv(ParallelEnv):
             "teammate": spaces.Box(np.array([-2 * r, -2 * r, -1, -1, 0], f32),
                                    np.array([2 * r, 2 * r, 1, 1, 1], f32)),
         })
-        if cfg.action_type == "continuous":
-            act: spaces.Space = spaces.Box(-1.0, 1.0, (2,), f32)
-        else:
-            act = spaces.Discrete(len(DISCRETE_ACTIONS))
-        self._observation_spaces = {a: obs for a in AGENTS}
-        self._action_spaces = {a: act for a in AGENTS}
-        self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
-        self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
+
+    def _action_space(self) -> spaces.Space:
+        if self.config.action_type == "continuous":
+            return spaces.Box(-1.0, 1.0, (2,), np.float32)
+        return spaces.Discrete(len(DISCRETE_ACTIONS))
 
     def observation_space(self, agent: str) -> spaces.Space:
-        """The (one, shared) observation space of ``agent``."""
+        """The observation space of ``agent`` (the same object every call)."""
         try:
             return self._observation_spaces[agent]
         except KeyError:
             raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
 
     def action_space(self, agent: str) -> spaces.Space:
-        """The (one, shared) action space of ``agent``."""
+        """The action space of ``agent`` (the same object every call)."""
         try:
             return self._action_spaces[agent]
         except KeyError:
@@ -310,7 +315,8 @@ class TwoRobotExploreEnv(ParallelEnv):
 
     @max_cycles.setter
     def max_cycles(self, value: int) -> None:
-        self._max_cycles = self.config.replace(max_cycles=value).max_cycles
+        self.config = self.config.replace(max_cycles=value)
+        self._max_cycles = self.config.max_cycles
 
     @property
     def world(self) -> World:
