@@ -1,0 +1,449 @@
+"""Scripted explorers: random walk, wall following, frontier exploration and its coordinated
+two-robot version.
+
+All drive from the robot's own sensing: the ``sonar`` observation (ranges normalised by the
+sonar's ``max_range``), ``info["odometry"]`` (pose in the robot's own start frame) and
+``info["grid"]`` (the robot's own :class:`topo.OccupancyGrid`). None of them reads the true pose.
+
+* :class:`RandomWalk` — bump and turn: drive ahead, turn away for a random time when the front
+  sonars see something close.
+* :class:`WallFollower` — keep a wall on the right at a set distance.
+* :class:`Frontier` — Yamauchi (1997): frontier cells (known free next to unknown) of the
+  robot's own grid, clustered; the nearest cluster by path cost through the configuration
+  space (``skimage.graph.MCP_Geometric``), followed by pure pursuit; re-plan on arrival,
+  blockage, or every ``replan_every`` steps.
+* :class:`CoordinatedFrontier` — once a merge is accepted, each robot announces its goal on a
+  shared :class:`Blackboard` and the other discounts frontiers near it (utility = gain − cost,
+  Burgard et al. 2005), so the two do not chase the same frontier.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+from skimage.graph import MCP_Geometric
+
+from agents.base import CommandExplorer, Explorer
+from envs.two_robot_explore.config import SonarConfig
+from fusion.rigid import Rigid2D
+from topo._checks import check_int, check_real
+from topo.grid import CellState
+
+_SONAR = SonarConfig()
+SONAR_ANGLES = np.radians(np.asarray(_SONAR.angles, dtype=np.float64))
+"""Sonar directions (robot frame) the explorers assume: the env's default Pioneer ring."""
+FRONT = np.abs(SONAR_ANGLES) < math.radians(35.0)
+RIGHT = SONAR_ANGLES < -math.radians(35.0)
+LEFT = SONAR_ANGLES > math.radians(35.0)
+
+
+def sonar_metres(observation: Mapping[str, Any], max_range: float) -> np.ndarray:
+    """The ``sonar`` observation in metres."""
+    return np.asarray(observation["sonar"], dtype=np.float64) * max_range
+
+
+def _pose(info: Mapping[str, Any]) -> np.ndarray:
+    return np.asarray(info["odometry"], dtype=np.float64)[:3]
+
+
+# ---------------------------------------------------------------------------- random walk
+class RandomWalk(CommandExplorer):
+    """Bump and turn: drive ahead with a little random steering; when a front sonar reads
+    less than ``bump_distance``, turn (away from the nearer side) for a random 5–20 steps.
+
+    Args:
+        bump_distance: metres; front echo closer than this triggers a turn.
+        max_range: the env's sonar ``max_range`` (to read the normalised observation).
+        action_type: see :class:`Explorer`.
+    """
+
+    name = "random_walk"
+
+    def __init__(self, bump_distance: float = 0.6, max_range: float = _SONAR.max_range,
+                 action_type: str = "continuous") -> None:
+        super().__init__(action_type)
+        self.bump_distance = check_real(bump_distance, "bump_distance", low=0.0)
+        self.max_range = check_real(max_range, "max_range", low=0.0)
+        self._turn_left = 0
+        self._turn_steps = 0
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self._turn_steps = 0
+
+    def command(self, observation, info) -> np.ndarray:
+        ranges = sonar_metres(observation, self.max_range)
+        if self._turn_steps > 0:
+            self._turn_steps -= 1
+            return np.array([0.0, self._turn_left])
+        if ranges[FRONT].min() < self.bump_distance:
+            self._turn_left = 1.0 if ranges[LEFT].min() > ranges[RIGHT].min() else -1.0
+            self._turn_steps = int(self.rng.integers(5, 21))
+            return np.array([0.0, self._turn_left])
+        return np.array([1.0, float(self.rng.normal(0.0, 0.2))])
+
+
+# ---------------------------------------------------------------------------- wall follower
+class WallFollower(CommandExplorer):
+    """Keep a wall on the right at ``distance`` metres (proportional steering on the right
+    sonars); turn left in place when the way ahead is blocked; curve right to find a wall.
+
+    Args:
+        distance: target wall distance, metres.
+        gain: steering gain per metre of distance error.
+        max_range: the env's sonar ``max_range``.
+        action_type: see :class:`Explorer`.
+    """
+
+    name = "wall_follower"
+
+    def __init__(self, distance: float = 0.7, gain: float = 1.5,
+                 max_range: float = _SONAR.max_range, action_type: str = "continuous") -> None:
+        super().__init__(action_type)
+        self.distance = check_real(distance, "distance", low=0.0)
+        self.gain = check_real(gain, "gain", low=0.0)
+        self.max_range = check_real(max_range, "max_range", low=0.0)
+
+    def command(self, observation, info) -> np.ndarray:
+        ranges = sonar_metres(observation, self.max_range)
+        if ranges[FRONT].min() < self.distance:
+            return np.array([0.0, 1.0])
+        right = ranges[RIGHT].min()
+        if right >= self.max_range * 0.95:  # no wall: curve right to find one
+            return np.array([0.6, -0.5])
+        return np.array([0.8, float(np.clip(self.gain * (right - self.distance), -1, 1))])
+
+
+# ---------------------------------------------------------------------------- frontier
+@dataclass(frozen=True, slots=True)
+class FrontierConfig:
+    """Settings of :class:`Frontier` (validated; metres, steps).
+
+    Attributes:
+        clearance: paths keep at least this far from obstacles (the rest of the robot's radius
+            is left to the soft cost and the bump reflex: sonar maps make doorways narrow).
+        wall_cost_distance: cells closer than this to an obstacle cost up to 5× more, which
+            keeps paths centred in corridors and doorways.
+        occupied_log_odds: a cell blocks planning only above this log-odds (a sonar arc marks
+            a whole arc once; walls are hit again and again).
+        min_cluster_cells: frontier clusters smaller than this are noise.
+        min_goal_distance: frontier cells closer than this to the robot are already being
+            sensed and are not goals.
+        min_unknown_area: unknown pockets smaller than this (m²) are gaps between sonar cones
+            inside explored space, not territory: they make no frontier.
+        replan_every: steps between plans while a goal is being followed.
+        arrive_distance: the goal counts as reached within this distance.
+        lookahead: pure-pursuit look-ahead along the path.
+        blocked_distance: a front echo closer than this means "blocked": back off and re-plan.
+        max_range: the env's sonar ``max_range``.
+    """
+
+    clearance: float = 0.2
+    wall_cost_distance: float = 0.6
+    occupied_log_odds: float = 1.2
+    min_cluster_cells: int = 8
+    min_goal_distance: float = 1.0
+    min_unknown_area: float = 1.0
+    replan_every: int = 15
+    arrive_distance: float = 0.4
+    lookahead: float = 0.6
+    blocked_distance: float = 0.3
+    max_range: float = _SONAR.max_range
+
+    def __post_init__(self) -> None:
+        for name in ("clearance", "wall_cost_distance", "arrive_distance", "lookahead",
+                     "occupied_log_odds",
+                     "blocked_distance", "max_range", "min_goal_distance", "min_unknown_area"):
+            check_real(getattr(self, name), f"FrontierConfig.{name}", low=0.0)
+        check_int(self.min_cluster_cells, "FrontierConfig.min_cluster_cells", low=1)
+        check_int(self.replan_every, "FrontierConfig.replan_every", low=1)
+
+
+@dataclass(slots=True)
+class Plan:
+    """A path to a frontier goal in the robot's own frame (``path`` ``(K, 2)`` metres)."""
+
+    path: np.ndarray
+    goal: np.ndarray
+    cost: float
+    age: int = 0
+
+
+@dataclass(slots=True)
+class FrontierMap:
+    """Frontier clusters and path costs from the robot, on a crop of its grid."""
+
+    cost_to: np.ndarray
+    """Cumulative path cost (m) from the robot to every crop cell (inf: unreachable)."""
+    labels: np.ndarray
+    """Frontier cluster label per crop cell (0: none)."""
+    n_clusters: int
+    mcp: MCP_Geometric
+    origin: np.ndarray
+    """World position of the crop's cell (0, 0) corner."""
+    resolution: float
+
+    def cell_to_xy(self, cells: np.ndarray) -> np.ndarray:
+        return self.origin + (np.asarray(cells)[:, ::-1] + 0.5) * self.resolution
+
+    def path_to(self, cell: tuple[int, int]) -> np.ndarray:
+        return self.cell_to_xy(np.asarray(self.mcp.traceback(cell)))
+
+    def clusters(self, min_cells: int) -> list[dict[str, Any]]:
+        """Reachable clusters: size, cheapest cell, its cost, centroid (world)."""
+        if self.n_clusters == 0:
+            return []
+        idx = np.arange(1, self.n_clusters + 1)
+        sizes = ndimage.sum_labels(np.ones_like(self.labels), self.labels, idx)
+        cost = np.where(self.labels > 0, self.cost_to, np.inf)
+        best = ndimage.minimum_position(cost, self.labels, idx)
+        centroids = ndimage.center_of_mass(np.ones_like(self.labels), self.labels, idx)
+        out = []
+        for k in range(self.n_clusters):
+            c = best[k]
+            if sizes[k] < min_cells or not np.isfinite(self.cost_to[c]):
+                continue
+            out.append({"size": int(sizes[k]), "cell": c, "cost": float(self.cost_to[c]),
+                        "centroid": self.cell_to_xy(np.array([centroids[k]]))[0]})
+        return out
+
+
+def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig) -> FrontierMap | None:
+    """Frontier clusters and path costs from ``pose_xy`` on ``grid`` (cropped to its known
+    cells); ``None`` if nothing is known yet."""
+    states = grid.states()
+    known = states != CellState.UNKNOWN
+    rows, cols = np.nonzero(known)
+    if len(rows) == 0:
+        return None
+    res = float(grid.resolution)
+    r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, states.shape[0])
+    c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, states.shape[1])
+    crop = states[r0:r1, c0:c1]
+    origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * res
+
+    free = crop == CellState.FREE
+    unknown = crop == CellState.UNKNOWN
+    # Sonar arcs smear walls into doorways; only cells hit again and again block the way.
+    occupied = grid.log_odds[r0:r1, c0:c1] > cfg.occupied_log_odds
+    dist = ndimage.distance_transform_edt(~occupied) * res
+    blocked = dist < cfg.clearance
+    costs = np.where(free & ~blocked, 1.0, np.inf)
+    near = np.isfinite(costs) & (dist < cfg.wall_cost_distance)
+    costs[near] += 4.0 * (cfg.wall_cost_distance - dist[near]) / cfg.wall_cost_distance
+    grow = max(1, int(math.ceil(cfg.clearance / res)))
+
+    rc = np.floor((pose_xy - origin) / res).astype(int)[::-1]
+    rc = np.clip(rc, 0, np.array(crop.shape) - 1)
+    # the robot's own cell and its disc are drivable whatever the (noisy) map says
+    rr, cc = np.ogrid[: crop.shape[0], : crop.shape[1]]
+    own = (rr - rc[0]) ** 2 + (cc - rc[1]) ** 2 <= grow ** 2
+    costs[own & ~occupied] = np.minimum(costs[own & ~occupied], 1.0)
+    costs[rc[0], rc[1]] = 1.0
+
+    labels_u, n_u = ndimage.label(unknown)
+    if n_u:
+        sizes = np.bincount(labels_u.ravel(), minlength=n_u + 1)
+        big = sizes >= cfg.min_unknown_area / (res * res)
+        big[0] = False
+        # the crop's border touches the unexplored outside: pockets reaching it are territory
+        border = np.unique(np.concatenate([labels_u[0], labels_u[-1], labels_u[:, 0],
+                                           labels_u[:, -1]]))
+        big[border[border > 0]] = True
+        unknown = big[labels_u]
+    frontier = free & ~blocked & ndimage.binary_dilation(unknown, structure=np.ones((3, 3)))
+    near_robot = (rr - rc[0]) ** 2 + (cc - rc[1]) ** 2 < (cfg.min_goal_distance / res) ** 2
+    frontier &= ~near_robot
+    labels, n = ndimage.label(frontier, structure=np.ones((3, 3)))
+    mcp = MCP_Geometric(costs * res, fully_connected=True)
+    cost_to, _ = mcp.find_costs([tuple(rc)])
+    return FrontierMap(cost_to, labels, n, mcp, origin, res)
+
+
+def pure_pursuit(pose: np.ndarray, path: np.ndarray, lookahead: float) -> np.ndarray:
+    """Normalised ``(v, ω)`` steering ``pose`` along ``path`` (look-ahead point on the path)."""
+    d = np.linalg.norm(path - pose[:2], axis=1)
+    i = int(np.argmin(d))
+    ahead = np.flatnonzero(d[i:] >= lookahead)
+    target = path[i + ahead[0]] if len(ahead) else path[-1]
+    heading = math.atan2(target[1] - pose[1], target[0] - pose[0])
+    err = math.remainder(heading - pose[2], 2 * math.pi)
+    turn = float(np.clip(2.0 * err, -1.0, 1.0))
+    speed = 0.0 if abs(err) > math.radians(60) else math.cos(err)
+    return np.array([speed, turn])
+
+
+class Frontier(CommandExplorer):
+    """Frontier-based exploration (Yamauchi 1997) on the robot's own grid.
+
+    Every plan: frontier cells of ``info["grid"]`` are clustered (8-connected), path costs from
+    the robot through the configuration space come from one ``MCP_Geometric`` run, and the goal
+    is the cheapest cell of the best cluster (:meth:`_choose`: the nearest here). Between plans
+    the path is followed by pure pursuit. With no reachable frontier it falls back to a random
+    walk. See :class:`FrontierConfig` for the settings.
+    """
+
+    name = "frontier"
+
+    def __init__(self, config: FrontierConfig | None = None,
+                 action_type: str = "continuous") -> None:
+        super().__init__(action_type)
+        if config is not None and not isinstance(config, FrontierConfig):
+            raise TypeError(f"config must be a FrontierConfig, got {type(config).__name__}")
+        self.cfg = config or FrontierConfig()
+        self._fallback = RandomWalk(max_range=self.cfg.max_range)
+        self.plan: Plan | None = None
+        self._backoff = 0
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self._fallback.reset(int(self.rng.integers(2**31)))
+        self.plan = None
+        self._backoff = 0
+
+    def command(self, observation, info) -> np.ndarray:
+        pose = _pose(info)
+        ranges = sonar_metres(observation, self.cfg.max_range)
+        if self._backoff > 0:
+            self._backoff -= 1
+            return np.array([-0.5, 0.0])
+        if ranges[FRONT].min() < self.cfg.blocked_distance:
+            self.plan = None
+            self._backoff = 3
+            return np.array([-0.5, 0.0])
+        if self._needs_plan(pose):
+            self.plan = self._make_plan(info, pose)
+        if self.plan is None:
+            return self._fallback.command(observation, info)
+        self.plan.age += 1
+        return pure_pursuit(pose, self.plan.path, self.cfg.lookahead)
+
+    def _needs_plan(self, pose: np.ndarray) -> bool:
+        if self.plan is None or self.plan.age >= self.cfg.replan_every:
+            return True
+        return bool(np.linalg.norm(self.plan.goal - pose[:2]) < self.cfg.arrive_distance)
+
+    def _make_plan(self, info: Mapping[str, Any], pose: np.ndarray) -> Plan | None:
+        fmap = frontier_map(info["grid"], pose[:2], self.cfg)
+        if fmap is None:
+            return None
+        clusters = fmap.clusters(self.cfg.min_cluster_cells)
+        if not clusters:
+            return None
+        best = self._choose(clusters, info, pose)
+        path = fmap.path_to(best["cell"])
+        return Plan(path=path, goal=path[-1], cost=best["cost"])
+
+    def _choose(self, clusters: list[dict[str, Any]], info: Mapping[str, Any],
+                pose: np.ndarray) -> dict[str, Any]:
+        """The nearest cluster by path cost (Yamauchi)."""
+        return min(clusters, key=lambda c: c["cost"])
+
+
+@dataclass
+class Blackboard:
+    """What two :class:`CoordinatedFrontier` robots share: each robot's current goal in its
+    own frame, and the last accepted merge transform (robot 1's frame → robot 0's)."""
+
+    goals: dict[int, np.ndarray] = field(default_factory=dict)
+    transform: Rigid2D | None = None
+
+    def clear(self) -> None:
+        self.goals.clear()
+        self.transform = None
+
+
+class CoordinatedFrontier(Frontier):
+    """Frontier exploration for a team (Burgard et al. 2005 style).
+
+    Utility of a frontier cluster = ``gain − beta · cost`` with gain its size (m of frontier)
+    and cost its path length (m). Once a merge has been accepted (``info["merge"]``), each robot
+    publishes its goal on the shared :class:`Blackboard`; the teammate's goal, moved into this
+    robot's frame with the merge transform, discounts the gain of clusters within
+    ``coordination_radius`` of it by ``discount``, so the two spread out. Before any merge it
+    behaves like :class:`Frontier` with the utility rule.
+
+    Args:
+        index: 0 for ``robot_0`` (frame A), 1 for ``robot_1`` (frame B).
+        blackboard: shared by the two robots of a team (:func:`agents.make_team` wires it).
+    """
+
+    name = "coordinated_frontier"
+
+    def __init__(self, index: int, blackboard: Blackboard, config: FrontierConfig | None = None,
+                 beta: float = 1.0, coordination_radius: float = 4.0, discount: float = 0.1,
+                 action_type: str = "continuous") -> None:
+        super().__init__(config, action_type)
+        if index not in (0, 1):
+            raise ValueError(f"index must be 0 or 1, got {index!r}")
+        if not isinstance(blackboard, Blackboard):
+            raise TypeError(f"blackboard must be a Blackboard, got {type(blackboard).__name__}")
+        self.index = index
+        self.board = blackboard
+        self.beta = check_real(beta, "beta", low=0.0, low_inclusive=True)
+        self.coordination_radius = check_real(coordination_radius, "coordination_radius",
+                                              low=0.0)
+        self.discount = check_real(discount, "discount", low=0.0, low_inclusive=True, high=1.0)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.board.clear()
+
+    def _teammate_goal(self) -> np.ndarray | None:
+        goal = self.board.goals.get(1 - self.index)
+        t = self.board.transform
+        if goal is None or t is None:
+            return None
+        return (t if self.index == 0 else t.inverse()).apply(goal)
+
+    def command(self, observation, info) -> np.ndarray:
+        merge = info.get("merge")
+        if merge is not None and getattr(merge, "accepted", False):
+            self.board.transform = merge.transform
+        return super().command(observation, info)
+
+    def _choose(self, clusters, info, pose):
+        mate = self._teammate_goal()
+        res = float(info["grid"].resolution)
+
+        def utility(c: dict[str, Any]) -> float:
+            gain = c["size"] * res
+            if mate is not None and np.linalg.norm(c["centroid"] - mate) < self.coordination_radius:
+                gain *= self.discount
+            return gain - self.beta * c["cost"]
+
+        best = max(clusters, key=utility)
+        self.board.goals[self.index] = best["centroid"]
+        return best
+
+
+EXPLORERS = {
+    "random_walk": RandomWalk,
+    "wall_follower": WallFollower,
+    "frontier": Frontier,
+    "coordinated_frontier": CoordinatedFrontier,
+}
+"""Scripted explorers by name (``make_team`` also accepts ``"sb3:PATH"``)."""
+
+
+def make_team(name: str, action_type: str = "continuous") -> dict[str, Explorer]:
+    """One explorer per robot, ``{"robot_0": ..., "robot_1": ...}``; the coordinated team
+    shares one :class:`Blackboard`."""
+    if name.startswith("sb3:"):
+        from agents.sb3_explorer import SB3Explorer
+
+        policy = SB3Explorer.load_policy(name[4:])
+        return {f"robot_{i}": SB3Explorer(policy, action_type=action_type) for i in range(2)}
+    if name == "coordinated_frontier":
+        board = Blackboard()
+        return {f"robot_{i}": CoordinatedFrontier(i, board, action_type=action_type)
+                for i in range(2)}
+    if name not in EXPLORERS:
+        raise ValueError(f"explorer must be one of {sorted(EXPLORERS)} or 'sb3:PATH', "
+                         f"got {name!r}")
+    return {f"robot_{i}": EXPLORERS[name](action_type=action_type) for i in range(2)}
