@@ -352,8 +352,10 @@ def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str 
     files = []
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for ax, attr, unit, limit in ((axes[0], "rotation_error_deg", "°", ROTATION_OK_DEG),
-                                  (axes[1], "translation_error_m", "m", TRANSLATION_OK_M)):
+    for ax, attr, label, limit in ((axes[0], "rotation_error_deg", "rotation error (°)",
+                                    ROTATION_OK_DEG),
+                                   (axes[1], "translation_error_m",
+                                    "translation error at B's centroid (m)", TRANSLATION_OK_M)):
         for m in methods:
             v = np.sort([getattr(r, attr) for r in overlap
                          if r.method == m and getattr(r, attr) is not None])
@@ -361,16 +363,16 @@ def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str 
                 ax.step(v, np.arange(1, len(v) + 1) / len(v), where="post", label=m)
         ax.axvline(limit, color="k", ls=":", lw=1)
         ax.set_xscale("log")
-        ax.set_xlabel(f"{attr.replace('_', ' ')} ({unit}), all overlapping pairs")
+        ax.set_xlabel(f"{label}, overlapping pairs, all noise levels")
         ax.set_ylabel("fraction of pairs")
     axes[0].legend()
     files.append(save_figure(fig, out / "error_cdf.png"))
     plt.close(fig)
 
     for attr, edges, fname, xlabel in (
-            ("overlap", OVERLAP_BINS, "success_vs_overlap.png", "overlap"),
+            ("overlap", OVERLAP_BINS, "success_vs_overlap.png", "overlap (all noise levels)"),
             ("rotation", ROTATION_BINS_DEG, "success_vs_rotation.png",
-             "|true rotation| (°), overlap ≥ 40%")):
+             "|true rotation| (°), overlap ≥ 40%, all noise levels")):
         fig, ax = plt.subplots(figsize=(6, 4))
         centres = 0.5 * (np.array(edges[:-1]) + np.array(edges[1:]))
         for m in methods:
