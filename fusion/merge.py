@@ -170,7 +170,9 @@ regression (L2 0.01) fitted on the best alignment ``"auto"`` finds on 1600 synth
 (:mod:`fusion.synthetic`, seed 1000 — the evaluation uses other seeds; node noise 0.05 and
 0.15 m; world jitter 0.2 and 0.4 m; half of the pairs without overlap), labelled right when
 within 2° and 0.3 m of the truth (near misses left out). On those pairs no no-overlap pair
-scored above 1.8, hence the default ``min_score`` of 2."""
+scored above 1.8, hence the default ``min_score`` of 2. Measured on other seeds: no false
+accept on 1200 no-overlap pairs of 15–60 nodes nor on 800 of 60–80 nodes; 2 of 800 (0.25%) on
+maps of only 5–15 nodes (absent from the fit; ``min_score = 3`` accepts none of them)."""
 
 
 @dataclass(frozen=True, slots=True)
