@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
@@ -468,7 +469,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
                                cfg.distinct_distance, cfg.candidates)
     th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
-    gates = np.array([cfg.coarse_tolerance, 0.5 * (cfg.coarse_tolerance + cfg.eps), cfg.eps])
+    gates = np.array([cfg.coarse_tolerance, cfg.eps])
     counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,
                             gates)
     keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
@@ -577,9 +578,9 @@ def fuse_maps(map_a: TopoMap, map_b: TopoMap, transform: Rigid2D, matches: np.nd
     matches = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
     xy[matches[:, 0]] = 0.5 * (map_a.xy[matches[:, 0]] + moved[matches[:, 1]])
     n = len(xy)
-    close_i, close_j = np.nonzero(np.triu(((xy[:, None] - xy[None]) ** 2).sum(-1) <= eps ** 2, 1))
-    rows = np.concatenate([matches[:, 0], close_i])
-    cols = np.concatenate([matches[:, 1] + n_a, close_j])
+    close = cKDTree(xy).query_pairs(eps, output_type="ndarray").reshape(-1, 2)
+    rows = np.concatenate([matches[:, 0], close[:, 0]])
+    cols = np.concatenate([matches[:, 1] + n_a, close[:, 1]])
     graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     first = np.full(label.max() + 1, n, dtype=np.int64)  # clusters in order of first node
@@ -601,7 +602,7 @@ def fuse_maps(map_a: TopoMap, map_b: TopoMap, transform: Rigid2D, matches: np.nd
     e = np.sort(node[edges], axis=1) if len(edges) else np.empty((0, 2), dtype=np.int64)
     keep = e[:, 0] != e[:, 1]
     e, lengths = e[keep], lengths[keep]
-    _, uniq = np.unique(e, axis=0, return_index=True)
+    _, uniq = np.unique(e[:, 0] * max(n_out, 1) + e[:, 1], return_index=True)
     uniq = np.sort(uniq)
     e, lengths = e[uniq], lengths[uniq]
     straight = np.linalg.norm(out_xy[e[:, 0]] - out_xy[e[:, 1]], axis=1) if len(e) else lengths
