@@ -1,0 +1,82 @@
+"""train.py: tiny-budget training, reproducibility, resume, SB3Explorer datasets, bad args."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from agents.dataset import GenerateArgs, generate
+from agents.pairs import load_pairs
+from train import Args, main
+
+torch.set_num_threads(1)
+TINY = {"total_timesteps": 256, "n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1,
+        "eval_every": 0, "eval_episodes": 1, "max_cycles": 40, "world_size": (8.0, 8.0),
+        "checkpoint_every": 128, "progress": False, "eval_baselines": ("random_walk",)}
+
+
+def params(run: Path) -> np.ndarray:
+    from stable_baselines3 import PPO
+
+    model = PPO.load(run / "model.zip", device="cpu")
+    return torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach().numpy()
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    return main(Args(runs_dir=tmp_path_factory.mktemp("runs"), seed=3, **TINY))
+
+
+def test_tiny_training_writes_a_run(run_dir):
+    assert run_dir.name.startswith("two_robot_explore_v0__3__")
+    for name in ("model.zip", "eval.json", "eval.md", "eval_coverage.png", "args.json"):
+        assert (run_dir / name).is_file(), name
+    assert sorted(p.name for p in (run_dir / "checkpoints").glob("step_*.zip"))
+    assert list((run_dir / "tb").rglob("events.out.tfevents.*"))
+    assert "| ppo |" in (run_dir / "eval.md").read_text()
+
+
+def test_same_seed_same_policy(run_dir, tmp_path):
+    again = main(Args(runs_dir=tmp_path, seed=3, **TINY))
+    np.testing.assert_array_equal(params(run_dir), params(again))
+    other = main(Args(runs_dir=tmp_path, seed=4, **TINY))
+    assert not np.array_equal(params(run_dir), params(other))
+
+
+def test_resume_finishes_the_budget(run_dir, tmp_path):
+    from stable_baselines3 import PPO
+
+    first = main(Args(runs_dir=tmp_path, seed=5, **{**TINY, "total_timesteps": 128}))
+    resumed = main(Args(runs_dir=tmp_path, seed=5, resume=first, **{**TINY,
+                                                                      "total_timesteps": 256}))
+    assert resumed == first
+    assert PPO.load(first / "model.zip").num_timesteps >= 256
+
+
+def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
+    generate(GenerateArgs(out=tmp_path, pairs=1, snapshots=1, max_cycles=30,
+                          explorer=f"sb3:{run_dir / 'model.zip'}", world_size=(8.0, 8.0),
+                          progress=False))
+    (pair,) = load_pairs(tmp_path)
+    assert pair.explorer.startswith("sb3:") and pair.step >= 1
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"total_timesteps": -5}, "total_timesteps must be an integer >= 1, got -5"),
+        ({"reward_mode": "selfish"}, "reward_mode must be one of"),
+        ({"resume": Path("/nowhere/run")}, "resume: no run folder or checkpoint at '/nowhere/run'"),
+        ({"learning_rate": 0.0}, r"learning_rate must be in \(0, 1\], got 0.0"),
+        ({"eval_baselines": ("oracle",)}, "eval_baselines: unknown explorer 'oracle'"),
+    ],
+)
+def test_bad_arguments(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        Args(**kwargs)
+
+
+def test_resume_folder_without_checkpoints(tmp_path):
+    with pytest.raises(ValueError, match="has no checkpoints"):
+        main(Args(runs_dir=tmp_path, resume=tmp_path, **TINY))

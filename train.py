@@ -1,0 +1,406 @@
+"""Train an exploration policy with PPO (Stable-Baselines3), map fusion inside the RL loop.
+
+Both robots share one policy (parameter sharing): each robot of each env is one sub-environment
+of a :class:`agents.sb3.ParallelVecEnv`. The reward is the env's team reward — the growth of the
+*shared* map, i.e. of robot 0's map united with robot 1's map moved by the latest accepted
+``fusion.merge_maps`` transform — so a wrong merge costs reward (``--reward-mode oracle`` uses the
+true union instead, for ablations).
+
+    python train.py --total-timesteps 200000 --n-envs 4 --seed 1
+    python train.py --help
+    tensorboard --logdir runs
+
+A run writes ``runs/<env>__<seed>__<time>/``: ``tb/`` (TensorBoard: reward, true and shared
+coverage, merge acceptance and errors, episode length, steps/s), ``checkpoints/`` (atomic,
+resumable with ``--resume RUN_DIR``), ``eval.json`` / ``eval.md`` / ``eval_coverage.png``
+(periodic evaluation of the policy against ``Frontier`` and ``RandomWalk`` on fixed seeds) and
+``model.zip`` (the final policy, usable as ``--explorer sb3:RUN_DIR/model.zip``).
+
+Readable like CleanRL's ``ppo.py``: ``Args`` below, ``main(args)``, importable for tests.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+import tyro
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.vec_env import VecMonitor
+from tqdm.auto import tqdm
+
+from agents.base import run_episode
+from agents.metrics import EpisodeRecorder
+from agents.pairs import atomic_write_json
+from agents.policy import TopoExplorerExtractor
+from agents.sb3 import ParallelVecEnv
+from agents.sb3_explorer import SB3Explorer
+from agents.scripted import make_team
+
+ENV_ID = "two_robot_explore_v0"
+
+
+@dataclass
+class Args:
+    """PPO on two_robot_explore_v0 with parameter sharing (both robots, one policy)."""
+
+    total_timesteps: int = 200_000
+    """Agent-steps to train for (each env step gives two: one per robot)."""
+    seed: int = 1
+    """Seed of everything: envs, policy initialisation, evaluation worlds."""
+    n_envs: int = 4
+    """Envs run in parallel (2 robots each, so 2 × n_envs policy sub-environments)."""
+    n_workers: int = 1
+    """Worker processes stepping the envs (1: in this process)."""
+    reward_mode: Literal["shared", "oracle", "individual"] = "shared"
+    """Env reward: growth of the fused shared map, of the true union, or per robot."""
+    device: str = "cpu"
+    """Torch device for the policy ("cpu", "cuda", "auto")."""
+    world_size: tuple[float, float] = (16.0, 16.0)
+    """Procedural building size in metres."""
+    max_cycles: int = 400
+    """Env steps per episode (truncation)."""
+    learning_rate: float = 3e-4
+    """Adam learning rate."""
+    n_steps: int = 128
+    """Rollout length per sub-environment between updates."""
+    batch_size: int = 256
+    """Minibatch size."""
+    n_epochs: int = 4
+    """Optimisation epochs per rollout."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    ent_coef: float = 0.005
+    """Entropy bonus."""
+    clip_range: float = 0.2
+    """PPO clip range."""
+    eval_every: int = 50_000
+    """Agent-steps between evaluations (0: only at the end)."""
+    eval_episodes: int = 4
+    """Fixed-seed evaluation worlds per evaluation."""
+    eval_baselines: tuple[str, ...] = ("frontier", "random_walk")
+    """Scripted explorers evaluated on the same worlds (once per run)."""
+    checkpoint_every: int = 50_000
+    """Agent-steps between checkpoints (0: only at the end)."""
+    runs_dir: Path = Path("runs")
+    """Where run folders go."""
+    resume: Path | None = None
+    """Continue a run: its folder (latest checkpoint) or a checkpoint .zip."""
+    progress: bool = True
+    """Show a progress bar."""
+    torch_threads: int = 1
+    """torch.set_num_threads (1 is fastest on 2 cores with envs busy)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Extra env config (EnvConfig fields) for training and evaluation."""
+
+    def __post_init__(self) -> None:
+        for name in ("total_timesteps", "n_envs", "n_workers", "n_steps", "batch_size",
+                     "n_epochs", "eval_episodes", "torch_threads", "max_cycles"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        for name in ("eval_every", "checkpoint_every", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+        if self.reward_mode not in ("shared", "oracle", "individual"):
+            raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
+                             f"got {self.reward_mode!r}")
+        for name in ("learning_rate", "gamma", "gae_lambda", "clip_range"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0 < value <= 1):
+                raise ValueError(f"{name} must be in (0, 1], got {value!r}")
+        if self.resume is not None and not Path(self.resume).exists():
+            raise ValueError(f"resume: no run folder or checkpoint at {str(self.resume)!r}")
+        from agents.scripted import EXPLORERS
+
+        for name in self.eval_baselines:
+            if name not in EXPLORERS:
+                raise ValueError(f"eval_baselines: unknown explorer {name!r}; allowed: "
+                                 f"{sorted(EXPLORERS)}")
+
+    def env_config(self) -> dict[str, Any]:
+        cfg = {"max_cycles": self.max_cycles, "reward_mode": self.reward_mode,
+               "world": {"size": tuple(self.world_size)}}
+        for key, value in self.env_kwargs.items():
+            if isinstance(value, dict) and isinstance(cfg.get(key), dict):
+                cfg[key] = {**cfg[key], **value}
+            else:
+                cfg[key] = value
+        return cfg
+
+
+def make_env(config: dict[str, Any]) -> Any:
+    """One ``two_robot_explore_v0`` ParallelEnv (a top-level function: picklable for workers)."""
+    from envs.two_robot_explore_v0 import parallel_env
+
+    return parallel_env(**config)
+
+
+class _EnvFactory:
+    def __init__(self, config: dict[str, Any]) -> None:
+        self.config = config
+
+    def __call__(self) -> Any:
+        return make_env(self.config)
+
+
+# ------------------------------------------------------------------------------- callbacks
+class InfoLogger(BaseCallback):
+    """Logs env infos at episode ends (true/shared coverage, merge acceptance and errors) and
+    steps/s; drives the progress bar."""
+
+    def __init__(self, total: int, progress: bool) -> None:
+        super().__init__()
+        self.total, self.progress = total, progress
+        self.bar: Any = None
+        self.t0 = 0.0
+        self.start_steps = 0
+
+    def _on_training_start(self) -> None:
+        self.t0, self.start_steps = time.perf_counter(), self.num_timesteps
+        self.bar = tqdm(total=self.total, initial=self.num_timesteps, unit="step",
+                        disable=not self.progress, desc="train", smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.training_env.num_envs)
+        for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+            if not done:
+                continue
+            for key in ("true_coverage", "shared_coverage", "overlap", "merges"):
+                if key in info:
+                    self.logger.record_mean(f"explore/{key}", float(info[key]))
+            if "merge_accepted" in info:
+                self.logger.record_mean("merge/accepted", float(info["merge_accepted"]))
+                for key in ("merge_rotation_error_deg", "merge_translation_error_m"):
+                    if np.isfinite(info.get(key, math.nan)):
+                        self.logger.record_mean(f"merge/{key}", float(info[key]))
+        elapsed = time.perf_counter() - self.t0
+        if elapsed > 0:
+            self.logger.record("time/agent_steps_per_s",
+                               (self.num_timesteps - self.start_steps) / elapsed)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.bar.close()
+
+
+def save_model_atomic(model: PPO, path: Path) -> None:
+    """``model.save`` to a temporary file in the same folder, then rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".zip", dir=path.parent)
+    os.close(fd)
+    try:
+        model.save(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class Checkpointer(BaseCallback):
+    """Saves ``checkpoints/step_<N>.zip`` atomically every ``every`` agent-steps."""
+
+    def __init__(self, folder: Path, every: int) -> None:
+        super().__init__()
+        self.folder, self.every = folder, every
+        self.next = 0
+
+    def _on_training_start(self) -> None:
+        self.next = (self.num_timesteps // self.every + 1) * self.every if self.every else 0
+
+    def _on_step(self) -> bool:
+        if self.every and self.num_timesteps >= self.next:
+            save_model_atomic(self.model, self.folder / f"step_{self.num_timesteps:09d}.zip")
+            self.next += self.every
+        return True
+
+
+class Evaluator(BaseCallback):
+    """Every ``every`` agent-steps, runs the current policy on the fixed evaluation worlds and
+    writes the comparison with the scripted baselines (see :func:`evaluate`)."""
+
+    def __init__(self, args: Args, run_dir: Path, every: int) -> None:
+        super().__init__()
+        self.args, self.run_dir, self.every = args, run_dir, every
+        self.next = 0
+
+    def _on_training_start(self) -> None:
+        self.next = (self.num_timesteps // self.every + 1) * self.every if self.every else 0
+
+    def _on_step(self) -> bool:
+        if self.every and self.num_timesteps >= self.next:
+            report = evaluate(self.model, self.args, self.run_dir, self.num_timesteps)
+            for row in report["rows"]:
+                if row["explorer"] == "ppo":
+                    for key in ("T50", "T85", "final_coverage"):
+                        self.logger.record(f"eval/{key}", row[key])
+            self.next += self.every
+        return True
+
+
+# ------------------------------------------------------------------------------- evaluation
+def eval_seeds(args: Args) -> list[int]:
+    """The fixed evaluation worlds: seeds derived from the run seed, disjoint from training's
+    (training envs are seeded ``seed + k``; these come from a separate SeedSequence)."""
+    ss = np.random.SeedSequence([args.seed, 0xE7A1])
+    return [int(s) for s in ss.generate_state(args.eval_episodes)]
+
+
+def run_explorer(team: dict, config: dict[str, Any], seeds: list[int]) -> list[dict]:
+    """Metrics of ``team`` on each evaluation seed (:class:`agents.metrics.EpisodeRecorder`)."""
+    out = []
+    for seed in seeds:
+        env = make_env(config)
+        rec = EpisodeRecorder()
+        try:
+            run_episode(env, team, seed=seed, callback=rec)
+        finally:
+            env.close()
+        out.append(rec.summary())
+    return out
+
+
+def _summarise(name: str, episodes: list[dict]) -> dict[str, Any]:
+    row: dict[str, Any] = {"explorer": name, "episodes": len(episodes)}
+    for key in ("T50", "T85", "T95", "final_coverage", "overlap", "collisions"):
+        row[key] = float(np.mean([e[key] for e in episodes]))
+    row["reached_T85"] = float(np.mean([e["reached_T85"] for e in episodes]))
+    return row
+
+
+def evaluate(model: PPO, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
+    """Evaluate the policy and the baselines on the fixed worlds; write ``eval.json``,
+    ``eval.md`` and ``eval_coverage.png`` (atomically) into ``run_dir``."""
+    config = args.env_config()
+    seeds = eval_seeds(args)
+    cache = run_dir / "eval_baselines.json"
+    baselines: dict[str, list[dict]] = {}
+    if cache.exists():
+        baselines = json.loads(cache.read_text())
+    for name in args.eval_baselines:
+        if name not in baselines:
+            eps = run_explorer(make_team(name), config, seeds)
+            baselines[name] = [{**e, "coverage": e["coverage"].tolist()} for e in eps]
+    atomic_write_json(cache, baselines)
+
+    policy = {a: SB3Explorer(model) for a in ("robot_0", "robot_1")}
+    ppo = [{**e, "coverage": e["coverage"].tolist()} for e in run_explorer(policy, config, seeds)]
+    curves = {"ppo": ppo, **baselines}
+    rows = [_summarise(name, eps) for name, eps in curves.items()]
+    report = {"step": step, "seeds": seeds, "rows": rows, "max_cycles": args.max_cycles}
+    atomic_write_json(run_dir / "eval.json", report)
+    lines = [f"Evaluation at {step} agent-steps on {len(seeds)} fixed worlds "
+             f"(T = steps to that true coverage; not reached = episode length + 1)", "",
+             "| explorer | T50 | T85 | T95 | reached 85% | final coverage | overlap | "
+             "collisions |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['explorer']} | {r['T50']:.0f} | {r['T85']:.0f} | {r['T95']:.0f} | "
+                     f"{r['reached_T85']:.0%} | {r['final_coverage']:.2f} | {r['overlap']:.2f} "
+                     f"| {r['collisions']:.1f} |")
+    (run_dir / "eval.md").write_text("\n".join(lines) + "\n")
+    _plot_coverage(curves, run_dir / "eval_coverage.png", step)
+    return report
+
+
+def _plot_coverage(curves: dict[str, list[dict]], path: Path, step: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topo.plotting import save_figure
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name, eps in curves.items():
+        n = max(len(e["coverage"]) for e in eps)
+        padded = np.array([np.pad(e["coverage"], (0, n - len(e["coverage"])), mode="edge")
+                           for e in eps])
+        ax.plot(np.arange(1, n + 1), padded.mean(axis=0), label=name)
+    for level in (0.5, 0.85, 0.95):
+        ax.axhline(level, color="0.7", lw=0.8, ls="--")
+    ax.set_xlabel("env step")
+    ax.set_ylabel("true coverage (mean over evaluation worlds)")
+    ax.set_title(f"Coverage vs steps after {step} agent-steps")
+    ax.set_ylim(0, 1)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------- main
+def _resume_checkpoint(resume: Path) -> tuple[Path, Path]:
+    resume = Path(resume)
+    if resume.is_file():
+        return resume.parent.parent, resume
+    checkpoints = sorted((resume / "checkpoints").glob("step_*.zip"))
+    final = resume / "model.zip"
+    candidates = checkpoints + ([final] if final.exists() else [])
+    if not candidates:
+        raise ValueError(f"resume: {str(resume)!r} has no checkpoints/step_*.zip or model.zip")
+    return resume, max(candidates, key=lambda p: p.stat().st_mtime)
+
+
+def main(args: Args) -> Path:
+    """Train (or resume) and return the run folder (see the module docstring)."""
+    torch.set_num_threads(args.torch_threads)
+    if args.resume is not None:
+        run_dir, checkpoint = _resume_checkpoint(args.resume)
+    else:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        run_dir = Path(args.runs_dir) / f"{ENV_ID}__{args.seed}__{stamp}"
+        checkpoint = None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
+
+    config = args.env_config()
+    venv = ParallelVecEnv([_EnvFactory(config) for _ in range(args.n_envs)],
+                          n_workers=args.n_workers)
+    venv = VecMonitor(venv)
+    venv.seed(args.seed)
+    try:
+        if checkpoint is not None:
+            model = PPO.load(checkpoint, env=venv, device=args.device,
+                             tensorboard_log=str(run_dir / "tb"))
+        else:
+            model = PPO(
+                "MultiInputPolicy", venv, learning_rate=args.learning_rate,
+                n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
+                gamma=args.gamma, gae_lambda=args.gae_lambda, ent_coef=args.ent_coef,
+                clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,
+                tensorboard_log=str(run_dir / "tb"),
+                policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
+                               "net_arch": {"pi": [64], "vf": [64]}},
+            )
+        callbacks = CallbackList([
+            InfoLogger(args.total_timesteps, args.progress),
+            Checkpointer(run_dir / "checkpoints", args.checkpoint_every),
+            Evaluator(args, run_dir, args.eval_every),
+        ])
+        remaining = args.total_timesteps - model.num_timesteps  # a resumed run finishes the budget
+        if remaining > 0:
+            model.learn(total_timesteps=remaining, callback=callbacks,
+                        reset_num_timesteps=checkpoint is None, tb_log_name="ppo")
+        save_model_atomic(model, run_dir / "model.zip")
+        evaluate(model, args, run_dir, model.num_timesteps)
+    finally:
+        venv.close()
+    print((run_dir / "eval.md").read_text())
+    print(f"run folder: {run_dir}  (policy: {run_dir / 'model.zip'})")
+    return run_dir
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
