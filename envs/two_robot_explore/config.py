@@ -112,7 +112,7 @@ class WorldConfig:
             )
         if self.source != "procedural":
             suffix = Path(self.source).suffix.lower()
-            if suffix not in (".yaml", ".yml", ".png", ".pgm", ".json"):
+            if suffix not in (".yaml", ".yml", ".png", ".json"):
                 raise ValueError(
                     f"world.source must be 'procedural' or a .yaml/.png/.json map file, "
                     f"got {self.source!r}"

@@ -123,6 +123,13 @@ def test_world_file_errors_name_the_problem(tmp_path):
         load_world(WorldConfig(source=str(tiny)))
 
 
+def test_malformed_ros_map_names_the_file(tmp_path):
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("image: missing.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(ValueError, match="broken.yaml|missing.pgm"):
+        load_world(WorldConfig(source=str(bad)))
+
+
 def test_map_too_small_for_two_robots_is_an_error():
     free = np.zeros((20, 20), bool)
     free[5:15, 5:15] = True  # 1 m square room
