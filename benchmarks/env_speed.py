@@ -153,13 +153,16 @@ def _current_rss_mib() -> float:
 
 
 def soak(steps: int, seed: int = 1) -> None:
-    """Long run: RSS every 10 % of the way, and robots checked to stay in free space."""
+    """Long run with defaults: RSS every 10 % of the way (printed as it goes), and the robots
+    checked to stay in free space every step."""
     par = two_robot_explore_v0.parallel_env(max_cycles=1000)
     par.reset(seed=seed)
     rng = np.random.default_rng(seed)
     act = {a: np.zeros(2, dtype=np.float32) for a in par.possible_agents}
-    marks = []
     outside = 0
+    print(f"\n## Soak: {steps:,} steps with defaults (episodes of 1000 steps)")
+    print("| steps | RSS (MiB) | peak RSS (MiB) | robot positions outside free space | steps/s |")
+    print("|---|---|---|---|---|", flush=True)
     t0 = time.perf_counter()
     for k in range(steps):
         if not par.agents:
@@ -171,15 +174,10 @@ def soak(steps: int, seed: int = 1) -> None:
         poses = np.array([r.true_pose()[:2] for r in par.robots])
         outside += int((~par.world.is_free(poses)).sum())
         if (k + 1) % max(steps // 10, 1) == 0:
-            marks.append((k + 1, _current_rss_mib(),
-                          resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))
-    dt = time.perf_counter() - t0
-    print(f"\n## Soak: {steps} steps ({steps // 1000} episodes of 1000), {steps / dt:,.0f} "
-          f"steps/s")
-    print("| steps | RSS (MiB) | peak RSS (MiB) |\n|---|---|---|")
-    for k, rss, peak in marks:
-        print(f"| {k:,} | {rss:,.1f} | {peak:,.1f} |")
-    print(f"robot positions outside free space: {outside}")
+            peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            rate = (k + 1) / (time.perf_counter() - t0)
+            print(f"| {k + 1:,} | {_current_rss_mib():,.1f} | {peak:,.1f} | {outside} | "
+                  f"{rate:,.0f} |", flush=True)
 
 
 def main() -> None:
