@@ -40,7 +40,7 @@ from tqdm.auto import tqdm
 
 from agents.base import run_episode
 from agents.metrics import EpisodeRecorder
-from agents.pairs import atomic_write_json
+from fusion.pairs import atomic_write_json
 from agents.policy import TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer

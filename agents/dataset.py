@@ -11,7 +11,7 @@ Each **episode** ``e`` of a run is seeded from ``(seed, e)`` alone and yields ``
 if it ends first. Episodes are independent tasks, so the pairs are the same whatever the number
 of workers or the backend, and an interrupted run resumes with the same command: episodes whose
 pairs all exist are skipped, the others are re-run and rewrite exactly the same pairs. The format
-is :mod:`agents.pairs`; ``fusion.evaluate DIR`` reads it.
+is :mod:`fusion.pairs`; ``fusion.evaluate DIR`` reads it.
 
 Ray: ``--backend ray`` runs one task per episode on ``ray.init()`` (a local cluster with
 ``--workers`` CPUs) or on an existing cluster (``--address``); tasks write their pair files into
@@ -32,7 +32,7 @@ import tyro
 from tqdm.auto import tqdm
 
 from agents.base import run_episode
-from agents.pairs import (
+from fusion.pairs import (
     FORMAT,
     FORMAT_VERSION,
     DatasetError,

@@ -19,8 +19,8 @@ true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). W
 
 Pairs come from :func:`fusion.synthetic.generate_pairs` (``--synthetic N``, once per ``--noise``
 level, with the true correspondences so the oracle can be computed) or from a map-pair dataset
-folder (:func:`load_pair_dir`; the agents' format, read by ``agents.pairs``: it stores no node
-correspondences, so the oracle column is empty).
+folder (:func:`load_pair_dir`; the :mod:`fusion.pairs` format that ``agents.dataset`` writes: it
+stores no node correspondences, so the oracle column is empty).
 """
 
 from __future__ import annotations
@@ -121,18 +121,17 @@ def synthetic_pairs(n: int, seed: int = 0, noise_levels: Sequence[float] = (0.05
 
 
 def load_pair_dir(path: str | Path) -> list[EvalPair]:
-    """The pairs of a map-pair dataset folder (the agents' format, read by
-    ``agents.pairs.load_pairs``; imported here only, so :mod:`fusion` does not depend on
-    :mod:`agents`). Pairs with zero overlap count as no-overlap pairs.
+    """The pairs of a map-pair dataset folder (:func:`fusion.pairs.load_pairs`, the format
+    ``agents.dataset`` writes). Pairs with zero overlap count as no-overlap pairs.
 
     Raises:
         FileNotFoundError: ``path`` is not a folder.
-        ImportError: ``agents.pairs`` is not available.
+        fusion.pairs.DatasetError: a missing manifest, foreign or corrupt file (named).
     """
     path = Path(path)
     if not path.is_dir():
         raise FileNotFoundError(f"PAIRS_DIR {str(path)!r} is not a folder")
-    from agents.pairs import load_pairs  # the dataset format belongs to agents
+    from fusion.pairs import load_pairs
 
     out = []
     for p in load_pairs(path):

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from agents.dataset import GenerateArgs, generate
-from agents.pairs import load_pairs
+from fusion.pairs import load_pairs
 from train import Args, main
 
 torch.set_num_threads(1)

@@ -6,7 +6,7 @@ from scipy import ndimage
 
 import agents.dataset as dataset
 from agents.dataset import GenerateArgs, coverage_levels, episode_seed, generate, info, main
-from agents.pairs import DatasetError, load_pairs, pair_files
+from fusion.pairs import DatasetError, load_pairs, pair_files
 from fusion import Rigid2D
 from topo.grid import CellState
 

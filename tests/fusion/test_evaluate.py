@@ -87,7 +87,8 @@ def test_summary_counts_false_accepts_and_bins():
 
 
 def test_reads_a_map_pair_dataset(tmp_path):
-    pairs_mod = pytest.importorskip("agents.pairs")
+    import fusion.pairs as pairs_mod
+
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
     pairs_mod.atomic_write_json(tmp_path / "dataset.json",
                                 {"format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
