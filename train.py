@@ -40,11 +40,11 @@ from tqdm.auto import tqdm
 
 from agents.base import run_episode
 from agents.metrics import EpisodeRecorder
-from fusion.pairs import atomic_write_json
 from agents.policy import TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
 from agents.scripted import make_team
+from fusion.pairs import atomic_write_json
 
 ENV_ID = "two_robot_explore_v0"
 

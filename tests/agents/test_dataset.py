@@ -6,8 +6,8 @@ from scipy import ndimage
 
 import agents.dataset as dataset
 from agents.dataset import GenerateArgs, coverage_levels, episode_seed, generate, info, main
-from fusion.pairs import DatasetError, load_pairs, pair_files
 from fusion import Rigid2D
+from fusion.pairs import DatasetError, load_pairs, pair_files
 from topo.grid import CellState
 
 KW = {"explorer": "frontier", "snapshots": 2, "max_cycles": 200, "world_size": (10.0, 10.0),

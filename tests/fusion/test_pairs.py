@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from fusion import Rigid2D
 from fusion.pairs import (
     DatasetError,
     GridSnapshot,
@@ -17,7 +18,6 @@ from fusion.pairs import (
     write_index,
     write_pair,
 )
-from fusion import Rigid2D
 from topo import TopoMap
 
 
