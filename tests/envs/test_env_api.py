@@ -52,7 +52,7 @@ def test_registry_makes_both_apis():
     assert aec.unwrapped.max_cycles == 7
 
 
-def test_spaces_hold_every_observation_over_an_episode():
+def test_spaces_hold_every_observation_and_robots_stay_in_free_space():
     par = two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": 150})
     obs, _ = par.reset(seed=3)
     rng = np.random.default_rng(3)
@@ -63,6 +63,8 @@ def test_spaces_hold_every_observation_over_an_episode():
             for key, sub in space.spaces.items():
                 assert sub.contains(o[key]), (key, o[key])
         obs, *_ = par.step({a: rng.uniform(-1, 1, 2).astype(np.float32) for a in par.agents})
+        poses = np.array([r.true_pose()[:2] for r in par.robots])
+        assert par.world.is_free(poses).all()
         steps += 1
     assert steps == 150
 
