@@ -5,10 +5,12 @@ Frames: robot ``i`` maps in its own start frame (its odometry frame). The **shar
 in robot 0's frame ("A"); robot 1's map ("B") enters it through the latest accepted
 ``fusion.merge_maps`` transform (``p_A = R p_B + T``). Ground truth is the world frame.
 
-Per step only a window around each robot is touched (the bounding box of its sonar cones):
-the grid update, the cell-state image, the "ever known" masks, the shared map and the oracle
-coverage all work on that window, so a step costs the same in a 20 m and an 80 m world. Whole
-maps are re-warped only when a merge changes the transform.
+Per step only a window around each robot is touched: the grid update visits the cones' cells
+(``topo.OccupancyGrid``), the "ever known" mask is refreshed in the bounding box of the cones,
+and the shared map and the true coverage only receive the bounding box of the cells that became
+known this step — so a step costs the same in a 20 m and an 80 m world. The shared map is
+re-warped whole only when a merge changes the transform. "Ever known" makes coverage monotone: a
+cell whose log-odds later drift back to unknown still counts as covered.
 
 Cell states are :class:`topo.grid.CellState` codes (``UNKNOWN = 0``, ``FREE = 1``,
 ``OCCUPIED = 2``); ``topo.grid.IMAGE_VALUES`` is the one table turning them into ``local_map``
