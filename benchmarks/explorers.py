@@ -85,10 +85,10 @@ def metrics_table(n_worlds: int, max_cycles: int, workers: int) -> None:
                   f"{reached:>6.0%}{mean['final_coverage']:>7.2f}{mean['overlap']:>8.2f}"
                   f"{mean['path']:>8.1f}{mean['collisions']:>7.1f}{merge:>8}")
         ratio = base["frontier"]["T85"] / base["random_walk"]["T85"]
+        coord, front = base["coordinated_frontier"], base["frontier"]
         print(f"Frontier T85 / RandomWalk T85 = {ratio:.2f} (goal ≤ 0.50); Coordinated vs "
-              f"Frontier: T95 {base['coordinated_frontier']['T95']:.0f} vs "
-              f"{base['frontier']['T95']:.0f}, overlap {base['coordinated_frontier']['overlap']:.2f}"
-              f" vs {base['frontier']['overlap']:.2f}")
+              f"Frontier: T95 {coord['T95']:.0f} vs {front['T95']:.0f}, overlap "
+              f"{coord['overlap']:.2f} vs {front['overlap']:.2f}")
 
 
 def decision_time() -> None:
