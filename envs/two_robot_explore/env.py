@@ -80,8 +80,8 @@ Team reward (both robots get it), every step:
 The shared map is robot 0's known cells plus robot 1's moved by the latest accepted merge
 transform. When a new merge changes the transform the shared map is rebuilt and the change of
 its area (possibly negative: a wrong merge overlaps what it should not) enters the reward.
-``reward_mode="oracle"`` uses the true union of both maps in the world frame instead (for
-ablations); ``"individual"`` gives each robot its own new area and its own contacts.
+``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
+``true_coverage``); ``"individual"`` gives each robot its own new area and its own contacts.
 
 Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
 ``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
@@ -106,10 +106,14 @@ After that ``agents`` is empty and ``step()`` raises until ``reset()``.
 
 ## Infos
 
-Per robot: ``true_coverage`` (fraction), ``true_area_m2``, ``shared_area_m2``,
-``shared_coverage`` (shared area / reachable area; an estimate, it includes walls and
-mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot map also known by
-the other, true frame), ``collisions``, ``merge_accepted`` (a transform is in use),
+Per robot: ``true_coverage`` — the fraction of the reachable free area the sonars have truly
+swept: each scan folded from the robot's true pose with its true ranges (nearest real echo per
+cone, no noise, no dropout) into a world-frame grid with the robots' inverse sensor model, so a
+dropped echo that "sees through" a wall, or odometry drift, does not count; ``true_area_m2``
+(swept area, walls included), ``shared_area_m2``, ``shared_coverage`` (shared area / reachable
+area; the robots' estimate, it includes walls, phantom free space behind dropped echoes and
+mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot's true sweep also
+swept by the other), ``collisions``, ``merge_accepted`` (a transform is in use),
 ``merge_rotation_error_deg`` / ``merge_translation_error_m`` (of the transform in use against
 ground truth, translation error measured at the centroid of robot 1's map; NaN before a
 merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``pose`` (true world pose),
@@ -179,7 +183,6 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LOCAL_MAP_VALUES,
-    Geometry,
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
@@ -355,10 +358,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         for s in starts:
             reach = float(np.max(np.hypot(*(corners - s[:2]).T)))
             radius = min(reach + cfg.sonar.max_range + 1.0, self.frame_radius)
-            self.maps.append(RobotMap(radius, cfg.mapping))
+            self.maps.append(RobotMap((-radius, -radius, radius, radius),
+                                      cfg.mapping.grid_resolution))
         self.shared = SharedMap(self.maps[0].geometry)
-        self.oracle = OracleCoverage(
-            Geometry(world.origin, world.resolution, world.shape), world.reachable)
+        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
         self.merge = None
         self.merges = 0
         self.merge_time_s = math.nan
@@ -510,12 +513,15 @@ class TwoRobotExploreEnv(ParallelEnv):
                 self._own_delta[i] = 0
                 continue
             rmap = self.maps[i]
-            window, new = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
-                                         sonar.mount_radius, scfg.max_range, half)
-            self._own_delta[i] = new
-            if new:
+            before = rmap.n_ever
+            window, _ = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
+                                       sonar.mount_radius, scfg.max_range, half)
+            self._own_delta[i] = rmap.n_ever - before
+            if window is not None:
                 self._shared_delta += self.shared.add(i, rmap, window)
-                self._oracle_delta += self.oracle.add(i, rmap, window, self.frames[i])
+            self._oracle_delta += self.oracle.add(i, robot.true_pose(), sonar.true_last,
+                                                  sonar.angles, sonar.mount_radius,
+                                                  scfg.max_range, half)
         every = cfg.mapping.topo_every
         if every and self.steps % every == 0:
             for i, rmap in enumerate(self.maps):

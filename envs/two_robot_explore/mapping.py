@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.two_robot_explore.config import MappingConfig
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
 from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
@@ -108,10 +107,15 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
 
 
 class RobotMap:
-    """One robot's maps in its own start frame.
+    """An occupancy grid with "ever known" bookkeeping and a topological map: one robot's maps
+    in its own start frame, or (for :class:`OracleCoverage`) a robot's true sweep in the world.
+
+    Args:
+        extent: ``(xmin, ymin, xmax, ymax)`` of the grid, metres.
+        resolution: metres per cell.
 
     Attributes:
-        grid: the ``topo.OccupancyGrid`` (extent ``[-radius, radius]²`` around the start).
+        grid: the ``topo.OccupancyGrid``.
         geometry: its :class:`Geometry`.
         states: ``(H, W)`` int8 cell states (the grid's own read-only view).
         ever: ``(H, W)`` bool, cells known at least once (coverage never shrinks).
@@ -122,9 +126,8 @@ class RobotMap:
 
     __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
 
-    def __init__(self, radius: float, cfg: MappingConfig) -> None:
-        self.grid = OccupancyGrid(resolution=cfg.grid_resolution,
-                                  extent=(-radius, -radius, radius, radius))
+    def __init__(self, extent: tuple[float, float, float, float], resolution: float) -> None:
+        self.grid = OccupancyGrid(resolution=resolution, extent=extent)
         self.geometry = geometry_of(self.grid)
         self.states = self.grid.states()
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
@@ -134,13 +137,13 @@ class RobotMap:
 
     def integrate(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
                   mount_radius: float, max_range: float, half_cone: float
-                  ) -> tuple[tuple[slice, slice] | None, int]:
+                  ) -> tuple[tuple[slice, slice] | None, np.ndarray | None]:
         """Fold one sonar scan (taken at odometry ``pose``) into the grid.
 
         Readings are measured from the transducers on the rim; the grid's sensor model puts all
         sensors at the robot centre, so ``mount_radius`` is added to ranges and to
         ``max_range``. Returns the bounding box of the cells that became known for the first
-        time (``None`` if none did) and how many they are.
+        time and the boolean mask of those cells inside it (``(None, None)`` if none did).
         """
         self.grid.update(pose, ranges + mount_radius, angles, max_range + mount_radius,
                          half_cone)
@@ -153,17 +156,16 @@ class RobotMap:
         pts[-1] = pose[:2]
         window = self.geometry.window(pts)
         if window is None:
-            return None, 0
+            return None, None
         st = self.states[window]
         ever = self.ever[window]
         fresh = (st != CellState.UNKNOWN) & ~ever
         rows = np.flatnonzero(fresh.any(axis=1))
         if len(rows) == 0:
-            return None, 0
+            return None, None
         cols = np.flatnonzero(fresh.any(axis=0))
-        new = int(np.count_nonzero(fresh))
         ever |= fresh
-        self.n_ever += new
+        self.n_ever += int(np.count_nonzero(fresh))
         rs, cs = window
         r0, r1 = rs.start + int(rows[0]), rs.start + int(rows[-1]) + 1
         c0, c1 = cs.start + int(cols[0]), cs.start + int(cols[-1]) + 1
@@ -173,7 +175,8 @@ class RobotMap:
             b = self.bbox
             b[0], b[1] = min(b[0], r0), max(b[1], r1)
             b[2], b[3] = min(b[2], c0), max(b[3], c1)
-        return (slice(r0, r1), slice(c0, c1)), new
+        sub = fresh[int(rows[0]):int(rows[-1]) + 1, int(cols[0]):int(cols[-1]) + 1]
+        return (slice(r0, r1), slice(c0, c1)), sub
 
     def known_window(self) -> tuple[slice, slice] | None:
         """Slices of :attr:`bbox` (``None`` before the first scan)."""
@@ -256,68 +259,70 @@ class SharedMap:
 
 
 class OracleCoverage:
-    """True coverage: each robot's known cells moved into the world by its true start frame.
+    """True coverage: what the sonars have really swept, in the world frame.
+
+    Each robot's scans are folded, from its **true** pose and with its **true** ranges (nearest
+    real echo per cone, no noise, no dropout), into a world-frame grid with the same inverse
+    sensor model as the robots' own maps. A dropped echo makes a robot believe it sees through
+    a wall; the sweep stops at the wall. Odometry errors do not enter either.
 
     Attributes:
-        masks: two ``(H, W)`` bool world-grid masks, one per robot.
-        counts: cells known by each robot; ``both``: by both; ``covered``: reachable cells known
-            by either (the coverage numerator).
+        sweeps: two world-frame :class:`RobotMap` s, one per robot.
+        union: ``(H, W)`` bool, world cells swept by either robot.
+        both: cells swept by both; ``covered``: reachable cells swept by either (the coverage
+            numerator); ``count``: ``union.sum()``.
     """
 
-    __slots__ = ("geometry", "reachable", "n_reachable", "masks", "counts", "both", "covered",
-                 "union")
+    __slots__ = ("geometry", "reachable", "n_reachable", "sweeps", "union", "both", "covered",
+                 "count")
 
-    def __init__(self, geometry: Geometry, reachable: np.ndarray) -> None:
-        self.geometry = geometry
+    def __init__(self, extent: tuple[float, float, float, float], resolution: float,
+                 reachable: np.ndarray) -> None:
+        self.sweeps = [RobotMap(extent, resolution) for _ in range(2)]
+        self.geometry = self.sweeps[0].geometry
+        if self.geometry.shape != reachable.shape:
+            raise ValueError(f"reachable must have the grid's shape {self.geometry.shape}, got "
+                             f"{reachable.shape}")
         self.reachable = reachable
         self.n_reachable = int(np.count_nonzero(reachable))
-        self.masks = [np.zeros(geometry.shape, dtype=bool) for _ in range(2)]
-        self.counts = [0, 0]
+        self.union = np.zeros(self.geometry.shape, dtype=bool)
         self.both = 0
         self.covered = 0
-        self.union = 0
+        self.count = 0
 
     @property
     def fraction(self) -> float:
-        """Covered fraction of the reachable free area."""
+        """Swept fraction of the reachable free area."""
         return self.covered / self.n_reachable
 
     @property
     def overlap(self) -> float:
-        """Fraction of the smaller robot map's known world area also known by the other."""
-        small = min(self.counts)
+        """Fraction of the smaller robot sweep also swept by the other robot."""
+        small = min(m.n_ever for m in self.sweeps)
         return self.both / small if small else 0.0
 
     @property
     def area(self) -> float:
-        """Area known by either robot, m² (world frame)."""
-        return self.union * self.geometry.resolution ** 2
+        """Area swept by either robot, m²."""
+        return self.count * self.geometry.resolution ** 2
 
-    def add(self, index: int, robot_map: RobotMap, window: tuple[slice, slice] | None,
-            frame: Rigid2D) -> int:
-        """Move robot ``index``'s window into the world by ``frame`` (its true start pose);
-        returns how many world cells became known to the team."""
+    def add(self, index: int, pose: np.ndarray, true_ranges: np.ndarray, angles: np.ndarray,
+            mount_radius: float, max_range: float, half_cone: float) -> int:
+        """Sweep robot ``index``'s scan from its true world ``pose``; returns how many world
+        cells the team swept for the first time."""
+        window, fresh = self.sweeps[index].integrate(pose, true_ranges, angles, mount_radius,
+                                                     max_range, half_cone)
         if window is None:
             return 0
-        res = warp_window(self.geometry, robot_map.geometry, robot_map.ever, window, frame)
-        if res is None:
-            return 0
-        dwin, vals = res
-        mine = self.masks[index][dwin]
-        other = self.masks[1 - index][dwin]
-        new = vals & ~mine
-        if not new.any():
-            return 0
-        mine |= new
-        self.counts[index] += int(np.count_nonzero(new))
-        shared = new & other
-        n_shared = int(np.count_nonzero(shared))
-        self.both += n_shared
-        team_new = new & ~other
-        self.covered += int(np.count_nonzero(team_new & self.reachable[dwin]))
-        n_team = int(np.count_nonzero(team_new))
-        self.union += n_team
-        return n_team
+        union = self.union[window]
+        team_new = fresh & ~union
+        self.both += int(np.count_nonzero(fresh & union))
+        n_new = int(np.count_nonzero(team_new))
+        if n_new:
+            union |= team_new
+            self.count += n_new
+            self.covered += int(np.count_nonzero(team_new & self.reachable[window]))
+        return n_new
 
 
 class LocalMapSampler:

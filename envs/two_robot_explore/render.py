@@ -118,8 +118,7 @@ class Renderer:
         g = Geometry(world.origin, world.resolution, world.shape)
         rgb = np.full(world.shape + (3,), 110, dtype=np.uint8)
         rgb[world.free] = 255
-        seen = env.oracle.masks[0] | env.oracle.masks[1]
-        rgb[seen & world.free] = (255, 236, 170)
+        rgb[env.oracle.union & world.free] = (255, 236, 170)
         h, w = world.shape
         self._blit_cells(rgb, g, slice(0, h), slice(0, w), view)
         for x0, y0, x1, y1 in world.segments.tolist():

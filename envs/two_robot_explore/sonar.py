@@ -38,11 +38,14 @@ class Sonar:
         ray_angles: ``(S, K)`` ray directions in the robot frame, radians.
         last: ``(S,)`` the latest reading, metres (``max_range`` = no echo); kept for
             observations and rendering.
+        true_last: ``(S,)`` what the latest scan would read without noise and dropout (the
+            nearest real echo of each cone), for ground-truth coverage.
         last_pose: the world pose ``(x, y, heading)`` the latest reading was taken from.
         fresh: whether the latest :meth:`measure` call took a new scan.
     """
 
-    __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "last_pose", "fresh",
+    __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "true_last",
+                 "last_pose", "fresh",
                  "_local_dir", "_local_dirs", "_length", "_cos_dropout", "_since", "_n_rays",
                  "_rays")
 
@@ -61,6 +64,7 @@ class Sonar:
         self._length = self.mount_radius + cfg.max_range
         self._cos_dropout = math.cos(math.radians(cfg.dropout_incidence))
         self.last = np.full(len(self.angles), cfg.max_range)
+        self.true_last = self.last.copy()
         self.last_pose = np.zeros(3)
         self.fresh = False
         self._since = math.inf
@@ -68,6 +72,7 @@ class Sonar:
     def reset(self) -> None:
         """Forget the last scan (the next :meth:`measure` always scans)."""
         self.last = np.full(len(self.angles), self.cfg.max_range)
+        self.true_last = self.last.copy()
         self.fresh = False
         self._since = math.inf
 
@@ -135,14 +140,19 @@ class Sonar:
         steep, p_drop = self._cos_dropout, cfg.dropout_prob
         lo, hi, std, k_rays = cfg.min_range, cfg.max_range, cfg.noise_std, self._rays
         reading = []
+        truth = []
         for k, z in enumerate(noise):
-            best = math.inf
+            best = true = math.inf
             for i in range(k * k_rays, (k + 1) * k_rays):
+                if dist[i] < true:
+                    true = dist[i]
                 if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
                     best = dist[i]
             r = best + z * std if best != math.inf else hi
             reading.append(lo if r < lo else hi if r > hi else r)
+            truth.append(lo if true < lo else hi if true > hi else true)
         self.last = np.array(reading)
+        self.true_last = np.array(truth)
         self.last_pose = np.array(pose, dtype=np.float64)
         self.fresh = True
         return self.last

@@ -114,11 +114,11 @@ def test_windowed_bookkeeping_matches_the_whole_grid():
 
 
 def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
-    # without dropouts (whose "no echo" clears space through walls, out of the world) every
-    # known cell lies inside the world, so the oracle sees all of it
+    # without dropouts (a "no echo" belief clears space through walls) and odometry noise, the
+    # robots' maps hold what the sonars truly swept: with the true transform the shared map
+    # covers what the oracle counts, up to the range noise and nearest-cell resampling
     _, par = _episode(8, 150, sonar={"dropout_prob": 0.0})
     par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
-    # the shared map with the true transform covers what the team truly knows
     assert par.shared.area == pytest.approx(par.oracle.area, rel=0.05)
     obs = par._observe_one(0)
     truth = np.array([r.true_pose() for r in par.robots])
@@ -165,3 +165,24 @@ def test_coverage_target_terminates_both_robots():
     assert trunc == {"robot_0": False, "robot_1": False}
     assert infos["robot_0"]["true_coverage"] >= 0.02
     assert par.agents == []
+
+
+def test_true_coverage_ignores_echoes_lost_through_walls():
+    # same seed, same actions: dropouts change only the readings, never the motion
+    runs = []
+    for drop in (0.0, 1.0):
+        par = two_robot_explore_v0.parallel_env(
+            **{**SMALL, "max_cycles": 60},
+            sonar={"dropout_prob": drop, "dropout_incidence": 0.0},
+            mapping={"topo_every": 0, "merge_every": 0})
+        par.reset(seed=12)
+        k = 0
+        while par.agents:
+            par.step({"robot_0": [0.7, math.sin(k / 9)], "robot_1": [0.6, -0.4]})
+            k += 1
+        runs.append(par)
+    clean, lossy = runs
+    np.testing.assert_array_equal(clean.oracle.union, lossy.oracle.union)
+    # the robots themselves believe they see far beyond the walls when every echo is lost
+    assert lossy.maps[0].n_ever > 1.5 * clean.maps[0].n_ever
+    assert 0 < clean.oracle.fraction < 1
