@@ -89,24 +89,31 @@ def run_floor(par, steps: int, seed: int = 0) -> float:
 
 
 class StageTimer:
-    """Wraps functions/methods to accumulate their wall time under a stage name."""
+    """Wraps functions/methods to accumulate their exclusive wall time under a stage name (time
+    spent in another wrapped function called from inside goes to that one's stage)."""
 
     def __init__(self) -> None:
         self.total = defaultdict(float)
         self._saved = []
+        self._children = [0.0]
 
     def wrap(self, owner, name: str, stage: str) -> None:
         fn = getattr(owner, name)
         self._saved.append((owner, name, fn))
         total = self.total
+        children = self._children
 
         @functools.wraps(fn)
         def timed(*args, **kwargs):
+            children.append(0.0)
             t = time.perf_counter()
             try:
                 return fn(*args, **kwargs)
             finally:
-                total[stage] += time.perf_counter() - t
+                elapsed = time.perf_counter() - t
+                inner = children.pop()
+                total[stage] += elapsed - inner
+                children[-1] += elapsed
 
         setattr(owner, name, timed)
 
@@ -124,9 +131,9 @@ def breakdown(steps: int, seed: int = 0) -> tuple[dict[str, float], float]:
     timer.wrap(env_cls, "_simulate", "physics (substeps)")
     timer.wrap(robot.Robot, "update_odometry", "odometry")
     timer.wrap(sonar.Sonar, "measure", "sonar ray casts")
-    timer.wrap(mapping.RobotMap, "integrate", "grid update (topo.OccupancyGrid)")
+    timer.wrap(mapping.RobotMap, "integrate", "grid updates + windows (4 grids)")
     timer.wrap(mapping.SharedMap, "add", "shared map")
-    timer.wrap(mapping.OracleCoverage, "add", "true coverage")
+    timer.wrap(mapping.OracleCoverage, "add", "true coverage (less its grid update)")
     timer.wrap(mapping.RobotMap, "extract", "topo extraction (every 10)")
     timer.wrap(env_module, "run_merge", "merge_maps (every 25)")
     timer.wrap(env_cls, "_rewards", "rewards/ends")
