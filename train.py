@@ -95,6 +95,8 @@ class Args:
     """Agent-steps between checkpoints (0: only at the end)."""
     runs_dir: Path = Path("runs")
     """Where run folders go."""
+    run_name: str | None = None
+    """Run folder name (default: <env>__<seed>__<time>); an existing one is overwritten."""
     resume: Path | None = None
     """Continue a run: its folder (latest checkpoint) or a checkpoint .zip."""
     progress: bool = True
@@ -121,6 +123,9 @@ class Args:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and 0 < value <= 1):
                 raise ValueError(f"{name} must be in (0, 1], got {value!r}")
+        if self.run_name is not None and (not self.run_name or "/" in self.run_name
+                                          or self.run_name in (".", "..")):
+            raise ValueError(f"run_name must be a plain folder name, got {self.run_name!r}")
         if self.resume is not None and not Path(self.resume).exists():
             raise ValueError(f"resume: no run folder or checkpoint at {str(self.resume)!r}")
         from agents.scripted import EXPLORERS
@@ -360,7 +365,7 @@ def main(args: Args) -> Path:
         run_dir, checkpoint = _resume_checkpoint(args.resume)
     else:
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(args.runs_dir) / f"{ENV_ID}__{args.seed}__{stamp}"
+        run_dir = Path(args.runs_dir) / (args.run_name or f"{ENV_ID}__{args.seed}__{stamp}")
         checkpoint = None
     run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
