@@ -13,11 +13,9 @@ ratio is fair even on a busy machine. Also prints the brute-force/KD-tree crosso
 from __future__ import annotations
 
 import math
-import statistics
-import time
-from collections.abc import Callable
 
 import numpy as np
+from _timing import interleaved_medians
 
 from fusion import Rigid2D, exhaustive_search, icp_svd, paper_example
 from fusion import icp as icp_module
@@ -33,18 +31,6 @@ def lattice(n: int, rng: np.random.Generator, size: float = 10.0) -> np.ndarray:
     g = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)[:n]
     pts = (g - (side - 1) / 2) * spacing
     return pts + rng.uniform(-0.3, 0.3, pts.shape) * spacing
-
-
-def interleaved_medians(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    for fn in fns.values():
-        fn()  # warm up (compiled kernels load on the first call)
-    times: dict[str, list[float]] = {k: [] for k in fns}
-    for _ in range(repeats):
-        for k, fn in fns.items():
-            t0 = time.perf_counter()
-            fn()
-            times[k].append(time.perf_counter() - t0)
-    return {k: statistics.median(v) for k, v in times.items()}
 
 
 def load_open3d():

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import statistics
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -22,20 +19,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 
 from fusion import Rigid2D, exhaustive_search, icp_svd, paper_example, similarity  # noqa: E402
 from fusion.paper import PAPER_ITERATIONS, PAPER_TAU  # noqa: E402
 from topo.plotting import equal_axes, kind_legend_handles, plot_topomap, save_figure  # noqa: E402
-
-
-def median_time(fn: Callable[[], object], repeats: int = 200) -> float:
-    fn()  # warm up (compiled kernels load on first call)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def fmt_rigid(t: Rigid2D) -> str:
@@ -55,10 +43,10 @@ def main(out: Path) -> dict[str, float]:
                for p in search.ties]
     full = icp_svd(M, ex.truth.inverse().apply(M), tau=PAPER_TAU)  # full overlap: A's vertices only
 
-    t_icp = median_time(lambda: icp_svd(M, D, tau=PAPER_TAU))
+    t_icp = median_time(lambda: icp_svd(M, D, tau=PAPER_TAU), 200)
     t_search = median_time(lambda: exhaustive_search(ex.map_a, ex.map_b, 2.0, ex.eps), 20)
     t_refine = median_time(lambda: icp_svd(M, D, tau=PAPER_TAU, init=search.transform,
-                                           max_distance=ex.eps))
+                                           max_distance=ex.eps), 200)
 
     def errors(t: Rigid2D) -> str:
         return (f"rot err {math.degrees(t.rotation_error(ex.truth)):6.2f}°  "

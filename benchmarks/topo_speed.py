@@ -9,12 +9,10 @@ over repeats, all in this one process, so the ratio to ``skeletonize`` is fair o
 from __future__ import annotations
 
 import math
-import statistics
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from _timing import median_time
 from skimage.morphology import skeletonize
 
 from topo import OccupancyGrid, load_floor_plan
@@ -22,16 +20,6 @@ from topo.extract import extract_topomap
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 SONAR = np.radians([-90, -50, -30, -10, 10, 30, 50, 90])
-
-
-def median_time(fn: Callable[[], object], repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main() -> None:

@@ -1,12 +1,14 @@
 """The README's demo script runs end to end and writes both figures."""
 
 import importlib.util
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def load(name: str):
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # as when run as a script
     spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
