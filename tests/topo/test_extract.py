@@ -155,3 +155,10 @@ def test_bad_config_values():
         ExtractConfig(min_spur_length=-1)
     with pytest.raises(ValueError, match="ExtractConfig.corner_angle must be <= 180.0"):
         ExtractConfig(corner_angle=270)
+
+
+def test_sonar_preset_is_a_valid_simpler_config():
+    cfg = ExtractConfig.for_sonar()
+    assert cfg.erode_radius > 0 and cfg.min_spur_length > ExtractConfig().min_spur_length
+    mask = SHAPES["plus"][0]
+    assert counts(extract_topomap(mask, resolution=RES, config=cfg)) == (1, 4, 0)
