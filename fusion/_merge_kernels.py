@@ -56,18 +56,18 @@ def node_pairs(xy, edges, knn, min_dist):
             dist[a, b] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
     cand = near.copy()
     k = min(knn, n - 1)
-    if k > 0:
-        for a in range(n):
-            order = np.argsort(dist[a])
-            m = 0
-            for b in order:
-                if b == a:
-                    continue
-                cand[a, b] = True
-                cand[b, a] = True
-                m += 1
-                if m == k:
-                    break
+    taken = np.zeros(n, dtype=np.bool_)
+    for a in range(n):  # the k nearest by k selection passes (k is small)
+        taken[:] = False
+        taken[a] = True
+        for _ in range(k):
+            best, arg = np.inf, -1
+            for b in range(n):
+                if not taken[b] and dist[a, b] < best:
+                    best, arg = dist[a, b], b
+            taken[arg] = True
+            cand[a, arg] = True
+            cand[arg, a] = True
     count = 0
     for a in range(n):
         for b in range(a + 1, n):
@@ -140,6 +140,9 @@ def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol,
     tx = np.empty(n_out)
     ty = np.empty(n_out)
     weight = np.empty(n_out)
+    ang_b = np.empty(b_i.shape[0])
+    for q in range(b_i.shape[0]):
+        ang_b[q] = math.atan2(B[b_j[q], 1] - B[b_i[q], 1], B[b_j[q], 0] - B[b_i[q], 0])
     k = 0
     for p in range(a_i.shape[0]):
         ai, aj = a_i[p], a_j[p]
@@ -150,7 +153,7 @@ def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol,
             bi, bj = b_i[q], b_j[q]
             if not (compat[a_kind[ai], b_kind[bi]] and compat[a_kind[aj], b_kind[bj]]):
                 continue
-            ang = ang_a - math.atan2(B[bj, 1] - B[bi, 1], B[bj, 0] - B[bi, 0])
+            ang = ang_a - ang_b[q]
             c, s = math.cos(ang), math.sin(ang)
             mxb = 0.5 * (B[bi, 0] + B[bj, 0])
             myb = 0.5 * (B[bi, 1] + B[bj, 1])

@@ -107,8 +107,8 @@ class MergeConfig:
     min_pair_distance: float = 1.0
     knn: int = 4
     coarse_tolerance: float = 0.7
-    max_hypotheses: int = 1500
-    candidates: int = 32
+    max_hypotheses: int = 1000
+    candidates: int = 24
     scored: int = 12
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
