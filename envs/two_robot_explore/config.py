@@ -24,6 +24,11 @@ REWARD_MODES = ("shared", "oracle", "individual")
 ACTION_TYPES = ("continuous", "discrete")
 """``EnvConfig.action_type`` values."""
 
+TOPO_PRESETS = ("sonar", "default")
+"""``MappingConfig.topo_preset`` values: ``topo.extract.ExtractConfig.for_sonar()`` (eroded by
+about a robot radius, eager spur pruning and node merging: suited to ragged sonar grids) or
+``ExtractConfig()``."""
+
 MERGE_METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp", "none")
 """``MappingConfig.merge_method`` values; ``"none"`` never merges (each robot alone)."""
 
@@ -255,6 +260,7 @@ class MappingConfig:
     Attributes:
         grid_resolution: cell size of each robot's occupancy grid, metres.
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
+        topo_preset: extraction settings, ``"sonar"`` or ``"default"`` (:data:`TOPO_PRESETS`).
         merge_every: merge the two topological maps every this many steps (``0`` never).
         merge_method: ``fusion.merge_maps`` method, or ``"none"``.
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
@@ -264,6 +270,7 @@ class MappingConfig:
 
     grid_resolution: float = 0.1
     topo_every: int = 10
+    topo_preset: str = "sonar"
     merge_every: int = 25
     merge_method: str = "auto"
     local_map_size: int = 64
@@ -275,6 +282,7 @@ class MappingConfig:
                                                  "mapping.grid_resolution", low=0.02,
                                                  low_inclusive=True, high=0.5))
         _set(self, "topo_every", check_int(self.topo_every, "mapping.topo_every", low=0))
+        _check_choice(self.topo_preset, "mapping.topo_preset", TOPO_PRESETS)
         _set(self, "merge_every", check_int(self.merge_every, "mapping.merge_every", low=0))
         _check_choice(self.merge_method, "mapping.merge_method", MERGE_METHODS)
         _set(self, "local_map_size", check_int(self.local_map_size, "mapping.local_map_size",

@@ -68,7 +68,8 @@ file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` 
 HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
 of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
 ``mapping.grid_resolution``) covers a square of half-side ``R`` around its start; its
-topological map (``topo.extract_topomap``) is re-extracted every ``mapping.topo_every`` steps.
+topological map (``topo.extract_topomap`` with ``ExtractConfig.for_sonar()``, made for ragged
+sonar grids) is re-extracted every ``mapping.topo_every`` steps.
 
 ## Rewards
 
@@ -147,6 +148,7 @@ are a ``ValueError``.
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
 | ``mapping.topo_every`` / ``merge_every`` | int | 10 / 25 | steps (0 = never) |
+| ``mapping.topo_preset`` | str | ``"sonar"`` | ``ExtractConfig.for_sonar()`` or ``"default"`` |
 | ``mapping.merge_method`` | str | ``"auto"`` | ``fusion.merge_maps`` method or ``"none"`` |
 | ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
 | ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
@@ -194,6 +196,7 @@ from envs.two_robot_explore.robot import Robot, build_space, simulate
 from envs.two_robot_explore.sonar import Sonar
 from envs.two_robot_explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
+from topo.extract import ExtractConfig
 from topo.graph import NodeKind, TopoMap
 
 AGENTS = ("robot_0", "robot_1")
@@ -257,6 +260,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._build_spaces()
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
+        self._extract_config = (ExtractConfig.for_sonar() if cfg.mapping.topo_preset == "sonar"
+                                else ExtractConfig())
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
@@ -525,7 +530,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         every = cfg.mapping.topo_every
         if every and self.steps % every == 0:
             for i, rmap in enumerate(self.maps):
-                rmap.extract()
+                rmap.extract(self._extract_config)
                 self._cache_graph(i)
 
     def _fuse(self) -> None:

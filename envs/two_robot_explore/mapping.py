@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.rigid import Rigid2D
+from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
 from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
 
@@ -184,10 +185,9 @@ class RobotMap:
             return None
         return slice(self.bbox[0], self.bbox[1]), slice(self.bbox[2], self.bbox[3])
 
-    def extract(self) -> TopoMap:
-        """Re-extract :attr:`topomap` from the free cells inside :attr:`bbox`."""
-        from topo.extract import extract_topomap
-
+    def extract(self, config: ExtractConfig | None = None) -> TopoMap:
+        """Re-extract :attr:`topomap` from the free cells inside :attr:`bbox` with
+        ``topo.extract_topomap`` (``config``: its :class:`topo.extract.ExtractConfig`)."""
         win = self.known_window()
         if win is None:
             return self.topomap
@@ -195,7 +195,8 @@ class RobotMap:
         g = self.geometry
         free = self.states[win] == CellState.FREE
         origin = (g.origin[0] + cs.start * g.resolution, g.origin[1] + rs.start * g.resolution)
-        self.topomap = extract_topomap(free, resolution=g.resolution, origin=origin)
+        self.topomap = extract_topomap(free, resolution=g.resolution, origin=origin,
+                                       config=config)
         return self.topomap
 
 
