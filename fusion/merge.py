@@ -144,8 +144,11 @@ class MergeConfig:
         ``fit_eps = pair_tolerance = 4σ``, ``coarse_tolerance = 3.3σ`` and ``min_score = 7``
         (wider tolerances let more chance alignments score: at σ = 0.3 m the best of 400
         no-overlap pairs scored 6.97). At σ = 0.3 m this lifts ``auto``'s success on ≥ 40%
-        overlap from 18% to 62% (oracle 83%). ``overrides`` replace any field."""
-        sigma = check_real(sigma, "sigma", low=0.0, low_inclusive=True)
+        overlap from 18% to 62% (oracle 83%). ``overrides`` replace any field.
+
+        Only ``0 <= sigma <= 0.3`` was calibrated; larger values are refused (at σ = 0.5 m the
+        scaled tolerances accepted a wrong merge of two sonar maps from the environment)."""
+        sigma = check_real(sigma, "sigma", low=0.0, low_inclusive=True, high=0.3)
         base = cls()
         scaled = {}
         if 3.0 * sigma > base.eps:

@@ -247,5 +247,7 @@ def test_config_for_noise_scales_tolerances_and_bar():
     assert MergeConfig.for_noise(0.3, eps=1.0).eps == 1.0
     with pytest.raises(ValueError, match="sigma must be >= 0.0, got -0.1"):
         MergeConfig.for_noise(-0.1)
+    with pytest.raises(ValueError, match="sigma must be <= 0.3, got 0.5"):
+        MergeConfig.for_noise(0.5)
     with pytest.raises(ValueError, match=r"MergeConfig has unknown keys \['tolerance'\]"):
         MergeConfig.for_noise(0.3, tolerance=1.0)
