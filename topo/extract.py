@@ -118,12 +118,34 @@ def _as_mask(grid_or_free_mask: Any, resolution: float | None,
     return mask, res, (ox, oy)
 
 
+def _polyline_length(poly: np.ndarray) -> float:
+    d = poly[1:] - poly[:-1]
+    return float(np.sqrt((d * d).sum(axis=1)).sum())
+
+
+@dataclass(slots=True)
+class _Edge:
+    u: int
+    v: int
+    poly: np.ndarray
+    """Pixel polyline ``(K, 2)`` (float ``row, col``) from ``u`` to ``v``."""
+    length: float
+
+    def other(self, n: int) -> int:
+        return self.v if self.u == n else self.u
+
+    def from_node(self, n: int) -> np.ndarray:
+        return self.poly if self.u == n else self.poly[::-1]
+
+
 class _Graph:
-    """Nodes (pixel positions, float ``(row, col)``) and edges (pixel polylines) during clean-up."""
+    """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
+    up to date so that every clean-up pass is linear in the graph's size."""
 
     def __init__(self) -> None:
         self.pos: dict[int, np.ndarray] = {}
-        self.edges: dict[int, list] = {}  # id -> [u, v, polyline (K, 2)]
+        self.edges: dict[int, _Edge] = {}
+        self.inc: dict[int, set[int]] = {}
         self.corners: set[int] = set()  # nodes placed where a path turns: never dissolved
         self._next_edge = 0
         self._next_node = 0
@@ -132,88 +154,104 @@ class _Graph:
         nid = self._next_node
         self._next_node += 1
         self.pos[nid] = np.asarray(rc, dtype=np.float64)
+        self.inc[nid] = set()
         return nid
 
-    def add_edge(self, u: int, v: int, poly: np.ndarray) -> None:
-        self.edges[self._next_edge] = [u, v, poly]
+    def add_edge(self, u: int, v: int, poly: np.ndarray) -> int:
+        e = self._next_edge
         self._next_edge += 1
+        self.edges[e] = _Edge(u, v, poly, _polyline_length(poly))
+        self.inc[u].add(e)
+        self.inc[v].add(e)
+        return e
 
-    def incident(self) -> dict[int, list[int]]:
-        inc: dict[int, list[int]] = {n: [] for n in self.pos}
-        for e, (u, v, _) in self.edges.items():
-            inc[u].append(e)
-            inc[v].append(e)
-        return inc
+    def remove_edge(self, e: int) -> _Edge:
+        edge = self.edges.pop(e)
+        self.inc[edge.u].discard(e)
+        self.inc[edge.v].discard(e)
+        return edge
 
-    @staticmethod
-    def length(poly: np.ndarray) -> float:
-        return float(np.linalg.norm(np.diff(poly, axis=0), axis=1).sum())
+    def remove_node(self, n: int) -> None:
+        for e in list(self.inc[n]):
+            self.remove_edge(e)
+        del self.pos[n], self.inc[n]
+        self.corners.discard(n)
 
-    def oriented(self, e: int, start: int) -> np.ndarray:
-        u, _, poly = self.edges[e]
-        return poly if u == start else poly[::-1]
+    def degree(self, n: int) -> int:
+        # a self-loop counts twice, as in networkx
+        return sum(2 if self.edges[e].u == self.edges[e].v else 1 for e in self.inc[n])
 
     def prune_spurs(self, min_len: float) -> None:
+        """Remove dead-end paths shorter than ``min_len`` that hang off a junction, shortest
+        first, in rounds until none is left (a junction left with two paths is dissolved)."""
         while True:
-            inc = self.incident()
-            spurs = [e for e, (u, v, poly) in self.edges.items()
-                     if u != v and self.length(poly) < min_len
-                     and ((len(inc[u]) == 1 and len(inc[v]) >= 3)
-                          or (len(inc[v]) == 1 and len(inc[u]) >= 3))]
-            if not spurs:
+            removed = False
+            for e in sorted(self.edges, key=lambda k: self.edges[k].length):
+                edge = self.edges.get(e)
+                if edge is None or edge.u == edge.v or edge.length >= min_len:
+                    continue
+                du, dv = self.degree(edge.u), self.degree(edge.v)
+                if du == 1 and dv >= 3:
+                    leaf, hub = edge.u, edge.v
+                elif dv == 1 and du >= 3:
+                    leaf, hub = edge.v, edge.u
+                else:
+                    continue
+                self.remove_node(leaf)
+                self.dissolve(hub)
+                removed = True
+            if not removed:
                 return
-            e = min(spurs, key=lambda k: self.length(self.edges[k][2]))
-            u, v, _ = self.edges.pop(e)
-            self.pos.pop(u if len(inc[u]) == 1 else v)
-            self.dissolve_degree_two()
+
+    def dissolve(self, n: int) -> None:
+        """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner."""
+        if n not in self.pos or n in self.corners or len(self.inc[n]) != 2:
+            return
+        ea, eb = self.inc[n]
+        a, b = self.edges[ea], self.edges[eb]
+        if a.u == a.v or b.u == b.v:
+            return
+        ua, vb = a.other(n), b.other(n)
+        pa, pb = a.from_node(n)[::-1], b.from_node(n)
+        self.remove_edge(ea)
+        self.remove_edge(eb)
+        del self.pos[n], self.inc[n]
+        self.add_edge(ua, vb, np.vstack([pa, pb[1:]]))
 
     def dissolve_degree_two(self) -> None:
-        """Join the two paths of every degree-2 node into one (until none is left, but a node
-        on a closed loop of its own stays)."""
-        changed = True
-        while changed:
-            changed = False
-            inc = self.incident()
-            for n, es in inc.items():
-                if len(es) != 2 or es[0] == es[1] or n in self.corners:
-                    continue
-                a, b = es
-                pa = self.oriented(a, n)[::-1]  # ends at n
-                pb = self.oriented(b, n)        # starts at n
-                ua = self.edges[a][0] if self.edges[a][1] == n else self.edges[a][1]
-                vb = self.edges[b][1] if self.edges[b][0] == n else self.edges[b][0]
-                if ua == n or vb == n:
-                    continue
-                del self.edges[a], self.edges[b]
-                self.pos.pop(n)
-                self.add_edge(ua, vb, np.vstack([pa, pb[1:]]))
-                changed = True
-                break
+        for n in list(self.pos):
+            self.dissolve(n)
 
     def merge_short(self, radius: float) -> None:
-        while True:
-            short = [e for e, (u, v, poly) in self.edges.items()
-                     if u != v and self.length(poly) < radius]
-            if not short:
-                return
-            e = min(short, key=lambda k: self.length(self.edges[k][2]))
-            u, v, _ = self.edges.pop(e)
-            inc = self.incident()
-            # the merged node sits at the more connected end (a junction keeps its place)
-            keep, drop = (u, v) if len(inc[u]) >= len(inc[v]) else (v, u)
-            for k, (a, b, poly) in list(self.edges.items()):
-                if a == drop:
-                    self.edges[k] = [keep, b, np.vstack([self.pos[keep], poly])]
-                if self.edges[k][1] == drop:
-                    a2, _, poly2 = self.edges[k]
-                    self.edges[k] = [a2, keep, np.vstack([poly2, self.pos[keep]])]
-            self.pos.pop(drop)
+        """Contract paths shorter than ``radius``, shortest first; the more connected end stays
+        where it is (a junction keeps its place) and takes over the other's paths."""
+        for e in sorted(self.edges, key=lambda k: self.edges[k].length):
+            edge = self.edges.get(e)
+            if edge is None or edge.u == edge.v or edge.length >= radius:
+                continue
+            self.remove_edge(e)
+            keep, drop = ((edge.u, edge.v) if len(self.inc[edge.u]) >= len(self.inc[edge.v])
+                          else (edge.v, edge.u))
+            for k in list(self.inc[drop]):
+                other = self.remove_edge(k)
+                a = keep if other.u == drop else other.u
+                b = keep if other.v == drop else other.v
+                poly = other.poly
+                if other.u == drop:
+                    poly = np.vstack([self.pos[keep], poly])
+                if other.v == drop:
+                    poly = np.vstack([poly, self.pos[keep]])
+                self.add_edge(a, b, poly)
+            del self.pos[drop], self.inc[drop]
             self.corners.discard(drop)
 
     def split_corners(self, angle_deg: float, tol: float) -> None:
         for e in list(self.edges):
-            u, v, poly = self.edges[e]
-            simple = approximate_polygon(poly, tolerance=tol) if len(poly) > 2 else poly
+            edge = self.edges[e]
+            poly = edge.poly
+            if len(poly) < 3:
+                continue
+            simple = approximate_polygon(poly, tolerance=tol)
             if len(simple) < 3:
                 continue
             d1 = simple[1:-1] - simple[:-2]
@@ -224,22 +262,23 @@ class _Graph:
             if len(cut_pts) == 0:
                 continue
             # cut at the polyline pixels nearest the simplified corner vertices, in path order
-            cuts = sorted({int(np.argmin(np.linalg.norm(poly - p, axis=1))) for p in cut_pts})
+            cuts = sorted({int(np.argmin(((poly - p) ** 2).sum(1))) for p in cut_pts})
             cuts = [c for c in cuts if 0 < c < len(poly) - 1]
             if not cuts:
                 continue
-            del self.edges[e]
-            prev_node, prev_cut = u, 0
+            self.remove_edge(e)
+            prev_node, prev_cut = edge.u, 0
             for c in cuts:
                 node = self.add_node(poly[c])
                 self.corners.add(node)
                 self.add_edge(prev_node, node, poly[prev_cut: c + 1])
                 prev_node, prev_cut = node, c
-            self.add_edge(prev_node, v, poly[prev_cut:])
+            self.add_edge(prev_node, edge.v, poly[prev_cut:])
 
     def break_self_loops(self) -> None:
-        for e in [k for k, (u, v, _) in self.edges.items() if u == v]:
-            u, _, poly = self.edges.pop(e)
+        for e in [k for k, edge in self.edges.items() if edge.u == edge.v]:
+            edge = self.remove_edge(e)
+            poly, u = edge.poly, edge.u
             if len(poly) < 4:
                 continue
             third = [len(poly) // 3, 2 * len(poly) // 3]
@@ -345,8 +384,8 @@ def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     index = {ids[k]: i for i, k in enumerate(order)}
     xy = xy[order]
     edges, paths, lengths = [], [], []
-    for e in sorted(g.edges, key=lambda k: (index[g.edges[k][0]], index[g.edges[k][1]])):
-        u, v, poly = g.edges[e]
+    for e in sorted(g.edges, key=lambda k: (index[g.edges[k].u], index[g.edges[k].v])):
+        u, v, poly = g.edges[e].u, g.edges[e].v, g.edges[e].poly
         iu, iv = index[u], index[v]
         pts = np.stack([origin[0] + (poly[:, 1] + 0.5) * res,
                         origin[1] + (poly[:, 0] + 0.5) * res], 1)
@@ -355,6 +394,6 @@ def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
             iu, iv, pts = iv, iu, pts[::-1]
         edges.append((iu, iv))
         paths.append(pts)
-        lengths.append(max(_Graph.length(pts), float(np.linalg.norm(xy[iu] - xy[iv]))))
+        lengths.append(max(_polyline_length(pts), float(np.linalg.norm(xy[iu] - xy[iv]))))
     return TopoMap.from_arrays(xy, np.asarray(edges, dtype=np.int64).reshape(-1, 2),
                                lengths=lengths, paths=paths)
