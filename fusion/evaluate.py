@@ -28,10 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import statistics
 import sys
-import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -42,6 +40,7 @@ import numpy as np
 from fusion._config import config_from
 from fusion.icp import best_rotation_angle
 from fusion.merge import METHODS, MergeConfig, merge_maps
+from fusion.pairs import atomic_write_json
 from fusion.rigid import Rigid2D
 from fusion.synthetic import SyntheticConfig, generate_pairs
 from topo.graph import TopoMap
@@ -318,22 +317,6 @@ def format_tables(summary: dict[str, Any]) -> str:
 
 
 # ---------------------------------------------------------------------------------- output
-def write_json(path: str | Path, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically (temporary file in the folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=".json", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1, allow_nan=False)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
 def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str | Path,
                  config: MergeConfig | dict | None = None, pictures: int = 4) -> list[Path]:
     """Error CDFs, success vs overlap, success vs true rotation, and ``pictures`` merged maps
@@ -483,11 +466,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_tables(summary))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
               if args.synthetic is not None else str(args.pairs_dir))
-    write_json(args.out / "results.json", {
+    atomic_write_json(args.out / "results.json", {
         "source": source, "methods": methods, "config": asdict(config),
         "config_for_noise": args.for_noise,
         "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
-        "summary": summary, "records": [asdict(r) for r in records]})
+        "summary": summary, "records": [asdict(r) for r in records]}, allow_nan=False)
     if not args.no_plots:
         plot_results(records, pairs, args.out, config)
     print(f"\nwrote {args.out / 'results.json'}" + ("" if args.no_plots else " and plots"))

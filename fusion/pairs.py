@@ -141,9 +141,12 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
         raise
 
 
-def atomic_write_json(path: str | Path, obj: Any) -> None:
-    """JSON-encode ``obj`` (indented, sorted keys) and write it atomically."""
-    atomic_write_bytes(path, (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode())
+def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> Path:
+    """JSON-encode ``obj`` (indented, sorted keys) and write it atomically; returns the path.
+    ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
+    text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
+    atomic_write_bytes(path, text.encode())
+    return Path(path)
 
 
 def _map_arrays(prefix: str, m: TopoMap) -> dict[str, np.ndarray]:

@@ -19,9 +19,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fusion.rigid import Rigid2D, wrap_angle
+from fusion.rigid import Rigid2D
 from topo._checks import as_points, check_real
 from topo.graph import TopoMap
 
@@ -158,26 +160,30 @@ def _distinct_optima(
 ) -> list[Placement]:
     """Group tied placements into optima (single linkage: within one angle step and ``eps`` at
     B's centroid) and return, per group in angle order, the placement whose coinciding pairs
-    are closest (least squared distance): ω ties are broken by residual."""
-    centroid = b.mean(axis=0)
-    tree = cKDTree(a)
+    are closest (least squared distance): ω ties are broken by residual.
+
+    Linking uses one KD-tree over (B's centroid image, scaled angle on the unit circle), so
+    even maps with thousands of tied placements group in ``O(T log T)``."""
     placements = [Placement(Rigid2D(math.radians(deg), shift), (i, j), score)
                   for deg, i, j, shift in tied]
-    groups: list[list[Placement]] = []
-    for p in placements:
-        linked = [g for g in groups if any(
-            abs(wrap_angle(p.transform.theta - q.transform.theta)) <= step_rad + 1e-9
-            and p.transform.translation_error(q.transform, at=centroid) <= eps
-            for q in g)]
-        merged = [p]
-        for g in linked:
-            merged = g + merged
-            groups.remove(g)
-        groups.append(merged)
-    groups.sort(key=lambda g: min(q.transform.degrees % 360.0 for q in g))
+    centroid = b.mean(axis=0)
+    where = np.array([p.transform.apply(centroid) for p in placements])
+    theta = np.array([p.transform.theta for p in placements])
+    # chord length on a circle of radius r ≈ r·Δθ; choose r so one step ≈ eps
+    r = eps / max(step_rad, 1e-12)
+    feats = np.column_stack([where, r * np.cos(theta), r * np.sin(theta)])
+    pairs = cKDTree(feats).query_pairs(eps * math.sqrt(2) * (1 + 1e-9), output_type="ndarray")
+    n = len(placements)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    tree = cKDTree(a)
 
     def residual(p: Placement) -> float:
         d, _ = tree.query(p.transform.apply(b), distance_upper_bound=eps)
         return float(np.sum(d[np.isfinite(d)] ** 2))
 
-    return [min(g, key=residual) for g in groups]
+    groups: dict[int, list[Placement]] = {}
+    for label, p in zip(labels, placements, strict=True):
+        groups.setdefault(int(label), []).append(p)
+    ordered = sorted(groups.values(), key=lambda g: min(q.transform.degrees % 360.0 for q in g))
+    return [min(g, key=residual) for g in ordered]
