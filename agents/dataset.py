@@ -7,11 +7,13 @@
 
 Each **episode** ``e`` of a run is seeded from ``(seed, e)`` alone and yields ``snapshots`` pairs
 (ids ``e · snapshots + k``): snapshot ``k`` is taken the first time the true coverage reaches
-``coverage_levels[k]`` (spread over 15–85 % so that overlaps vary), or at the episode's last step
-if it ends first. Episodes are independent tasks, so the pairs are the same whatever the number
-of workers or the backend, and an interrupted run resumes with the same command: episodes whose
-pairs all exist are skipped, the others are re-run and rewrite exactly the same pairs. The format
-is :mod:`fusion.pairs`; ``fusion.evaluate DIR`` reads it.
+``coverage_levels[k]`` (spread over 15–85 % so that overlaps vary) or, for an explorer too slow
+to get there, at step ``(k + 1) / snapshots · max_cycles``, whichever comes first (so the
+snapshots of an episode are taken at distinct moments); an episode that terminates early gives
+its remaining snapshots at its last step. Episodes are independent tasks, so the pairs are the
+same whatever the number of workers or the backend, and an interrupted run resumes with the
+same command: episodes whose pairs all exist are skipped, the others are re-run and rewrite
+exactly the same pairs. The format is :mod:`fusion.pairs`; ``fusion.evaluate DIR`` reads it.
 
 Ray: ``--backend ray`` runs one task per episode on ``ray.init()`` (a local cluster with
 ``--workers`` CPUs) or on an existing cluster (``--address``); tasks write their pair files into
@@ -165,6 +167,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     env = parallel_env(max_cycles=settings["max_cycles"], world=world)
     team = make_team(settings["explorer"])
     levels = coverage_levels(snapshots)[: len(ids)]
+    deadlines = [math.ceil((k + 1) / snapshots * settings["max_cycles"]) for k in range(len(ids))]
     taken: list[MapPair] = []
     state = {"infos": None, "step": 0}
 
@@ -173,7 +176,8 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
             return
         state["infos"], state["step"] = infos, step
         cov = float(infos["robot_0"]["true_coverage"])
-        while len(taken) < len(ids) and cov >= levels[len(taken)]:
+        while len(taken) < len(ids) and (cov >= levels[len(taken)]
+                                         or step >= deadlines[len(taken)]):
             k = len(taken)
             taken.append(_snapshot(env, infos, ids[k], episode, k, seed, step, settings))
 
