@@ -1,11 +1,8 @@
-"""``make demo``: two scripted wanderers explore one episode of ``two_robot_explore_v0``.
+"""``make demo``: two scripted explorers run one episode of ``two_robot_explore_v0``.
 
 Prints the coverage and how good the map merge was, writes the last frame to ``out/demo.png``
-and a short GIF (every 20th step) to ``out/demo.gif``.
-
-The wanderer is deliberately simple (the agents package has frontier explorers): drive ahead,
-drift in a random direction that changes now and then, and turn away — towards the side with
-more room — when the front sonars see something close.
+and a short GIF (every 20th step) to ``out/demo.gif``. The explorers are ``agents.scripted``
+ones (``--explorer``, default ``coordinated_frontier``).
 """
 
 from __future__ import annotations
@@ -20,36 +17,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agents.scripted import make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-
-
-class Wanderer:
-    """A reactive sonar wanderer for the Pioneer front ring (-90 … 90°)."""
-
-    def __init__(self, rng: np.random.Generator, max_range: float) -> None:
-        self.rng = rng
-        self.max_range = max_range
-        self.drift = 0.0
-        self.turn_steps = 0
-        self.turn_dir = 1.0
-
-    def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        """``(v, ω)`` in ``[-1, 1]`` from the latest sonar readings."""
-        r = obs["sonar"] * self.max_range
-        front = min(r[3], r[4])
-        right, left = float(np.mean(r[:3])), float(np.mean(r[5:]))
-        if self.turn_steps:
-            if front > 0.9:
-                self.turn_steps -= 1
-            return np.array([0.0, self.turn_dir], dtype=np.float32)
-        if front < 0.6 or min(r[2], r[5]) < 0.4:
-            self.turn_dir = 1.0 if left >= right else -1.0
-            self.turn_steps = int(self.rng.integers(3, 10))
-            return np.array([0.0, self.turn_dir], dtype=np.float32)
-        if self.rng.random() < 0.05:
-            self.drift = float(self.rng.uniform(-0.4, 0.4))
-        steer = 0.6 * (min(r[5], r[6]) - min(r[1], r[2])) / self.max_range
-        return np.array([1.0, np.clip(self.drift + steer, -1, 1)], dtype=np.float32)
 
 
 def _write_atomic(path: Path, write) -> None:
@@ -70,21 +39,22 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1000, help="max_cycles of the episode")
     parser.add_argument("--out", type=Path, default=Path("out"))
     parser.add_argument("--no-gif", action="store_true")
+    parser.add_argument("--explorer", default="coordinated_frontier",
+                        help="agents.scripted explorer driving both robots")
     args = parser.parse_args()
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     import imageio.v3 as iio
 
     env = two_robot_explore_v0.parallel_env(max_cycles=args.steps, render_mode="rgb_array")
     obs, infos = env.reset(seed=args.seed)
-    rng = np.random.default_rng(args.seed)
-    max_range = env.config.sonar.max_range
-    bots = {a: Wanderer(np.random.default_rng(rng.integers(2**32)), max_range)
-            for a in env.possible_agents}
+    team = make_team(args.explorer)
+    for explorer, s in zip(team.values(), np.random.SeedSequence(args.seed).spawn(2), strict=True):
+        explorer.reset(int(s.generate_state(1)[0]))
     frames = []
     total = 0.0
     steps = 0
     while env.agents:
-        actions = {a: bots[a].act(obs[a]) for a in env.agents}
+        actions = {a: team[a].act(obs[a], infos[a]) for a in env.agents}
         obs, rewards, _, _, infos = env.step(actions)
         total += rewards["robot_0"]
         steps += 1
@@ -92,7 +62,8 @@ def main() -> None:
             frames.append(env.render()[::2, ::2])
     frame = env.render()
     info = infos["robot_0"]
-    print(f"two_robot_explore_v0, seed {args.seed}: {env.world.name}, {steps} steps")
+    print(f"two_robot_explore_v0, seed {args.seed}: {env.world.name}, {steps} steps, "
+          f"explorer {args.explorer}")
     print(f"  true coverage      {info['true_coverage']:.1%} of {env.world.reachable_area:.0f} m²")
     print(f"  shared map         {info['shared_area_m2']:.1f} m² (robot 0 alone "
           f"{info['own_area_m2']:.1f} m²)")
