@@ -17,7 +17,7 @@ $(VENV)/.torch:
 
 # one stamp per set of extras, redone when pyproject.toml changes
 $(VENV)/.deps-base: pyproject.toml $(VENV)/.torch
-	$(PIP) install -e .
+	$(PIP) install -e ".[render]"
 	touch $@
 
 $(VENV)/.deps-test: pyproject.toml $(VENV)/.torch
