@@ -29,8 +29,10 @@ TOPO_PRESETS = ("sonar", "default")
 about a robot radius, eager spur pruning and node merging: suited to ragged sonar grids) or
 ``ExtractConfig()``."""
 
-MERGE_METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp", "none")
-"""``MappingConfig.merge_method`` values; ``"none"`` never merges (each robot alone)."""
+MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "none")
+"""``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.grid_merge.hybrid_merge``: the
+structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method, or
+``"none"`` (never merges: each robot alone)."""
 
 
 def _check_choice(value: object, name: str, allowed: tuple[str, ...]) -> str:
@@ -262,7 +264,11 @@ class MappingConfig:
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
         topo_preset: extraction settings, ``"sonar"`` or ``"default"`` (:data:`TOPO_PRESETS`).
         merge_every: merge the two topological maps every this many steps (``0`` never).
-        merge_method: ``fusion.merge_maps`` method, or ``"none"``.
+        merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, or ``"none"``
+            (:data:`MERGE_METHODS`).
+        grid_merge_every: with ``"hybrid"``, the (slower, ~0.1–0.4 s) occupancy-grid alignment
+            is tried on merge steps that are multiples of this, until a transform is in use;
+            ``0`` never. A multiple of ``merge_every`` (unused when ``merge_every`` is 0).
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).
@@ -272,7 +278,8 @@ class MappingConfig:
     topo_every: int = 10
     topo_preset: str = "sonar"
     merge_every: int = 25
-    merge_method: str = "auto"
+    merge_method: str = "hybrid"
+    grid_merge_every: int = 100
     local_map_size: int = 64
     local_map_resolution: float = 0.15
     max_nodes: int = 32
@@ -285,6 +292,13 @@ class MappingConfig:
         _check_choice(self.topo_preset, "mapping.topo_preset", TOPO_PRESETS)
         _set(self, "merge_every", check_int(self.merge_every, "mapping.merge_every", low=0))
         _check_choice(self.merge_method, "mapping.merge_method", MERGE_METHODS)
+        _set(self, "grid_merge_every", check_int(self.grid_merge_every,
+                                                 "mapping.grid_merge_every", low=0))
+        if self.grid_merge_every and self.merge_every and (
+                self.grid_merge_every % self.merge_every):
+            raise ValueError(f"mapping.grid_merge_every must be 0 or a multiple of "
+                             f"mapping.merge_every ({self.merge_every}), got "
+                             f"{self.grid_merge_every}")
         _set(self, "local_map_size", check_int(self.local_map_size, "mapping.local_map_size",
                                                low=64))
         if self.local_map_size > 512:

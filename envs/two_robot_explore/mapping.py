@@ -373,8 +373,15 @@ def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:
     return np.array([xy[0], xy[1], math.atan2(math.sin(th), math.cos(th))])
 
 
-def run_merge(map_a: TopoMap, map_b: TopoMap, method: str):
-    """The one place fusion is called: ``fusion.merge_maps(map_a, map_b, method=method)``."""
+def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
+              grid_b: OccupancyGrid | None = None, try_grids: bool = False):
+    """The one place fusion is called: ``fusion.grid_merge.hybrid_merge`` for ``"hybrid"``
+    (the grids are aligned only when ``try_grids``), else
+    ``fusion.merge_maps(map_a, map_b, method=method)``."""
+    if method == "hybrid":
+        from fusion.grid_merge import hybrid_merge
+
+        return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids)
     from fusion.merge import merge_maps
 
     return merge_maps(map_a, map_b, method=method)

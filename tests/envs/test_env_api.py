@@ -189,3 +189,12 @@ def test_reset_options():
         par.reset(seed=0, options={"start_poses": [[-5, -5, 0], [1, 1, 0]]})
     with pytest.raises(ValueError, match=r"shape \(2, 3\)"):
         par.reset(seed=0, options={"start_poses": [[1, 1, 0]]})
+
+
+def test_grid_merge_every_must_be_a_multiple_of_merge_every():
+    from envs.two_robot_explore.config import MappingConfig
+
+    with pytest.raises(ValueError, match=r"mapping.grid_merge_every must be 0 or a multiple of "
+                                         r"mapping.merge_every \(25\), got 30"):
+        MappingConfig(grid_merge_every=30)
+    assert MappingConfig(merge_every=0).grid_merge_every == 100
