@@ -152,8 +152,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     fa_free = sfft.rfft2(for_free, fshape)
     half = side // 2
 
-    def score_at(theta: float) -> tuple[float, np.ndarray]:
-        """Best translation for rotation ``theta``: (score, T)."""
+    def score_map(theta: float) -> tuple[np.ndarray, np.ndarray]:
+        """Score of every translation for rotation ``theta`` (A-cell offsets) and R."""
         c, s = math.cos(theta), math.sin(theta)
         rot = np.array([[c, -s], [s, c]])
         kw = np.zeros((side, side))
@@ -166,15 +166,20 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
         # correlation = convolution with the flipped kernel
         spec = fa_walls * sfft.rfft2(kw[::-1, ::-1], fshape)
         spec += fa_free * sfft.rfft2(kf[::-1, ::-1], fshape)
-        smap = sfft.irfft2(spec, fshape)[: shape[0], : shape[1]]
-        k = int(np.argmax(smap))
-        r, col = divmod(k, smap.shape[1])
+        return sfft.irfft2(spec, fshape)[: shape[0], : shape[1]], rot
+
+    def to_translation(r: int, col: int, rot: np.ndarray) -> np.ndarray:
         # flipped-kernel cell (side-1, side-1), i.e. kernel cell (0, 0), lands on A cell
         # (r - side + 1, col - side + 1); kernel cell (0, 0) is B's point centre - half·res
-        dr, dc = r - side + 1, col - side + 1
-        corner = origin_a + np.array([dc, dr]) * res
-        t = corner + half * res - rot @ centre
-        return float(smap[r, col]), t
+        corner = origin_a + np.array([col - side + 1, r - side + 1]) * res
+        return corner + half * res - rot @ centre
+
+    def score_at(theta: float) -> tuple[float, np.ndarray]:
+        """Best translation for rotation ``theta``: (score, T)."""
+        smap, rot = score_map(theta)
+        k = int(np.argmax(smap))
+        r, col = divmod(k, smap.shape[1])
+        return float(smap[r, col]), to_translation(r, col, rot)
 
     thetas = np.radians(np.arange(0.0, 360.0, cfg.step_deg))
     results = [score_at(th) for th in thetas]
@@ -188,7 +193,12 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     estimate = Rigid2D(theta, t)
 
     # the best clearly different alignment: other angles, or far-away peaks at this angle
-    rival = 0.0
+    # (buildings repeat rooms: a shifted copy can score almost as well)
+    smap, rot = score_map(theta)
+    r_best, c_best = divmod(int(np.argmax(smap)), smap.shape[1])
+    rr, cc = np.ogrid[: smap.shape[0], : smap.shape[1]]
+    far = (rr - r_best) ** 2 + (cc - c_best) ** 2 > (cfg.distinct_m / res) ** 2
+    rival = float(smap[far].max()) if far.any() else 0.0
     for th, (s, tt) in zip(thetas, results, strict=True):
         other = Rigid2D(float(th), tt)
         if (math.degrees(other.rotation_error(estimate)) > cfg.distinct_deg
