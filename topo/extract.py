@@ -4,22 +4,35 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 
 1. **Free space** — a boolean mask (or an :class:`~topo.grid.OccupancyGrid`'s free cells),
    cropped to its free cells' bounding box; holes smaller than ``min_hole_area`` (sonar
-   speckle) are filled, and the mask is optionally eroded by ``erode_radius`` (the robot).
+   speckle) are filled, the mask is optionally eroded by ``erode_radius`` (the robot), and free
+   components smaller than ``min_component_area`` are dropped.
 2. **Skeleton** — ``skimage.morphology.skeletonize``.
 3. **Graph** — ``skan.csr.Skeleton`` traces the skeleton into paths between junction and end
    pixels (no hand-written tracing).
-4. **Clean-up** — dead-end spurs shorter than ``min_spur_length`` are pruned (repeatedly: a
-   junction left with two paths joins them); nodes joined by a path shorter than
-   ``merge_radius`` are merged (skeleton junctions come in pixel clusters).
-5. **Corners** — each path is simplified (Douglas–Peucker, ``corner_tolerance``) and split at
-   vertices where it turns by more than ``corner_angle``; a closed loop with no such vertex
-   gets three evenly spaced corner nodes (a map has no self-loops).
-6. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
+4. **Spurs** — a dead-end path is pruned when it *protrudes* less than ``min_spur_length``
+   beyond the free disc at its junction: ``length − (r_junction − r_end)``, with ``r`` the
+   distance to the nearest non-free cell. A bump in a wall or a room's corner makes a skeleton
+   branch about as long as the corridor's half width but protrudes only by the bump's depth, so
+   it goes whatever the corridor's width, while a real side corridor protrudes by its length.
+   Pruning repeats, shortest first; a junction left with two paths joins them.
+5. **Merging** — nodes joined by a path shorter than ``merge_radius`` are merged, shortest path
+   first, into their mean position (skeleton junctions come in pixel clusters).
+6. **Corners** — the turn of a path at a pixel is the angle between the chords to the path
+   points ``corner_arm`` before and after it; each stretch turning by more than
+   ``corner_angle`` gets one corner node at its sharpest pixel, at least ``merge_radius`` from
+   the path's ends. Measuring over arms rather than between neighbouring pixels sees a rounded
+   90° skeleton corner as one 90° turn, and a corridor's short sideways jog as no corner.
+   Closed loops are treated as closed curves; a loop with fewer than two corners gets extra
+   nodes at thirds of its length (a map has no self-loops).
+7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
 (row 0 at the bottom, CONTRIBUTING.md).
+
+Counts on the real maps in ``shared/maps`` (default config; ``benchmarks/topo_gallery.py``
+draws them): COUNTS_PLACEHOLDER
 """
 
 from __future__ import annotations
@@ -31,8 +44,8 @@ from typing import Any
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 from skan.csr import Skeleton
-from skimage.measure import approximate_polygon
 from skimage.morphology import disk, remove_small_holes, skeletonize
 
 from topo._checks import check_real
@@ -41,15 +54,16 @@ from topo.graph import TopoMap
 
 @dataclass(frozen=True, slots=True)
 class ExtractConfig:
-    """Settings of :func:`extract_topomap` (metres and degrees; validated).
+    """Settings of :func:`extract_topomap` (metres, m², and degrees for the angle; validated).
 
     Attributes:
         erode_radius: shrink free space by this much first (e.g. the robot radius); 0 = off.
         min_hole_area: fill holes in free space smaller than this (m²).
-        min_spur_length: prune dead-end paths shorter than this.
+        min_spur_length: prune dead-end paths that protrude less than this beyond the free disc
+            at their junction (module docstring, step 4).
         merge_radius: merge nodes joined by a path shorter than this.
         corner_angle: a path turning by more than this (degrees) gets a corner node.
-        corner_tolerance: Douglas–Peucker tolerance for finding corners.
+        corner_arm: the turn of a path is measured between chords this long (metres).
         min_component_area: ignore free components smaller than this (m²).
     """
 
@@ -57,31 +71,31 @@ class ExtractConfig:
     min_hole_area: float = 0.04
     min_spur_length: float = 0.6
     merge_radius: float = 0.5
-    corner_angle: float = 50.0
-    corner_tolerance: float = 0.25
+    corner_angle: float = 70.0
+    corner_arm: float = 1.0
     min_component_area: float = 0.5
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.name in ("erode_radius", "min_hole_area", "min_spur_length", "merge_radius",
-                          "min_component_area"):
-                check_real(value, f"ExtractConfig.{f.name}", low=0.0, low_inclusive=True)
-            elif f.name == "corner_angle":
-                check_real(value, "ExtractConfig.corner_angle", low=0.0, high=180.0)
+            name = f"ExtractConfig.{f.name}"
+            if f.name == "corner_angle":
+                check_real(value, name, low=0.0, high=180.0)
+            elif f.name == "corner_arm":
+                check_real(value, name, low=0.0)
             else:
-                check_real(value, f"ExtractConfig.{f.name}", low=0.0)
+                check_real(value, name, low=0.0, low_inclusive=True)
 
     @classmethod
     def for_sonar(cls) -> ExtractConfig:
         """Settings for robots' sonar grids (0.1 m cells): sonar maps have ragged, speckled
         free space that leaks through gaps in thinly mapped walls, so free space is eroded by
-        the robot's radius and short spurs and close nodes are removed more eagerly. On a
-        frontier-explored 20 m building this gives ~35 nodes where the defaults give ~110."""
+        the robot's radius and short spurs and close nodes are removed more eagerly."""
         return cls(erode_radius=0.3, min_hole_area=0.5, min_spur_length=1.5, merge_radius=0.8)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ExtractConfig:
+        """A config from a plain dict; unknown keys are an error naming the allowed ones."""
         allowed = [f.name for f in dataclasses.fields(cls)]
         unknown = sorted(set(data) - set(allowed))
         if unknown:
@@ -109,6 +123,8 @@ def _as_mask(grid_or_free_mask: Any, resolution: float | None,
     if resolution is None:
         raise ValueError("resolution is required with a mask (metres per cell), got None")
     res = check_real(resolution, "resolution", low=0.0)
+    if origin is None or isinstance(origin, (str, bytes)):
+        raise ValueError(f"origin must be (x, y), got {origin!r}")
     try:
         ox, oy = (float(v) for v in origin)
     except (TypeError, ValueError) as exc:
@@ -121,6 +137,92 @@ def _as_mask(grid_or_free_mask: Any, resolution: float | None,
 def _polyline_length(poly: np.ndarray) -> float:
     d = poly[1:] - poly[:-1]
     return float(np.sqrt((d * d).sum(axis=1)).sum())
+
+
+def _wall_tree(free: np.ndarray) -> cKDTree:
+    """A KD-tree of the non-free pixels that border free space: its distance query gives the
+    radius of the largest free disc at a pixel. ``free`` has a non-free border, so there is
+    always a wall."""
+    near = np.zeros_like(free)
+    near[1:] |= free[:-1]
+    near[:-1] |= free[1:]
+    near[:, 1:] |= free[:, :-1]
+    near[:, :-1] |= free[:, 1:]
+    return cKDTree(np.argwhere(near & ~free))
+
+
+def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+           arm: float) -> np.ndarray:
+    """Absolute turn (radians) at each point between the chords to the points ``arm`` before
+    and after it along the path (clipped to the path); ``arc`` is the increasing arc length,
+    ``lo``/``hi`` the first and last index of each point's own path."""
+    back = np.maximum(np.searchsorted(arc, arc - arm, side="right") - 1, lo)
+    ahead = np.minimum(np.searchsorted(arc, arc + arm, side="left"), hi)
+    a = points - points[back]
+    b = points[ahead] - points
+    return np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1)))
+
+
+def _peaks(turn: np.ndarray, candidate: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """One index per run of consecutive candidates (within one group): its sharpest point, the
+    middle one if several are equally sharp."""
+    idx = np.flatnonzero(candidate)
+    if len(idx) == 0:
+        return idx
+    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(group[idx]) != 0)) + 1
+    out = []
+    for run in np.split(idx, breaks):
+        t = turn[run]
+        best = run[np.flatnonzero(t >= t.max() - 1e-9)]
+        out.append(int(best[len(best) // 2]))
+    return np.asarray(out, dtype=np.int64)
+
+
+def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
+                  margin: float) -> list[np.ndarray]:
+    """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
+    if not polys:
+        return []
+    lens = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))
+    points = np.concatenate(polys)
+    first = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    last = first + lens - 1
+    group = np.repeat(np.arange(len(polys)), lens)
+    step = np.zeros(len(points))
+    d = np.diff(points, axis=0)
+    step[1:] = np.sqrt((d * d).sum(axis=1))
+    step[first] = 2.0 * arm + 1.0  # a gap between paths: no stretch reaches the next path
+    step[0] = 0.0
+    arc = np.cumsum(step)
+    turn = _turns(points, arc, first[group], last[group], arm)
+    candidate = ((turn > min_turn) & (arc - arc[first][group] >= margin)
+                 & (arc[last][group] - arc >= margin))
+    peaks = _peaks(turn, candidate, group)
+    return [peaks[group[peaks] == k] - first[k] for k in range(len(polys))]
+
+
+def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) -> np.ndarray:
+    """Corner indices of a closed polyline (``poly[0] == poly[-1]``) into ``poly[:-1]``,
+    ignoring the stretch within ``margin`` of the anchor ``poly[0]`` (0 = no anchor)."""
+    ring = poly[:-1]
+    n = len(ring)
+    if n < 4:
+        return np.empty(0, dtype=np.int64)
+    points = np.concatenate([ring, ring, ring, ring[:1]])
+    d = np.diff(points, axis=0)
+    arc = np.concatenate([[0.0], np.cumsum(np.sqrt((d * d).sum(axis=1)))])
+    total = arc[n]
+    if total <= 2.0 * arm:
+        return np.empty(0, dtype=np.int64)
+    zeros = np.zeros(len(points), dtype=np.int64)
+    turn = _turns(points, arc, zeros, zeros + len(points) - 1, arm)
+    local = arc - arc[n]
+    candidate = np.zeros(len(points), dtype=bool)
+    candidate[n // 2: 2 * n + n // 2] = turn[n // 2: 2 * n + n // 2] > min_turn
+    peaks = _peaks(turn, candidate, zeros)
+    peaks = peaks[(peaks >= n) & (peaks < 2 * n)]
+    away = (local[peaks] >= margin) & (total - local[peaks] >= margin)
+    return np.sort(peaks[away] - n)
 
 
 @dataclass(slots=True)
@@ -142,10 +244,13 @@ class _Graph:
     """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
     up to date so that every clean-up pass is linear in the graph's size."""
 
-    def __init__(self) -> None:
+    def __init__(self, free: np.ndarray) -> None:
+        self.free = free
         self.pos: dict[int, np.ndarray] = {}
         self.edges: dict[int, _Edge] = {}
         self.inc: dict[int, set[int]] = {}
+        self.mass: dict[int, int] = {}  # how many skeleton nodes a node stands for
+        self.radius: dict[int, float] = {}  # free-disc radius (pixels) at skeleton nodes
         self.corners: set[int] = set()  # nodes placed where a path turns: never dissolved
         self._next_edge = 0
         self._next_node = 0
@@ -155,6 +260,7 @@ class _Graph:
         self._next_node += 1
         self.pos[nid] = np.asarray(rc, dtype=np.float64)
         self.inc[nid] = set()
+        self.mass[nid] = 1
         return nid
 
     def add_edge(self, u: int, v: int, poly: np.ndarray) -> int:
@@ -171,37 +277,46 @@ class _Graph:
         self.inc[edge.v].discard(e)
         return edge
 
+    def _forget(self, n: int) -> None:
+        del self.pos[n], self.inc[n], self.mass[n]
+        self.corners.discard(n)
+        self.radius.pop(n, None)
+
     def remove_node(self, n: int) -> None:
         for e in list(self.inc[n]):
             self.remove_edge(e)
-        del self.pos[n], self.inc[n]
-        self.corners.discard(n)
+        self._forget(n)
 
     def degree(self, n: int) -> int:
         # a self-loop counts twice, as in networkx
         return sum(2 if self.edges[e].u == self.edges[e].v else 1 for e in self.inc[n])
 
-    def prune_spurs(self, min_len: float) -> None:
-        """Remove dead-end paths shorter than ``min_len`` that hang off a junction, shortest
-        first, in rounds until none is left (a junction left with two paths is dissolved)."""
+    def prune_spurs(self, min_protrusion: float) -> None:
+        """Remove dead-end paths that protrude less than ``min_protrusion`` beyond the free
+        disc at their junction (module docstring), in rounds: all such paths of a round go at
+        once, so the result does not depend on their order; a junction left with two paths is
+        dissolved, one left with one path becomes a dead end."""
         while True:
-            removed = False
-            for e in sorted(self.edges, key=lambda k: self.edges[k].length):
-                edge = self.edges.get(e)
-                if edge is None or edge.u == edge.v or edge.length >= min_len:
+            doomed: list[tuple[int, int]] = []
+            for edge in self.edges.values():
+                if edge.u == edge.v:
                     continue
-                du, dv = self.degree(edge.u), self.degree(edge.v)
+                du, dv = len(self.inc[edge.u]), len(self.inc[edge.v])
                 if du == 1 and dv >= 3:
                     leaf, hub = edge.u, edge.v
                 elif dv == 1 and du >= 3:
                     leaf, hub = edge.v, edge.u
                 else:
                     continue
-                self.remove_node(leaf)
-                self.dissolve(hub)
-                removed = True
-            if not removed:
+                inside = max(self.radius.get(hub, 0.0) - self.radius.get(leaf, 0.0), 0.0)
+                if edge.length - inside < min_protrusion:
+                    doomed.append((leaf, hub))
+            if not doomed:
                 return
+            for leaf, _ in doomed:
+                self.remove_node(leaf)
+            for _, hub in doomed:
+                self.dissolve(hub)
 
     def dissolve(self, n: int) -> None:
         """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner."""
@@ -215,16 +330,21 @@ class _Graph:
         pa, pb = a.from_node(n)[::-1], b.from_node(n)
         self.remove_edge(ea)
         self.remove_edge(eb)
-        del self.pos[n], self.inc[n]
+        self._forget(n)
         self.add_edge(ua, vb, np.vstack([pa, pb[1:]]))
 
     def dissolve_degree_two(self) -> None:
         for n in list(self.pos):
             self.dissolve(n)
 
+    def _is_free(self, rc: np.ndarray) -> bool:
+        r, c = (int(v) for v in np.rint(rc))
+        return bool(self.free[r, c])
+
     def merge_short(self, radius: float) -> None:
-        """Contract paths shorter than ``radius``, shortest first; the more connected end stays
-        where it is (a junction keeps its place) and takes over the other's paths."""
+        """Contract paths shorter than ``radius``, shortest first, into one node at the mean of
+        the skeleton nodes both ends stand for (the better connected end's place if that mean
+        is not free); it takes over both ends' other paths."""
         for e in sorted(self.edges, key=lambda k: self.edges[k].length):
             edge = self.edges.get(e)
             if edge is None or edge.u == edge.v or edge.length >= radius:
@@ -232,64 +352,63 @@ class _Graph:
             self.remove_edge(e)
             keep, drop = ((edge.u, edge.v) if len(self.inc[edge.u]) >= len(self.inc[edge.v])
                           else (edge.v, edge.u))
+            mk, md = self.mass[keep], self.mass[drop]
+            mean = (mk * self.pos[keep] + md * self.pos[drop]) / (mk + md)
+            if self._is_free(mean):
+                self.pos[keep] = mean
             for k in list(self.inc[drop]):
                 other = self.remove_edge(k)
                 a = keep if other.u == drop else other.u
                 b = keep if other.v == drop else other.v
-                poly = other.poly
-                if other.u == drop:
-                    poly = np.vstack([self.pos[keep], poly])
-                if other.v == drop:
-                    poly = np.vstack([poly, self.pos[keep]])
-                self.add_edge(a, b, poly)
-            del self.pos[drop], self.inc[drop]
-            self.corners.discard(drop)
+                self.add_edge(a, b, other.poly)
+            self.mass[keep] = mk + md
+            if drop in self.corners:
+                self.corners.add(keep)
+            self._forget(drop)
 
-    def split_corners(self, angle_deg: float, tol: float) -> None:
-        for e in list(self.edges):
+    def split_corners(self, arm: float, min_turn: float, margin: float) -> None:
+        """Put a corner node wherever a path turns (module docstring, step 6)."""
+        open_ids = [e for e, edge in self.edges.items() if edge.u != edge.v]
+        found = _open_corners([self.edges[e].poly for e in open_ids], arm, min_turn, margin)
+        for e, cuts in zip(open_ids, found, strict=True):
+            if len(cuts):
+                self._split(e, cuts.tolist())
+        for e in [k for k, edge in self.edges.items() if edge.u == edge.v]:
             edge = self.edges[e]
-            poly = edge.poly
-            if len(poly) < 3:
-                continue
-            simple = approximate_polygon(poly, tolerance=tol)
-            if len(simple) < 3:
-                continue
-            d1 = simple[1:-1] - simple[:-2]
-            d2 = simple[2:] - simple[1:-1]
-            turn = np.degrees(np.abs(np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0],
-                                                (d1 * d2).sum(1))))
-            cut_pts = simple[1:-1][turn > angle_deg]
-            if len(cut_pts) == 0:
-                continue
-            # cut at the polyline pixels nearest the simplified corner vertices, in path order
-            cuts = sorted({int(np.argmin(((poly - p) ** 2).sum(1))) for p in cut_pts})
-            cuts = [c for c in cuts if 0 < c < len(poly) - 1]
-            if not cuts:
-                continue
-            self.remove_edge(e)
-            prev_node, prev_cut = edge.u, 0
-            for c in cuts:
-                node = self.add_node(poly[c])
-                self.corners.add(node)
-                self.add_edge(prev_node, node, poly[prev_cut: c + 1])
-                prev_node, prev_cut = node, c
-            self.add_edge(prev_node, edge.v, poly[prev_cut:])
+            anchored = self.degree(edge.u) > 2 or edge.u in self.corners
+            cuts = _loop_corners(edge.poly, arm, min_turn, margin if anchored else 0.0)
+            if len(cuts):
+                self._split(e, [c for c in cuts.tolist() if c > 0], at_start=0 in cuts)
+
+    def _split(self, e: int, cuts: list[int], at_start: bool = False) -> None:
+        edge = self.remove_edge(e)
+        poly = edge.poly
+        if at_start:  # a loop's corner on its start pixel: the start node is that corner
+            self.corners.add(edge.u)
+        prev_node, prev_cut = edge.u, 0
+        for c in cuts:
+            node = self.add_node(poly[c])
+            self.corners.add(node)
+            self.add_edge(prev_node, node, poly[prev_cut: c + 1])
+            prev_node, prev_cut = node, c
+        self.add_edge(prev_node, edge.v, poly[prev_cut:])
 
     def break_self_loops(self) -> None:
+        """Split every remaining loop path at thirds of its length (no self-loops in a map)."""
         for e in [k for k, edge in self.edges.items() if edge.u == edge.v]:
-            edge = self.remove_edge(e)
-            poly, u = edge.poly, edge.u
-            if len(poly) < 4:
+            edge = self.edges[e]
+            if len(edge.poly) < 4:
+                self.remove_edge(e)
                 continue
-            third = [len(poly) // 3, 2 * len(poly) // 3]
-            a, b = self.add_node(poly[third[0]]), self.add_node(poly[third[1]])
-            self.add_edge(u, a, poly[: third[0] + 1])
-            self.add_edge(a, b, poly[third[0]: third[1] + 1])
-            self.add_edge(b, u, poly[third[1]:])
+            d = np.diff(edge.poly, axis=0)
+            arc = np.concatenate([[0.0], np.cumsum(np.sqrt((d * d).sum(axis=1)))])
+            cuts = np.searchsorted(arc, arc[-1] * np.array([1.0, 2.0]) / 3.0)
+            cuts = np.clip(cuts, 1, len(edge.poly) - 2)
+            self._split(e, sorted(set(cuts.tolist())))
 
 
-def _skeleton_graph(skel: np.ndarray) -> _Graph:
-    g = _Graph()
+def _skeleton_graph(skel: np.ndarray, free: np.ndarray) -> _Graph:
+    g = _Graph(free)
     if not skel.any():
         return g
     sk = Skeleton(skel, keep_images=False)
@@ -301,16 +420,18 @@ def _skeleton_graph(skel: np.ndarray) -> _Graph:
             pixel_node[pixel] = g.add_node(coords[pixel])
         return pixel_node[pixel]
 
+    on_path = np.zeros(len(coords), dtype=bool)
     for path in sk.paths_list():
         path = np.asarray(path)
+        on_path[path] = True
         u, v = node_of(int(path[0])), node_of(int(path[-1]))
         g.add_edge(u, v, coords[path])
     # isolated single pixels (a tiny blob) are nodes without paths
-    on_path = np.zeros(len(coords), dtype=bool)
-    for path in sk.paths_list():
-        on_path[np.asarray(path)] = True
     for pixel in np.flatnonzero(~on_path):
         node_of(int(pixel))
+    ids = list(g.pos)
+    radii = _wall_tree(free).query(np.array([g.pos[n] for n in ids]))[0]
+    g.radius = dict(zip(ids, radii.tolist(), strict=True))
     return g
 
 
@@ -323,15 +444,16 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
             origin) or a 2-D boolean array of free cells (``[iy, ix]``, row 0 at the bottom).
         resolution: metres per cell (required with a mask).
         origin: world position of cell (0, 0)'s lower-left corner (with a mask).
-        config: :class:`ExtractConfig` (defaults if ``None``).
+        config: :class:`ExtractConfig` or a dict of its fields (defaults if ``None``).
 
     Returns:
-        A :class:`~topo.graph.TopoMap` in metres with polylines; empty if there is no free space
-        large enough.
+        A :class:`~topo.graph.TopoMap` in metres with polylines. A mask or grid without free
+        cells (a robot that has seen nothing yet) gives :meth:`TopoMap.empty`, as does free
+        space that the config removes entirely (all components below ``min_component_area``).
 
     Raises:
         TypeError / ValueError: a non-boolean or non-2-D mask, a missing or non-positive
-            resolution, a bad origin or config.
+            resolution, a bad origin or config; each message names the argument.
     """
     mask, res, (ox, oy) = _as_mask(grid_or_free_mask, resolution, origin)
     if config is None:
@@ -360,16 +482,15 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
             small[0] = False
             free = free & ~small[labels]
 
-    g = _skeleton_graph(skeletonize(free))
+    g = _skeleton_graph(skeletonize(free), free)
     to_px = 1.0 / res
+    merge_px = config.merge_radius * to_px
     g.prune_spurs(config.min_spur_length * to_px)
     g.dissolve_degree_two()
-    g.merge_short(config.merge_radius * to_px)
-    corner_args = (config.corner_angle, config.corner_tolerance * to_px)
-    g.split_corners(*corner_args)
-    g.dissolve_degree_two()  # a loop's arbitrary start pixel goes; corners stay
-    g.split_corners(*corner_args)  # a corner that sat on that start pixel is found now
-    g.merge_short(config.merge_radius * to_px)
+    g.merge_short(merge_px)
+    g.split_corners(config.corner_arm * to_px, math.radians(config.corner_angle), merge_px)
+    g.dissolve_degree_two()  # a pure loop's arbitrary start pixel goes; corners stay
+    g.merge_short(merge_px)
     g.break_self_loops()
     return _to_topomap(g, res, (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
 

@@ -35,6 +35,16 @@ from topo._checks import as_points, check_real
 from topo._grid_kernels import sonar_update
 
 
+def _float_array(value: Any, name: str, shape: str) -> np.ndarray:
+    """``value`` as a float64 array, or a ``ValueError`` naming ``name`` (never numpy's own)."""
+    if value is None or isinstance(value, (str, bytes, dict, set)):
+        raise ValueError(f"{name} must be a numeric array {shape}, got {type(value).__name__}")
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array {shape}, got {value!r}") from exc
+
+
 class CellState(enum.IntEnum):
     """The one encoding table of cell states (:meth:`OccupancyGrid.states`)."""
 
@@ -83,7 +93,8 @@ class OccupancyGrid:
                  extent: tuple[float, float, float, float] = (-20.0, -20.0, 20.0, 20.0),
                  model: SensorModel | None = None) -> None:
         self.resolution = check_real(resolution, "resolution", low=0.0)
-        if isinstance(extent, (str, bytes)) or len(extent) != 4:
+        if (not isinstance(extent, (tuple, list, np.ndarray)) or np.ndim(extent) != 1
+                or len(extent) != 4):
             raise ValueError(f"extent must be (xmin, ymin, xmax, ymax), got {extent!r}")
         xmin, ymin, xmax, ymax = (check_real(v, f"extent[{i}]") for i, v in enumerate(extent))
         if xmax - xmin < self.resolution or ymax - ymin < self.resolution:
@@ -145,13 +156,16 @@ class OccupancyGrid:
                      m.clamp, m.threshold)
 
     def _check_scan(self, pose: Any, ranges: Any, angles: Any):
-        p = np.asarray(pose, dtype=np.float64) if not isinstance(pose, (str, bytes)) else None
-        if p is None or p.shape != (3,):
-            raise ValueError(f"pose must be (x, y, theta), got {pose!r}")
+        p = _float_array(pose, "pose", "(x, y, theta)")
+        if p.shape != (3,):
+            raise ValueError(f"pose must be (x, y, theta), got shape {p.shape}")
         if not np.all(np.isfinite(p)):
             raise ValueError(f"pose must be finite, got {p.tolist()}")
-        r = np.asarray(ranges, dtype=np.float64).ravel()
-        a = np.asarray(angles, dtype=np.float64).ravel()
+        r = _float_array(ranges, "ranges", "(K,)")
+        a = _float_array(angles, "sensor_angles", "(K,)")
+        for name, arr in (("ranges", r), ("sensor_angles", a)):
+            if arr.ndim != 1:
+                raise ValueError(f"{name} must be a 1-D array (K,), got shape {arr.shape}")
         if r.shape != a.shape:
             raise ValueError(f"ranges and sensor_angles must have the same length, got "
                              f"{r.size} and {a.size}")
@@ -216,6 +230,11 @@ class OccupancyGrid:
         """This grid moved by ``rigid`` (anything with ``apply`` and ``inverse``, e.g.
         :class:`fusion.Rigid2D`: a point ``p`` of this grid lands at ``rigid.apply(p)``) and
         resampled (nearest cell) onto the geometry of ``into`` (default: this grid's)."""
+        if not all(callable(getattr(rigid, m, None)) for m in ("apply", "inverse")):
+            raise TypeError(f"rigid must have apply() and inverse() (e.g. fusion.Rigid2D), got "
+                            f"{type(rigid).__name__}")
+        if into is not None and not isinstance(into, OccupancyGrid):
+            raise TypeError(f"into must be an OccupancyGrid or None, got {type(into).__name__}")
         target = (into or self).empty_like()
         h, w = target.shape
         rows, cols = np.mgrid[0:h, 0:w]

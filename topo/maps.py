@@ -20,6 +20,7 @@ Every problem with a file (missing, truncated, bad header, missing YAML key) rai
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,7 +63,15 @@ class FloorPlan:
         return float(self.free.sum()) * self.resolution ** 2
 
 
+_WIDE_MODES = ("I", "I;16", "I;16B", "I;16L", "I;16N")
+"""16-bit images (PGM with maxval > 255, 16-bit PNG): Pillow gives 0..65535 here."""
+
+
 def _read_image(path: Path, what: str) -> np.ndarray:
+    """The image's grey levels as float64 in ``[0, 255]``, image order (row 0 at the top).
+
+    8-bit images are Pillow's luma (``convert("L")``); 16-bit ones are scaled by 255/65535
+    (Pillow already stretches a PGM's ``maxval`` to the full range), not clipped."""
     from PIL import Image, UnidentifiedImageError
 
     if not path.is_file():
@@ -70,17 +79,22 @@ def _read_image(path: Path, what: str) -> np.ndarray:
     try:
         with Image.open(path) as im:
             im.load()
-            if im.mode not in ("L", "P", "RGB", "RGBA", "LA", "I", "I;16"):
-                raise MapFileError(f"{path}: unsupported image mode {im.mode!r}")
-            grey = np.asarray(im.convert("L"), dtype=np.uint8)
+            if im.mode in _WIDE_MODES:
+                grey = np.asarray(im, dtype=np.float64) * (255.0 / 65535.0)
+            elif im.mode in ("1", "L", "P", "RGB", "RGBA", "LA", "PA"):
+                grey = np.asarray(im.convert("L"), dtype=np.float64)
+            else:
+                raise MapFileError(f"{path}: unsupported image mode {im.mode!r}; expected a "
+                                   "grey, palette or RGB(A) image")
     except MapFileError:
         raise
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, SyntaxError,
+            ValueError) as exc:
         raise MapFileError(f"{path}: cannot read the image (truncated or bad header: {exc})"
                            ) from exc
     if grey.ndim != 2 or min(grey.shape) < 2:
         raise MapFileError(f"{path}: image must be 2-D and at least 2x2, got {grey.shape}")
-    return grey
+    return np.clip(grey, 0.0, 255.0)
 
 
 def _yaml_number(meta: dict[str, Any], key: str, path: Path, **bounds: Any) -> float:
@@ -105,15 +119,23 @@ def load_ros_map(yaml_path: str | Path) -> FloorPlan:
         raise MapFileError(f"{path}: not valid YAML ({exc})") from exc
     if not isinstance(meta, dict):
         raise MapFileError(f"{path}: expected a YAML mapping, got {type(meta).__name__}")
-    if not isinstance(meta.get("image"), str):
+    if "image" not in meta:
         raise MapFileError(f"{path}: missing key 'image' (the map image file name)")
+    if not isinstance(meta["image"], str) or not meta["image"].strip():
+        raise MapFileError(f"{path}: 'image' must be the map image file name, got "
+                           f"{meta['image']!r}")
     resolution = _yaml_number(meta, "resolution", path, low=0.0)
     occ_t = _yaml_number(meta, "occupied_thresh", path, low=0.0, high=1.0)
     free_t = _yaml_number(meta, "free_thresh", path, low=0.0, low_inclusive=True, high=1.0)
+    if free_t > occ_t:
+        raise MapFileError(f"{path}: free_thresh ({free_t}) must be <= occupied_thresh "
+                           f"({occ_t})")
     origin = meta.get("origin")
     if (not isinstance(origin, list) or len(origin) != 3
-            or not all(isinstance(v, (int, float)) for v in origin)):
-        raise MapFileError(f"{path}: 'origin' must be [x, y, yaw], got {origin!r}")
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in origin)):
+        raise MapFileError(f"{path}: 'origin' must be [x, y, yaw] of finite numbers, got "
+                           f"{origin!r}")
     if origin[2] != 0:
         raise MapFileError(f"{path}: origin yaw must be 0 (rotated map origins are not "
                            f"supported), got {origin[2]}")
@@ -127,7 +149,7 @@ def load_ros_map(yaml_path: str | Path) -> FloorPlan:
     image_path = Path(meta["image"])
     if not image_path.is_absolute():
         image_path = path.parent / image_path
-    grey = _read_image(image_path, "map image")[::-1].astype(np.float64)  # row 0 at the bottom
+    grey = _read_image(image_path, "map image")[::-1]  # row 0 at the bottom
     if mode == "raw":
         p = grey / 100.0
     else:
