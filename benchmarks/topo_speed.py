@@ -1,7 +1,9 @@
 """topo speed: one 8-sonar scan into an OccupancyGrid, and extract_topomap vs skeletonize alone.
 
-Masks are crops of a DungeonMaps floor plan (real corridors and rooms) at 0.1 m/cell; medians
-over repeats, all in this one process, so the ratio to ``skeletonize`` is fair on a busy machine.
+Masks are crops of a DungeonMaps floor plan (real corridors and rooms) at 0.1 m/cell, and a
+400x400 sonar grid built by scanning that plan (ragged free space, ``ExtractConfig.for_sonar``);
+medians over repeats, all in this one process, so the ratio to ``skeletonize`` is fair on a busy
+machine.
 
     python benchmarks/topo_speed.py
 """
@@ -12,11 +14,11 @@ import math
 from pathlib import Path
 
 import numpy as np
-from _timing import median_time
+from _timing import interleaved_medians, median_time
 from skimage.morphology import skeletonize
 
 from topo import OccupancyGrid, load_floor_plan
-from topo.extract import extract_topomap
+from topo.extract import ExtractConfig, extract_topomap
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 SONAR = np.radians([-90, -50, -30, -10, 10, 30, 50, 90])
@@ -46,10 +48,48 @@ def main() -> None:
         free = np.ascontiguousarray(big[:n, :n])
         m = extract_topomap(free, 0.1)
         reps = 20 if n < 800 else 5
-        t_ex = median_time(lambda free=free: extract_topomap(free, 0.1), reps)
-        t_sk = median_time(lambda free=free: skeletonize(free), reps)
+        t = interleaved_medians({"ex": lambda free=free: extract_topomap(free, 0.1),
+                                 "sk": lambda free=free: skeletonize(free)}, reps)
+        t_ex, t_sk = t["ex"], t["sk"]
         print(f"{n:>4}x{n:<5} {m.n_nodes:>6} {t_ex * 1e3:>9.2f} {t_sk * 1e3:>9.2f} "
               f"{t_ex / t_sk:>6.2f} {goal:>12}")
+    sonar_row(plan.free)
+
+
+def sonar_grid(free: np.ndarray, res: float, rng: np.random.Generator,
+               scans: int = 400) -> OccupancyGrid:
+    """A robot-frame grid filled by ``scans`` 8-sonar scans from random free poses, ranges ray
+    marched on ``free`` (cell steps), 5 m range, 15° cones."""
+    h, w = free.shape
+    g = OccupancyGrid(res, (0.0, 0.0, w * res, h * res))
+    cells = np.argwhere(free)
+    steps = np.arange(1, int(5.0 / res) + 1) * res
+    for _ in range(scans):
+        iy, ix = cells[rng.integers(len(cells))]
+        x, y, th = (ix + 0.5) * res, (iy + 0.5) * res, rng.uniform(-math.pi, math.pi)
+        ranges = np.full(len(SONAR), 5.0)
+        for k, a in enumerate(th + SONAR):
+            px = ((x + steps * math.cos(a)) / res).astype(int)
+            py = ((y + steps * math.sin(a)) / res).astype(int)
+            inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
+            hit = ~inside
+            hit[inside] = ~free[py[inside], px[inside]]
+            if hit.any():
+                ranges[k] = steps[int(np.argmax(hit))]
+        g.update((x, y, th), ranges, SONAR, 5.0, math.radians(7.5))
+    return g
+
+
+def sonar_row(plan_free: np.ndarray) -> None:
+    grid = sonar_grid(np.ascontiguousarray(plan_free[:400, 100:500]), 0.1,
+                      np.random.default_rng(1))
+    cfg = ExtractConfig.for_sonar()
+    free = grid.free_mask()
+    m = extract_topomap(grid, config=cfg)
+    t = interleaved_medians({"ex": lambda: extract_topomap(grid, config=cfg),
+                             "sk": lambda: skeletonize(free)}, 20)
+    print(f"{'sonar 400':>10} {m.n_nodes:>6} {t['ex'] * 1e3:>9.2f} {t['sk'] * 1e3:>9.2f} "
+          f"{t['ex'] / t['sk']:>6.2f} {'≤20 ms, ≤2×':>12}")
 
 
 if __name__ == "__main__":
