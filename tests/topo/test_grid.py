@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion import Rigid2D
@@ -139,3 +139,80 @@ def test_bad_geometry():
         OccupancyGrid(0.1, (0, 0, 1))
     with pytest.raises(ValueError, match="extent must span at least one cell"):
         OccupancyGrid(0.1, (0, 0, 1, 0))
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda g: g.update({"x": 0}, [1.0], [0.0], 5.0, BETA), "pose must be a numeric array"),
+        (lambda g: g.update(("a", "b", "c"), [1.0], [0.0], 5.0, BETA),
+         "pose must be a numeric array"),
+        (lambda g: g.update((0, 0, 0), ["far"], [0.0], 5.0, BETA),
+         "ranges must be a numeric array"),
+        (lambda g: g.update((0, 0, 0), [[1.0], [2.0]], [0.0, 1.0], 5.0, BETA),
+         r"ranges must be a 1-D array \(K,\), got shape \(2, 1\)"),
+        (lambda g: g.update((0, 0, 0), [1.0], None, 5.0, BETA),
+         "sensor_angles must be a numeric array"),
+        (lambda g: g.update((0, 0, 0), [1.0], [np.inf], 5.0, BETA),
+         "sensor_angles must be finite"),
+        (lambda g: g.update((0, 0, 0), [1.0], [0.0], float("nan"), BETA),
+         "max_range must be finite"),
+    ],
+)
+def test_bad_scans_name_the_argument(call, match):
+    with pytest.raises(ValueError, match=match):
+        call(OccupancyGrid(0.1, (-2, -2, 2, 2)))
+
+
+def test_bad_extent_and_combining_arguments():
+    with pytest.raises(ValueError, match=r"extent must be \(xmin, ymin, xmax, ymax\), got None"):
+        OccupancyGrid(0.1, None)
+    with pytest.raises(TypeError, match=r"extent\[1\] must be a real number"):
+        OccupancyGrid(0.1, (0, "y", 1, 1))
+    g = OccupancyGrid(0.1, (-2, -2, 2, 2))
+    with pytest.raises(TypeError, match="rigid must have apply"):
+        g.transformed((0.0, 0.0, 0.0))
+    with pytest.raises(TypeError, match="into must be an OccupancyGrid"):
+        g.transformed(Rigid2D(), into=np.zeros((40, 40)))
+    with pytest.raises(TypeError, match="other must be an OccupancyGrid"):
+        g.union(np.zeros((40, 40)))
+
+
+def reference_update(g: OccupancyGrid, pose, ranges, angles, max_range, beta) -> None:
+    """The inverse model the slow obvious way: every cell of the grid, beam after beam."""
+    m = g.model
+    half = (m.hit_width or g.resolution) / 2.0
+    h, w = g.shape
+    xs = g.origin[0] + (np.arange(w) + 0.5) * g.resolution
+    ys = g.origin[1] + (np.arange(h) + 0.5) * g.resolution
+    dx, dy = xs[None, :] - pose[0], ys[:, None] - pose[1]
+    dist = np.sqrt(dx * dx + dy * dy)
+    for r, a in zip(ranges, angles, strict=True):
+        ax = pose[2] + a
+        inside = np.cos(ax) * dx + np.sin(ax) * dy >= np.cos(beta) * dist
+        echo = r < max_range
+        free = inside & (dist < (r - half if echo else max_range))
+        hit = inside & ~free & echo & (np.abs(dist - r) <= half)
+        delta = np.where(free, m.l_free, np.where(hit, m.l_occupied, 0.0))
+        touched = free | hit
+        new = np.clip(g.log_odds.astype(np.float64) + delta, -m.clamp, m.clamp)
+        g.log_odds[touched] = new[touched]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-2.5, 2.5), st.floats(-2.5, 2.5), st.floats(-4.0, 4.0),
+       st.lists(st.tuples(st.floats(0.0, 6.0), st.floats(-np.pi, np.pi)), min_size=1,
+                max_size=8),
+       st.floats(0.05, 1.2))
+def test_compiled_update_matches_the_slow_reference(x, y, theta, beams, beta):
+    """Same model whatever the pose, ranges (including no-echo ones), cone width, and cells
+    off the grid (the grid is smaller than the sonar's reach)."""
+    ranges = [r for r, _ in beams]
+    angles = [a for _, a in beams]
+    fast = OccupancyGrid(0.1, (-3.0, -2.0, 3.0, 2.5))
+    slow = fast.copy()
+    for _ in range(2):  # twice: the second scan starts from non-zero log-odds
+        fast.update((x, y, theta), ranges, angles, 5.0, beta)
+        reference_update(slow, (x, y, theta), ranges, angles, 5.0, beta)
+    np.testing.assert_allclose(fast.log_odds, slow.log_odds, atol=1e-5)
+    np.testing.assert_array_equal(fast.states(), slow._classify(slow.log_odds))

@@ -81,3 +81,48 @@ def test_missing_and_broken_files_are_named(tmp_path):
         load_floor_plan(tmp_path / "x.bmp")
     with pytest.raises(ValueError, match="resolution is set by the ROS map's YAML"):
         load_floor_plan(yml, resolution=0.1)
+
+
+def test_more_broken_files_are_named(tmp_path):
+    png = MAPS / "dungeon" / "1.png"
+    (tmp_path / "cut.png").write_bytes(png.read_bytes()[:5000])
+    with pytest.raises(MapFileError, match=r"cut\.png: cannot read the image"):
+        load_dungeon_png(tmp_path / "cut.png")
+    (tmp_path / "empty.png").write_bytes(b"")
+    with pytest.raises(MapFileError, match=r"empty\.png: cannot read the image"):
+        load_floor_plan(tmp_path / "empty.png")
+    yml = write_pgm_map(tmp_path, np.full((4, 4), 254))
+    (tmp_path / "m.pgm").write_bytes(b"P5\n4 4x\n255\n" + bytes(16))  # bad size in the header
+    with pytest.raises(MapFileError, match=r"m\.pgm: cannot read the image"):
+        load_ros_map(yml)
+    (tmp_path / "m.pgm").unlink()
+    with pytest.raises(MapFileError, match=r"m\.pgm: map image file not found"):
+        load_ros_map(yml)
+    cases = [
+        ({"free_thresh": 0.9}, r"free_thresh \(0.9\) must be <= occupied_thresh \(0.65\)"),
+        ({"origin": "[0.0, .nan, 0.0]"}, r"'origin' must be \[x, y, yaw\] of finite numbers"),
+        ({"image": 7}, "'image' must be the map image file name, got 7"),
+        ({"image": None}, "missing key 'image'"),
+        ({"negate": 2}, "negate must be 0 or 1, got 2"),
+        ({"mode": "fancy"}, "mode must be 'trinary', 'scale' or 'raw', got 'fancy'"),
+        ({"occupied_thresh": "high"}, "occupied_thresh must be a real number"),
+    ]
+    for fields, match in cases:
+        yml = write_pgm_map(tmp_path, np.full((4, 4), 254), **fields)
+        with pytest.raises(MapFileError, match=r"m\.yaml: " + match):
+            load_ros_map(yml)
+    (tmp_path / "m.yaml").write_text("")
+    with pytest.raises(MapFileError, match=r"m\.yaml: expected a YAML mapping, got NoneType"):
+        load_ros_map(tmp_path / "m.yaml")
+
+
+def test_sixteen_bit_pgm_is_scaled_not_clipped(tmp_path):
+    """A 16-bit PGM (maxval 65535): 0 is occupied, 65535 free, 32768 (p = 0.5) unknown."""
+    pixels = np.array([[0, 32768, 65535], [65535, 65535, 65535]], dtype=">u2")
+    yml = write_pgm_map(tmp_path, np.full((2, 3), 254))  # the YAML; the image is replaced
+    (tmp_path / "m.pgm").write_bytes(b"P5\n3 2\n65535\n" + pixels.tobytes())
+    plan = load_ros_map(yml)
+    top = 1  # image row 0 is the grid's top row
+    assert plan.occupied[top, 0] and not plan.free[top, 0]
+    assert not plan.occupied[top, 1] and not plan.free[top, 1]
+    assert plan.free[top, 2] and plan.free[0].all()
