@@ -39,6 +39,8 @@ def _float_array(value: Any, name: str, shape: str) -> np.ndarray:
     """``value`` as a float64 array, or a ``ValueError`` naming ``name`` (never numpy's own)."""
     if value is None or isinstance(value, (str, bytes, dict, set)):
         raise ValueError(f"{name} must be a numeric array {shape}, got {type(value).__name__}")
+    if isinstance(value, np.ndarray) and value.dtype == np.float64:
+        return value
     try:
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -156,22 +158,25 @@ class OccupancyGrid:
                      m.clamp, m.threshold)
 
     def _check_scan(self, pose: Any, ranges: Any, angles: Any):
+        # sums instead of np.isfinite(...).all(): NaN and inf survive a sum, and on arrays this
+        # small each numpy call costs more than the arithmetic (this runs every env step)
         p = _float_array(pose, "pose", "(x, y, theta)")
         if p.shape != (3,):
             raise ValueError(f"pose must be (x, y, theta), got shape {p.shape}")
-        if not np.all(np.isfinite(p)):
+        if not math.isfinite(p[0] + p[1] + p[2]):
             raise ValueError(f"pose must be finite, got {p.tolist()}")
         r = _float_array(ranges, "ranges", "(K,)")
         a = _float_array(angles, "sensor_angles", "(K,)")
-        for name, arr in (("ranges", r), ("sensor_angles", a)):
-            if arr.ndim != 1:
-                raise ValueError(f"{name} must be a 1-D array (K,), got shape {arr.shape}")
+        if r.ndim != 1:
+            raise ValueError(f"ranges must be a 1-D array (K,), got shape {r.shape}")
+        if a.ndim != 1:
+            raise ValueError(f"sensor_angles must be a 1-D array (K,), got shape {a.shape}")
         if r.shape != a.shape:
             raise ValueError(f"ranges and sensor_angles must have the same length, got "
                              f"{r.size} and {a.size}")
-        if not np.all(np.isfinite(r)) or np.any(r < 0):
+        if r.size and (not math.isfinite(r.sum()) or r.min() < 0):
             raise ValueError(f"ranges must be finite and >= 0, got {r.tolist()}")
-        if not np.all(np.isfinite(a)):
+        if not math.isfinite(a.sum()):
             raise ValueError(f"sensor_angles must be finite, got {a.tolist()}")
         return p, r, a
 
