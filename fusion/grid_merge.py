@@ -114,6 +114,59 @@ def _centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
     return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
 
 
+def _consistency(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall, pts_free,
+                 n_free_b) -> tuple[float, float, float]:
+    """(overlap m², wall agreement, conflict) of B's wall and free cells moved by
+    ``transform`` onto A's pooled layers."""
+    h, w = wall_a.shape
+
+    def cells(pts: np.ndarray) -> np.ndarray:
+        ij = np.floor((transform.apply(pts) - origin_a) / res).astype(int)
+        return ij[(ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)]
+
+    known_a = wall_a | free_a
+    ia = cells(pts_wall)
+    on_known = known_a[ia[:, 1], ia[:, 0]]
+    hits = ia[on_known]
+    agree = float(near_wall_a[hits[:, 1], hits[:, 0]].mean()) if len(hits) else 0.0
+    conflict = float((free_a & ~near_wall_a)[hits[:, 1], hits[:, 0]].mean()) if len(hits) else 1.0
+    ifm = cells(pts_free)
+    step_free = max(1, int(math.ceil(n_free_b / max(len(pts_free), 1))))
+    overlap = float(known_a[ifm[:, 1], ifm[:, 0]].sum()) * step_free * res * res
+    return overlap, agree, conflict
+
+
+def _consistency_reasons(overlap: float, agree: float, conflict: float,
+                         cfg: GridMergeConfig) -> list[str]:
+    reasons = []
+    if overlap < cfg.min_overlap_m2:
+        reasons.append(f"overlap {overlap:.1f} m² < min_overlap_m2={cfg.min_overlap_m2}")
+    if agree < cfg.min_wall_agreement:
+        reasons.append(f"wall agreement {agree:.2f} < min_wall_agreement="
+                       f"{cfg.min_wall_agreement}")
+    if conflict > cfg.max_conflict:
+        reasons.append(f"conflict {conflict:.2f} > max_conflict={cfg.max_conflict}")
+    return reasons
+
+
+def check_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
+                     config: GridMergeConfig | None = None) -> str | None:
+    """``None`` if the grids agree with ``transform`` (enough overlap, B's walls on A's walls,
+    few on A's free space), else why not — the check :func:`hybrid_merge` puts on a structural
+    merge before trusting it."""
+    cfg = config or GridMergeConfig()
+    pa, pb = _pooled(grid_a, cfg.resolution), _pooled(grid_b, cfg.resolution)
+    if pa is None or pb is None:
+        return "a grid has no known cells"
+    wall_a, free_a, origin_a = pa
+    wall_b, free_b, origin_b = pb
+    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+    numbers = _consistency(wall_a, free_a, near_wall_a, origin_a, cfg.resolution, transform,
+                           _centres(wall_b, origin_b, cfg.resolution),
+                           _centres(free_b, origin_b, cfg.resolution), int(free_b.sum()))
+    return "; ".join(_consistency_reasons(*numbers, cfg)) or None
+
+
 def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                 ) -> GridMergeResult:
     """Align occupancy grid B onto grid A (module docstring); never raises on poor input:
@@ -217,33 +270,11 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
             estimate = icp.transform
             moved = estimate.apply(pts_wall)
 
-    # decision numbers at the final estimate
-    ia = np.floor((moved - origin_a) / res).astype(int)
-    inside = ((ia[:, 0] >= 0) & (ia[:, 0] < wall_a.shape[1]) & (ia[:, 1] >= 0)
-              & (ia[:, 1] < wall_a.shape[0]))
-    ia = ia[inside]
-    known_a = wall_a | free_a
-    on_known = known_a[ia[:, 1], ia[:, 0]]
-    n_known = int(on_known.sum())
-    agree = float(near_wall_a[ia[on_known, 1], ia[on_known, 0]].mean()) if n_known else 0.0
-    conflict = float((free_a & ~near_wall_a)[ia[on_known, 1], ia[on_known, 0]].mean()
-                     ) if n_known else 1.0
-    fm = estimate.apply(pts_free)
-    ifm = np.floor((fm - origin_a) / res).astype(int)
-    ok = ((ifm[:, 0] >= 0) & (ifm[:, 0] < wall_a.shape[1]) & (ifm[:, 1] >= 0)
-          & (ifm[:, 1] < wall_a.shape[0]))
-    step_free = max(1, int(math.ceil(free_b.sum() / max(len(pts_free), 1))))
-    overlap = float(known_a[ifm[ok, 1], ifm[ok, 0]].sum()) * step_free * res * res
+    overlap, agree, conflict = _consistency(wall_a, free_a, near_wall_a, origin_a, res,
+                                            estimate, pts_wall, pts_free, int(free_b.sum()))
     margin = score / rival if rival > 0 else math.inf
 
-    reasons = []
-    if overlap < cfg.min_overlap_m2:
-        reasons.append(f"overlap {overlap:.1f} m² < min_overlap_m2={cfg.min_overlap_m2}")
-    if agree < cfg.min_wall_agreement:
-        reasons.append(f"wall agreement {agree:.2f} < min_wall_agreement="
-                       f"{cfg.min_wall_agreement}")
-    if conflict > cfg.max_conflict:
-        reasons.append(f"conflict {conflict:.2f} > max_conflict={cfg.max_conflict}")
+    reasons = _consistency_reasons(overlap, agree, conflict, cfg)
     if margin < cfg.min_margin:
         reasons.append(f"ambiguous: a distinct alignment scores {rival:.1f} against "
                        f"{score:.1f} (margin {margin:.2f} < min_margin={cfg.min_margin})")
@@ -258,8 +289,9 @@ topological maps of the same place put their nodes ~0.5 m apart."""
 
 def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
                  try_grids: bool = True, config: GridMergeConfig | None = None) -> Any:
-    """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``), and if it rejects,
-    the grid alignment (:func:`merge_grids`) when ``try_grids``; returns a
+    """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``) — kept only if the
+    grids agree with it (:func:`check_with_grids`) — and if it fails, the grid alignment
+    (:func:`merge_grids`) when ``try_grids``; returns a
     :class:`fusion.MergeResult` (``method="hybrid"``). An accepted grid alignment fuses the
     topological maps at nodes within :data:`HYBRID_EPS`; a double rejection keeps the
     structural result with both reasons."""
@@ -269,7 +301,14 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
 
     t0 = time.perf_counter()
     topo = merge_maps(map_a, map_b, method="auto")
-    if topo.accepted or not try_grids:
+    if topo.accepted:
+        # sonar topological maps fool the structural merge now and then: the grids must agree
+        why = check_with_grids(grid_a, grid_b, topo.transform, config)
+        if why is None:
+            return dataclasses.replace(topo, method="hybrid", time_s=time.perf_counter() - t0)
+        topo = dataclasses.replace(topo, accepted=False, merged=map_a,
+                                   reason=f"structural merge refuted by the grids: {why}")
+    if not try_grids:
         return dataclasses.replace(topo, method="hybrid", time_s=time.perf_counter() - t0)
     grid = merge_grids(grid_a, grid_b, config)
     if not grid.accepted:

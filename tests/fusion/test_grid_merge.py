@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from fusion import Rigid2D
-from fusion.grid_merge import GridMergeConfig, hybrid_merge, merge_grids
+from fusion.grid_merge import GridMergeConfig, check_with_grids, hybrid_merge, merge_grids
 from fusion.pairs import GridSnapshot
 from topo import TopoMap
 
@@ -104,3 +104,15 @@ def test_bad_config():
         GridMergeConfig(resolution=0.0)
     with pytest.raises(ValueError, match="GridMergeConfig.min_wall_agreement must be <= 1.0"):
         GridMergeConfig(min_wall_agreement=2.0)
+
+
+def test_grids_refute_a_wrong_transform():
+    states = plan(1)
+    frame_a = Rigid2D.from_degrees(0.0, (0.0, 0.0))
+    frame_b = Rigid2D.from_degrees(60.0, (10.0, 4.0))
+    a = view(states, frame_a, (1, 1), (20, 22))
+    b = view(states, frame_b, (8, 6), (28, 28))
+    truth = frame_a.inverse() @ frame_b
+    assert check_with_grids(a, b, truth) is None
+    why = check_with_grids(a, b, Rigid2D.from_degrees(90.0) @ truth)
+    assert why is not None and "wall agreement" in why
