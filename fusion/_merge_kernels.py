@@ -377,7 +377,9 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
                     or max(by, by + sy) < min(ay, ay + ry)):
                 continue
             den = rx * sy - ry * sx
-            if abs(den) < min_sin * math.sqrt((rx * rx + ry * ry) * (sx * sx + sy * sy)):
+            # zero-length paths (coincident end nodes) cross nothing
+            if den == 0.0 or abs(den) < min_sin * math.sqrt((rx * rx + ry * ry)
+                                                             * (sx * sx + sy * sy)):
                 continue
             t = ((bx - ax) * sy - (by - ay) * sx) / den
             u = ((bx - ax) * ry - (by - ay) * rx) / den

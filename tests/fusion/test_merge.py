@@ -251,3 +251,19 @@ def test_config_for_noise_scales_tolerances_and_bar():
         MergeConfig.for_noise(0.5)
     with pytest.raises(ValueError, match=r"MergeConfig has unknown keys \['tolerance'\]"):
         MergeConfig.for_noise(0.3, tolerance=1.0)
+
+
+def test_zero_length_paths_do_not_crash_the_evidence_kernel():
+    """Two nodes at the same place joined by a path (seen in sonar maps) once divided by zero
+    in the crossing test."""
+    from fusion import Rigid2D, merge_maps
+    from topo import TopoMap
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 10, (12, 2))
+    xy[3] = xy[2]
+    edges = [[k, k + 1] for k in range(11)] + [[2, 5]]
+    a = TopoMap.from_arrays(xy, edges)
+    b = a.transformed(Rigid2D.from_degrees(30.0, (1.0, 2.0)))
+    result = merge_maps(a, b)
+    assert result.accepted
