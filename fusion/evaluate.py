@@ -70,6 +70,8 @@ class EvalPair:
         overlap: shared fraction of the explored areas, in ``[0, 1]``.
         kind: ``"overlap"`` or one of :data:`NO_OVERLAP_KINDS`.
         noise: node noise std the pair was made with (``None`` if unknown).
+        grids: the two occupancy grids (dataset pairs), for the grid methods; ``None`` for
+            synthetic pairs.
     """
 
     name: str
@@ -80,6 +82,7 @@ class EvalPair:
     overlap: float
     kind: str
     noise: float | None
+    grids: tuple[Any, Any] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,7 +139,7 @@ def load_pair_dir(path: str | Path) -> list[EvalPair]:
     for p in load_pairs(path):
         kind = "overlap" if p.overlap > 0 else "no_overlap"
         out.append(EvalPair(f"pair_{p.pair_id:06d}", p.map_a, p.map_b, p.transform, None,
-                            float(p.overlap), kind, None))
+                            float(p.overlap), kind, None, (p.grid_a, p.grid_b)))
     return out
 
 
@@ -200,7 +203,10 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
         if for_noise and pair.noise is not None:
             cfg = MergeConfig.for_noise(pair.noise, **overrides)
         for method in methods:
-            r = merge_maps(pair.map_a, pair.map_b, method=method, config=cfg)
+            if method in GRID_METHODS:
+                r = _grid_method(pair, method)
+            else:
+                r = merge_maps(pair.map_a, pair.map_b, method=method, config=cfg)
             records.append(_record(pair, method, r.transform, r.accepted, r.time_s, r.score,
                                    r.reason))
             bar.update()
@@ -208,13 +214,30 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
     return records
 
 
+GRID_METHODS = ("hybrid", "grid")
+"""Methods that also use the pairs' occupancy grids (``fusion.grid_merge``): ``"hybrid"`` (the
+env's default merge) and ``"grid"`` (grid alignment alone). Synthetic pairs have no grids."""
+
+
+def _grid_method(pair: EvalPair, method: str) -> Any:
+    from fusion.grid_merge import GridMergeResult, hybrid_merge, merge_grids
+
+    if pair.grids is None:
+        return GridMergeResult(Rigid2D.identity(), False, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0,
+                               "no occupancy grids with this pair")
+    if method == "grid":
+        return merge_grids(*pair.grids)
+    return hybrid_merge(pair.map_a, pair.map_b, *pair.grids)
+
+
 def parse_methods(methods: str | Iterable[str]) -> list[str]:
     """``"auto,paper_icp"`` or a list of names → the list; unknown names are a ``ValueError``."""
     names = [m.strip() for m in methods.split(",")] if isinstance(methods, str) else list(methods)
     names = [m for m in names if m]
-    unknown = [m for m in names if m not in METHODS]
+    allowed = list(METHODS) + list(GRID_METHODS)
+    unknown = [m for m in names if m not in allowed]
     if unknown or not names:
-        raise ValueError(f"methods must be a comma-separated list of {list(METHODS)}, "
+        raise ValueError(f"methods must be a comma-separated list of {allowed}, "
                          f"got {unknown or names}")
     return list(dict.fromkeys(names))
 
@@ -411,7 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--synthetic", type=int, metavar="N",
                    help="evaluate N synthetic pairs per noise level instead of a folder")
     p.add_argument("--methods", default="auto,paper_icp,multistart_icp,exhaustive",
-                   help=f"comma-separated methods among {', '.join(METHODS)}")
+                   help="comma-separated methods among "
+                        f"{', '.join(METHODS + GRID_METHODS)} (grid methods need a dataset)")
     p.add_argument("--noise", default="0.05,0.15,0.3",
                    help="node noise levels (m) of the synthetic pairs, comma-separated")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic pairs")

@@ -101,3 +101,13 @@ def test_reads_a_map_pair_dataset(tmp_path):
     assert loaded[0].correspondences is None
     records = evaluate(loaded, ["auto"], progress=False)
     assert [r.method for r in records] == ["auto", "auto"]  # no oracle without correspondences
+
+
+def test_grid_methods_need_grids():
+    from fusion.evaluate import evaluate, parse_methods, synthetic_pairs
+
+    assert parse_methods("hybrid,grid,auto") == ["hybrid", "grid", "auto"]
+    pairs = synthetic_pairs(2, seed=3, noise_levels=(0.05,))
+    records = evaluate(pairs, ["grid"], progress=False)
+    grid_records = [r for r in records if r.method == "grid"]
+    assert grid_records and all(not r.accepted for r in grid_records)
