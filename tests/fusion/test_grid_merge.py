@@ -47,14 +47,20 @@ def view(states: np.ndarray, frame: Rigid2D, lo, hi) -> GridSnapshot:
     return GridSnapshot(out.reshape(n[1], n[0]), RES, (float(o[0]), float(o[1])))
 
 
-@pytest.mark.parametrize("deg", [0.0, 37.0, 133.0, 251.0])
-def test_recovers_the_transform_of_overlapping_views(deg):
+def overlapping_views(deg: float, frame_a: Rigid2D | None = None,
+                      shift=(10.0, 4.0)) -> tuple[GridSnapshot, GridSnapshot, Rigid2D]:
+    """Two robots' grids of plan 1 overlapping on (8..20, 6..22) m, and the true B → A."""
+    frame_a = frame_a or Rigid2D.identity()
+    frame_b = Rigid2D(frame_a.theta + math.radians(deg), shift)
     states = plan(1)
-    frame_a = Rigid2D.from_degrees(20.0, (3.0, 2.0))
-    frame_b = Rigid2D.from_degrees(20.0 + deg, (12.0, 5.0))
     a = view(states, frame_a, (1, 1), (20, 22))
     b = view(states, frame_b, (8, 6), (28, 28))
-    truth = frame_a.inverse() @ frame_b  # B's frame → A's frame
+    return a, b, frame_a.inverse() @ frame_b
+
+
+@pytest.mark.parametrize("deg", [0.0, 37.0, 133.0, 251.0])
+def test_recovers_the_transform_of_overlapping_views(deg):
+    a, b, truth = overlapping_views(deg, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
     res = merge_grids(a, b)
     centre = np.array([0.0, 0.0])
     assert res.accepted, res.reason
@@ -86,15 +92,11 @@ def test_nothing_known_is_a_reason_not_an_error():
 
 
 def test_hybrid_falls_back_to_the_grids_and_fuses_the_maps():
-    states = plan(1)
-    frame_a = Rigid2D.from_degrees(0.0, (0.0, 0.0))
-    frame_b = Rigid2D.from_degrees(90.0, (10.0, 4.0))
-    a = view(states, frame_a, (1, 1), (20, 22))
-    b = view(states, frame_b, (8, 6), (28, 28))
+    a, b, truth = overlapping_views(90.0)
     tiny = TopoMap.from_arrays([[0, 0], [1, 0]], [[0, 1]])  # too small for the structural merge
     res = hybrid_merge(tiny, tiny, a, b)
     assert res.accepted and res.method == "hybrid"
-    assert math.degrees(res.transform.rotation_error(frame_a.inverse() @ frame_b)) < 1.0
+    assert math.degrees(res.transform.rotation_error(truth)) < 1.0
     rejected = hybrid_merge(tiny, tiny, a, b, try_grids=False)
     assert not rejected.accepted
 
@@ -107,12 +109,7 @@ def test_bad_config():
 
 
 def test_grids_refute_a_wrong_transform():
-    states = plan(1)
-    frame_a = Rigid2D.from_degrees(0.0, (0.0, 0.0))
-    frame_b = Rigid2D.from_degrees(60.0, (10.0, 4.0))
-    a = view(states, frame_a, (1, 1), (20, 22))
-    b = view(states, frame_b, (8, 6), (28, 28))
-    truth = frame_a.inverse() @ frame_b
+    a, b, truth = overlapping_views(60.0)
     assert check_with_grids(a, b, truth) is None
     why = check_with_grids(a, b, Rigid2D.from_degrees(90.0) @ truth)
     assert why is not None and "wall agreement" in why
