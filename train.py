@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -45,6 +43,7 @@ from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
 from agents.scripted import make_team
 from fusion.pairs import atomic_write_json
+from topo._io import atomic_write
 
 ENV_ID = "two_robot_explore_v0"
 
@@ -203,16 +202,8 @@ class InfoLogger(BaseCallback):
 
 
 def save_model_atomic(model: PPO, path: Path) -> None:
-    """``model.save`` to a temporary file in the same folder, then rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".zip", dir=path.parent)
-    os.close(fd)
-    try:
-        model.save(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """``model.save`` into a temporary file in the same folder, then rename."""
+    atomic_write(path, model.save)
 
 
 class Checkpointer(BaseCallback):

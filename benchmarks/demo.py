@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,18 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.scripted import make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-
-
-def _write_atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+from topo._io import atomic_write  # noqa: E402
 
 
 def main() -> None:
@@ -78,11 +66,12 @@ def main() -> None:
     else:
         print("  merge accuracy     no merge accepted in this episode")
     png = args.out / "demo.png"
-    _write_atomic(png, lambda p: iio.imwrite(p, frame))
+    atomic_write(png, lambda fh: iio.imwrite(fh, frame, extension=".png"))
     print(f"  wrote {png}")
     if frames:
         gif = args.out / "demo.gif"
-        _write_atomic(gif, lambda p: iio.imwrite(p, np.stack(frames), duration=100, loop=0))
+        atomic_write(gif, lambda fh: iio.imwrite(fh, np.stack(frames), extension=".gif",
+                                                 duration=100, loop=0))
         print(f"  wrote {gif} ({len(frames)} frames)")
     env.close()
 

@@ -40,9 +40,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import re
-import tempfile
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -52,12 +50,12 @@ from typing import Any
 import numpy as np
 
 from fusion.rigid import Rigid2D
+from topo._io import TEMP_PREFIX, atomic_write_bytes
 from topo.graph import TopoMap
 
 FORMAT = "topomerge.map_pairs"
 FORMAT_VERSION = 1
 PAIR_FILE = re.compile(r"^pair_(\d{6,})\.npz$")
-TEMP_PREFIX = ".tmp-"
 
 
 class DatasetError(ValueError):
@@ -125,28 +123,11 @@ def pair_path(root: str | Path, pair_id: int) -> Path:
 
 
 # --------------------------------------------------------------------------- atomic writes
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same folder and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> Path:
     """JSON-encode ``obj`` (indented, sorted keys) and write it atomically; returns the path.
     ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
     text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
-    atomic_write_bytes(path, text.encode())
-    return Path(path)
+    return atomic_write_bytes(path, text.encode())
 
 
 def _map_arrays(prefix: str, m: TopoMap) -> dict[str, np.ndarray]:

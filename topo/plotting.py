@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from topo._io import atomic_write
 from topo.graph import NodeKind, TopoMap
 
 KIND_COLOURS = {
@@ -57,17 +56,8 @@ def equal_axes(ax: Any, points: np.ndarray, margin: float = 0.08) -> None:
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
-    """Write ``fig`` to ``path`` atomically (temp file in the same folder, then rename), creating
-    the folder; the format follows the suffix. Returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=path.suffix.lstrip(".") or "png", dpi=dpi,
-                        bbox_inches="tight")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``fig`` to ``path`` atomically (:func:`topo._io.atomic_write`), creating the
+    folder; the format follows the suffix. Returns the path."""
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    return atomic_write(path, lambda fh: fig.savefig(fh, format=fmt, dpi=dpi,
+                                                     bbox_inches="tight"))

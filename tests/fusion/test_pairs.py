@@ -96,7 +96,7 @@ def test_interrupted_write_leaves_only_a_temp_file(tmp_path, monkeypatch):
     def crash(src, dst):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("fusion.pairs.os.replace", crash)
+    monkeypatch.setattr("topo._io.os.replace", crash)
     with pytest.raises(KeyboardInterrupt):
         write_pair(root, make_pair(1, np.random.default_rng(3)))
     monkeypatch.undo()
