@@ -269,6 +269,9 @@ class MappingConfig:
         grid_merge_every: with ``"hybrid"``, the (slower, ~0.1–0.4 s) occupancy-grid alignment
             is tried on merge steps that are multiples of this, until a transform is in use;
             ``0`` never. A multiple of ``merge_every`` (unused when ``merge_every`` is 0).
+        grid_merge_growth: after a rejected grid alignment, the next one waits (beyond
+            ``grid_merge_every``) until the two robots' maps together know this fraction more
+            cells: the same maps would only be rejected again. ``0`` retries on schedule.
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).
@@ -280,6 +283,7 @@ class MappingConfig:
     merge_every: int = 25
     merge_method: str = "hybrid"
     grid_merge_every: int = 100
+    grid_merge_growth: float = 0.2
     local_map_size: int = 64
     local_map_resolution: float = 0.15
     max_nodes: int = 32
@@ -299,6 +303,9 @@ class MappingConfig:
             raise ValueError(f"mapping.grid_merge_every must be 0 or a multiple of "
                              f"mapping.merge_every ({self.merge_every}), got "
                              f"{self.grid_merge_every}")
+        _set(self, "grid_merge_growth", check_real(self.grid_merge_growth,
+                                                   "mapping.grid_merge_growth", low=0.0,
+                                                   low_inclusive=True, high=10.0))
         _set(self, "local_map_size", check_int(self.local_map_size, "mapping.local_map_size",
                                                low=64))
         if self.local_map_size > 512:

@@ -75,8 +75,9 @@ sonar grids) is re-extracted every ``mapping.topo_every`` steps.
 Merging (``mapping.merge_method``): ``"hybrid"`` (default) runs the structural global merge
 ``fusion.merge_maps(method="auto")`` on the two topological maps every ``merge_every`` steps
 and, while no merge has been accepted, every ``grid_merge_every`` steps also the occupancy-grid
-alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, ~0.1–0.4 s),
-which is what succeeds on most sonar map pairs: sonar topological maps of the same place
+alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, the costly
+part; after a rejection it is retried only once the maps have grown by ``grid_merge_growth``,
+20 %), which is what succeeds on most sonar map pairs: sonar topological maps of the same place
 differ too much for the structural merge to be confident. Both refuse ambiguous alignments
 (the procedural buildings are lattices of rooms). Other values run one ``fusion.merge_maps``
 method; ``"none"`` never merges.
@@ -161,6 +162,7 @@ are a ``ValueError``.
 | ``mapping.topo_preset`` | str | ``"sonar"`` | ``ExtractConfig.for_sonar()`` or ``"default"`` |
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
+| ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
 | ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
 | ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
 | ``mapping.max_nodes`` | int | 32 | graph nodes observed |
@@ -380,6 +382,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
         self.merge = None
         self.merges = 0
+        self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self.merge_time_s = math.nan
         self.steps = 0
         self._prev_collisions = [0, 0]
@@ -529,11 +532,11 @@ class TwoRobotExploreEnv(ParallelEnv):
                 self._own_delta[i] = 0
                 continue
             rmap = self.maps[i]
-            before = rmap.n_ever
-            window, _ = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
-                                       sonar.mount_radius, scfg.max_range, half)
-            self._own_delta[i] = rmap.n_ever - before
-            if window is not None:
+            fresh = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
+                                   sonar.mount_radius, scfg.max_range, half)
+            self._own_delta[i] = int(fresh[0])
+            if fresh[0]:
+                window = slice(int(fresh[1]), int(fresh[2])), slice(int(fresh[3]), int(fresh[4]))
                 self._shared_delta += self.shared.add(i, rmap, window)
             self._oracle_delta += self.oracle.add(i, robot.true_pose(), sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
@@ -551,8 +554,12 @@ class TwoRobotExploreEnv(ParallelEnv):
         map_a, map_b = self.maps[0].topomap, self.maps[1].topomap
         if map_a.n_edges == 0 or map_b.n_edges == 0:
             return
+        known = self.maps[0].n_ever + self.maps[1].n_ever
         try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
-                         and self.shared.transform is None)
+                         and self.shared.transform is None
+                         and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
+        if try_grids:
+            self._grid_tried_at = known
         result = run_merge(map_a, map_b, mcfg.merge_method, self.maps[0].grid, self.maps[1].grid,
                            try_grids=try_grids)
         self.merge = result
@@ -672,7 +679,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         if t is not None:
             other = self.maps[1 - i]
             moved = compose_pose(t if i == 1 else t.inverse(), pose)
-            np.maximum(st, self._sampler.sample(other.states, other.geometry, moved), out=st)
+            self._sampler.sample(other.states, other.geometry, moved, out=st)
         return LOCAL_MAP_VALUES.take(st).reshape(1, size, size)
 
     # ------------------------------------------------------------------ infos

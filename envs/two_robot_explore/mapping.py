@@ -25,6 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from envs.two_robot_explore._map_kernels import (
+    NO_UNION,
+    absorb,
+    or_into,
+    sample_states,
+    scan_window,
+)
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
@@ -137,47 +144,36 @@ class RobotMap:
         self.topomap = TopoMap.empty()
 
     def integrate(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
-                  mount_radius: float, max_range: float, half_cone: float
-                  ) -> tuple[tuple[slice, slice] | None, np.ndarray | None]:
-        """Fold one sonar scan (taken at odometry ``pose``) into the grid.
+                  mount_radius: float, max_range: float, half_cone: float,
+                  union: np.ndarray = NO_UNION, reachable: np.ndarray = NO_UNION
+                  ) -> np.ndarray:
+        """Fold one sonar scan (taken at odometry ``pose``) into the grid and :attr:`ever`.
 
         Readings are measured from the transducers on the rim; the grid's sensor model puts all
         sensors at the robot centre, so ``mount_radius`` is added to ranges and to
-        ``max_range``. Returns the bounding box of the cells that became known for the first
-        time and the boolean mask of those cells inside it (``(None, None)`` if none did).
+        ``max_range``. ``union``/``reachable``: see :func:`_map_kernels.absorb`. Returns its
+        counts ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: how many cells became known
+        for the first time and their bounding box (all zero if none).
         """
         self.grid.update(pose, ranges + mount_radius, angles, max_range + mount_radius,
                          half_cone)
+        g = self.geometry
         reach = np.minimum(ranges, max_range) + mount_radius
-        th = pose[2] + np.concatenate([angles - half_cone, angles + half_cone])
-        rr = np.concatenate([reach, reach])
-        pts = np.empty((len(th) + 1, 2))
-        pts[:-1, 0] = pose[0] + rr * np.cos(th)
-        pts[:-1, 1] = pose[1] + rr * np.sin(th)
-        pts[-1] = pose[:2]
-        window = self.geometry.window(pts)
-        if window is None:
-            return None, None
-        st = self.states[window]
-        ever = self.ever[window]
-        fresh = (st != CellState.UNKNOWN) & ~ever
-        rows = np.flatnonzero(fresh.any(axis=1))
-        if len(rows) == 0:
-            return None, None
-        cols = np.flatnonzero(fresh.any(axis=0))
-        ever |= fresh
-        self.n_ever += int(np.count_nonzero(fresh))
-        rs, cs = window
-        r0, r1 = rs.start + int(rows[0]), rs.start + int(rows[-1]) + 1
-        c0, c1 = cs.start + int(cols[0]), cs.start + int(cols[-1]) + 1
-        if self.bbox is None:
-            self.bbox = [r0, r1, c0, c1]
-        else:
-            b = self.bbox
-            b[0], b[1] = min(b[0], r0), max(b[1], r1)
-            b[2], b[3] = min(b[2], c0), max(b[3], c1)
-        sub = fresh[int(rows[0]):int(rows[-1]) + 1, int(cols[0]):int(cols[-1]) + 1]
-        return (slice(r0, r1), slice(c0, c1)), sub
+        win = scan_window(g.origin[0], g.origin[1], g.resolution, g.shape[0], g.shape[1],
+                          float(pose[0]), float(pose[1]), float(pose[2]), reach, angles,
+                          half_cone, _MARGIN_CELLS)
+        counts = absorb(self.states, self.ever, win, union, reachable)
+        n = int(counts[0])
+        if n:
+            self.n_ever += n
+            r0, r1, c0, c1 = (int(v) for v in counts[1:5])
+            if self.bbox is None:
+                self.bbox = [r0, r1, c0, c1]
+            else:
+                b = self.bbox
+                b[0], b[1] = min(b[0], r0), max(b[1], r1)
+                b[2], b[3] = min(b[2], c0), max(b[3], c1)
+        return counts
 
     def known_window(self) -> tuple[slice, slice] | None:
         """Slices of :attr:`bbox` (``None`` before the first scan)."""
@@ -228,10 +224,9 @@ class SharedMap:
         if window is None:
             return 0
         if index == 0:
-            dst = self.ever[window]
-            src = robot_map.ever[window]
-            new = int(np.count_nonzero(src & ~dst))
-            dst |= src
+            rs, cs = window
+            new = or_into(self.ever, robot_map.ever,
+                          np.array([rs.start, rs.stop, cs.start, cs.stop], dtype=np.int64))
         else:
             if self.transform is None:
                 return 0
@@ -311,19 +306,13 @@ class OracleCoverage:
             mount_radius: float, max_range: float, half_cone: float) -> int:
         """Sweep robot ``index``'s scan from its true world ``pose``; returns how many world
         cells the team swept for the first time."""
-        window, fresh = self.sweeps[index].integrate(pose, true_ranges, angles, mount_radius,
-                                                     max_range, half_cone)
-        if window is None:
-            return 0
-        union = self.union[window]
-        team_new = fresh & ~union
-        self.both += int(np.count_nonzero(fresh & union))
-        n_new = int(np.count_nonzero(team_new))
-        if n_new:
-            union |= team_new
-            self.count += n_new
-            self.covered += int(np.count_nonzero(team_new & self.reachable[window]))
-        return n_new
+        counts = self.sweeps[index].integrate(pose, true_ranges, angles, mount_radius,
+                                              max_range, half_cone, self.union, self.reachable)
+        both, new, covered = (int(v) for v in counts[5:])
+        self.both += both
+        self.count += new
+        self.covered += covered
+        return new
 
 
 class LocalMapSampler:
@@ -334,35 +323,24 @@ class LocalMapSampler:
     centre facing up, its left on the image's left.
     """
 
-    __slots__ = ("size", "_offsets", "_corners")
+    __slots__ = ("size", "_offsets")
 
     def __init__(self, size: int, resolution: float) -> None:
         self.size = size
         k = (size / 2.0 - np.arange(size) - 0.5) * resolution
         fwd, left = np.meshgrid(k, k, indexing="ij")
-        self._offsets = np.stack([fwd.ravel(), left.ravel()]).astype(np.float32)
-        self._corners = ((k[0], k[0]), (k[0], k[-1]), (k[-1], k[0]), (k[-1], k[-1]))
+        self._offsets = np.ascontiguousarray(np.stack([fwd.ravel(), left.ravel()]))
 
-    def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray) -> np.ndarray:
+    def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
+               out: np.ndarray | None = None) -> np.ndarray:
         """``(size*size,)`` int8 states of ``states`` (in ``geometry``) around ``pose`` (that
-        grid's frame); outside the grid is unknown."""
-        inv = 1.0 / geometry.resolution
-        c, s = math.cos(pose[2]) * inv, math.sin(pose[2]) * inv
-        x = (pose[0] - geometry.origin[0]) * inv
-        y = (pose[1] - geometry.origin[1]) * inv
-        uv = np.array([[c, -s], [s, c]], dtype=np.float32) @ self._offsets
-        uv[0] += x
-        uv[1] += y
-        h, w = geometry.shape
-        idx = uv.astype(np.intp)  # truncation == floor wherever the cell is inside
-        flat = idx[1] * w
-        flat += idx[0]
-        out = states.ravel().take(flat, mode="clip")
-        # the square's extreme points are its corners: test those before masking
-        inside = all(0.0 <= x + c * f - s * g < w and 0.0 <= y + s * f + c * g < h
-                     for f, g in self._corners)
-        if not inside:
-            out[(uv[0] < 0) | (uv[0] >= w) | (uv[1] < 0) | (uv[1] >= h)] = 0
+        grid's frame); outside the grid is unknown. With ``out`` (a previous sample), the
+        cell-wise maximum of both is written there (known beats unknown, occupied beats
+        free) and returned."""
+        if out is None:
+            out = np.zeros(self.size * self.size, dtype=np.int8)
+        sample_states(out, states, self._offsets, geometry.origin[0], geometry.origin[1],
+                      geometry.resolution, float(pose[0]), float(pose[1]), float(pose[2]))
         return out
 
 

@@ -1,5 +1,6 @@
 """Behaviour over many steps: determinism, rewards, maps and frames, episode end."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -186,3 +187,25 @@ def test_true_coverage_ignores_echoes_lost_through_walls():
     # the robots themselves believe they see far beyond the walls when every echo is lost
     assert lossy.maps[0].n_ever > 1.5 * clean.maps[0].n_ever
     assert 0 < clean.oracle.fraction < 1
+
+
+@pytest.mark.parametrize(("growth", "expect_retries"), [(0.0, True), (10.0, False)])
+def test_rejected_grid_alignment_waits_for_the_maps_to_grow(monkeypatch, growth,
+                                                            expect_retries):
+    import fusion.grid_merge as gm
+
+    calls = []
+    real = gm.merge_grids
+
+    def refusing(grid_a, grid_b, config=None):
+        calls.append(int(grid_a.known_mask().sum() + grid_b.known_mask().sum()))
+        return dataclasses.replace(real(grid_a, grid_b, config), accepted=False, reason="test")
+
+    monkeypatch.setattr(gm, "merge_grids", refusing)
+    _episode(3, 200, mapping={"merge_every": 5, "grid_merge_every": 10,
+                              "grid_merge_growth": growth})
+    assert calls, "the grid alignment never ran"
+    if expect_retries:
+        assert len(calls) >= 5  # on schedule: every 10 steps while the maps are non-empty
+    else:
+        assert len(calls) == 1  # the maps never grow 11-fold in 200 steps
