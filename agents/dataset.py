@@ -22,7 +22,9 @@ the output folder, which must then be on storage that every node shares.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -51,6 +53,8 @@ from fusion.rigid import Rigid2D
 from topo._checks import check_int
 
 BACKENDS = ("process", "ray")
+_WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""Environment of worker processes (either backend): one BLAS/OpenMP thread per episode."""
 
 
 @dataclass(frozen=True)
@@ -197,6 +201,21 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
 Runner = Callable[[list[int]], Iterator[int]]
 
 
+@contextlib.contextmanager
+def _worker_env() -> Iterator[None]:
+    """Set :data:`_WORKER_ENV` while worker processes start (they inherit it), then restore."""
+    saved = {k: os.environ.get(k) for k in _WORKER_ENV}
+    os.environ.update(_WORKER_ENV)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def _process_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
     def run(episodes: list[int]) -> Iterator[int]:
         if args.workers == 1:
@@ -208,7 +227,8 @@ def _process_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
 
         ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods()
                              else "spawn")
-        with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as pool:
+        with _worker_env(), ProcessPoolExecutor(max_workers=args.workers,
+                                                 mp_context=ctx) as pool:
             futures = [pool.submit(generate_episode, root, e, args.pairs, settings)
                        for e in episodes]
             for fut in as_completed(futures):
@@ -226,11 +246,13 @@ def _ray_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
     def run(episodes: list[int]) -> Iterator[int]:
         started_here = not ray.is_initialized()
         if started_here:
+            # one thread per task, as the process backend's workers on a CPU each
+            common = {"log_to_driver": False, "configure_logging": False,
+                      "runtime_env": {"env_vars": dict(_WORKER_ENV)}}
             if args.address is None:
-                ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False,
-                         configure_logging=False)
+                ray.init(num_cpus=args.workers, include_dashboard=False, **common)
             else:
-                ray.init(address=args.address, log_to_driver=False, configure_logging=False)
+                ray.init(address=args.address, **common)
         try:
             task = ray.remote(num_cpus=1)(generate_episode)
             pending = [task.remote(root, e, args.pairs, settings) for e in episodes]

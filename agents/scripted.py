@@ -140,6 +140,16 @@ class FrontierConfig:
         arrive_distance: the goal counts as reached within this distance.
         lookahead: pure-pursuit look-ahead along the path.
         blocked_distance: a front echo closer than this means "blocked": back off and re-plan.
+        give_up_radius: frontier cells within this of a goal given up (reached without the
+            frontier going away, no progress, or blocked again and again) are no longer goals.
+            Sonar maps leave frontiers that driving to them does not clear: free space seen
+            through walls (lost echoes) and cone gaps; without this the robot circles them.
+        stall_steps: a goal whose path cost has not dropped by ``min_progress`` within this
+            many steps is given up.
+        min_progress: metres, see ``stall_steps``.
+        max_blocks: a goal is given up after this many "blocked" back-offs on the way to it.
+        hysteresis: metres; at a re-plan the current goal is kept unless another frontier is
+            this much cheaper (no dithering between two frontiers of similar cost).
         max_range: the env's sonar ``max_range``.
     """
 
@@ -153,15 +163,23 @@ class FrontierConfig:
     arrive_distance: float = 0.4
     lookahead: float = 0.6
     blocked_distance: float = 0.3
+    give_up_radius: float = 1.0
+    stall_steps: int = 60
+    min_progress: float = 0.5
+    max_blocks: int = 3
+    hysteresis: float = 1.0
     max_range: float = _SONAR.max_range
 
     def __post_init__(self) -> None:
         for name in ("clearance", "wall_cost_distance", "arrive_distance", "lookahead",
-                     "occupied_log_odds",
+                     "occupied_log_odds", "give_up_radius", "min_progress",
                      "blocked_distance", "max_range", "min_goal_distance", "min_unknown_area"):
             check_real(getattr(self, name), f"FrontierConfig.{name}", low=0.0)
+        check_real(self.hysteresis, "FrontierConfig.hysteresis", low=0.0, low_inclusive=True)
         check_int(self.min_cluster_cells, "FrontierConfig.min_cluster_cells", low=1)
         check_int(self.replan_every, "FrontierConfig.replan_every", low=1)
+        check_int(self.stall_steps, "FrontierConfig.stall_steps", low=1)
+        check_int(self.max_blocks, "FrontierConfig.max_blocks", low=1)
 
 
 @dataclass(slots=True)
@@ -213,24 +231,51 @@ class FrontierMap:
         return out
 
 
-def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig) -> FrontierMap | None:
+def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
+                 exclude: np.ndarray | None = None,
+                 teammate: tuple[Any, Rigid2D] | None = None) -> FrontierMap | None:
     """Frontier clusters and path costs from ``pose_xy`` on ``grid`` (cropped to its known
-    cells); ``None`` if nothing is known yet."""
+    cells); ``None`` if nothing is known yet.
+
+    Args:
+        exclude: ``(K, 2)`` points (own frame): frontier cells within ``cfg.give_up_radius`` of
+            one are dropped (goals given up).
+        teammate: the teammate's grid and the transform from this robot's frame into the
+            teammate's: its evidence (log-odds, nearest cell) is added to this robot's over
+            both robots' known area, so frontiers and paths are those of the shared map
+            (frontiers the teammate has already explored disappear).
+    """
     states = grid.states()
     known = states != CellState.UNKNOWN
     rows, cols = np.nonzero(known)
     if len(rows) == 0:
         return None
     res = float(grid.resolution)
-    r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, states.shape[0])
-    c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, states.shape[1])
-    crop = states[r0:r1, c0:c1]
+    r0, r1 = rows.min(), rows.max() + 1
+    c0, c1 = cols.min(), cols.max() + 1
+    if teammate is not None:
+        box = _known_box_in(teammate[0], teammate[1].inverse(), grid)
+        if box is not None:
+            r0, r1 = min(r0, box[0]), max(r1, box[1])
+            c0, c1 = min(c0, box[2]), max(c1, box[3])
+    r0, r1 = max(r0 - 2, 0), min(r1 + 2, states.shape[0])
+    c0, c1 = max(c0 - 2, 0), min(c1 + 2, states.shape[1])
     origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * res
+    log_odds = grid.log_odds[r0:r1, c0:c1]
+    if teammate is None:
+        crop = states[r0:r1, c0:c1]
+    else:
+        log_odds = log_odds + _sample_log_odds(teammate[0], teammate[1], origin, res,
+                                               log_odds.shape)
+        t = grid.model.threshold
+        crop = np.full(log_odds.shape, CellState.UNKNOWN, dtype=np.int8)
+        crop[log_odds < -t] = CellState.FREE
+        crop[log_odds > t] = CellState.OCCUPIED
 
     free = crop == CellState.FREE
     unknown = crop == CellState.UNKNOWN
     # Sonar arcs smear walls into doorways; only cells hit again and again block the way.
-    occupied = grid.log_odds[r0:r1, c0:c1] > cfg.occupied_log_odds
+    occupied = log_odds > cfg.occupied_log_odds
     dist = ndimage.distance_transform_edt(~occupied) * res
     blocked = dist < cfg.clearance
     costs = np.where(free & ~blocked, 1.0, np.inf)
@@ -259,10 +304,55 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig) -> Frontie
     frontier = free & ~blocked & ndimage.binary_dilation(unknown, structure=np.ones((3, 3)))
     near_robot = (rr - rc[0]) ** 2 + (cc - rc[1]) ** 2 < (cfg.min_goal_distance / res) ** 2
     frontier &= ~near_robot
+    if exclude is not None and len(exclude) and frontier.any():
+        fy, fx = np.nonzero(frontier)
+        xy = origin + (np.stack([fx, fy], 1) + 0.5) * res
+        d2 = ((xy[:, None, :] - np.asarray(exclude)[None, :, :2]) ** 2).sum(-1).min(1)
+        drop = d2 < cfg.give_up_radius ** 2
+        frontier[fy[drop], fx[drop]] = False
     labels, n = ndimage.label(frontier, structure=np.ones((3, 3)))
     mcp = MCP_Geometric(costs * res, fully_connected=True)
     cost_to, _ = mcp.find_costs([tuple(rc)])
     return FrontierMap(cost_to, labels, n, mcp, origin, res)
+
+
+def _sample_log_odds(grid: Any, transform: Rigid2D, origin: np.ndarray, res: float,
+                     shape: tuple[int, int]) -> np.ndarray:
+    """``shape`` log-odds of ``grid`` (nearest cell; 0 outside it) at the centres of a crop
+    (``origin``, ``res``), ``transform`` taking the crop's frame into ``grid``'s."""
+    h, w = shape
+    xs = origin[0] + (np.arange(w) + 0.5) * res
+    ys = origin[1] + (np.arange(h) + 0.5) * res
+    c, s_ = math.cos(transform.theta), math.sin(transform.theta)
+    tx, ty = transform.T
+    g_res = float(grid.resolution)
+    ix = np.floor((c * xs[None, :] - s_ * ys[:, None] + tx - grid.origin[0]) / g_res)
+    iy = np.floor((s_ * xs[None, :] + c * ys[:, None] + ty - grid.origin[1]) / g_res)
+    ix, iy = ix.astype(np.int64), iy.astype(np.int64)
+    gh, gw = grid.log_odds.shape
+    inside = (ix >= 0) & (ix < gw) & (iy >= 0) & (iy < gh)
+    out = np.zeros(shape, dtype=np.float64)
+    out[inside] = grid.log_odds[iy[inside], ix[inside]]
+    return out
+
+
+def _known_box_in(other: Any, transform: Rigid2D, grid: Any) -> tuple[int, int, int, int] | None:
+    """Rows/cols ``(r0, r1, c0, c1)`` of ``grid`` covering ``other``'s known cells moved by
+    ``transform`` (``other``'s frame → ``grid``'s); ``None`` if ``other`` knows nothing."""
+    rows, cols = np.nonzero(other.states() != CellState.UNKNOWN)
+    if len(rows) == 0:
+        return None
+    res_o = float(other.resolution)
+    x = other.origin[0] + np.array([cols.min(), cols.max() + 1]) * res_o
+    y = other.origin[1] + np.array([rows.min(), rows.max() + 1]) * res_o
+    corners = transform.apply(np.array([[x[0], y[0]], [x[1], y[0]], [x[0], y[1]],
+                                        [x[1], y[1]]]))
+    res = float(grid.resolution)
+    c = np.floor((corners[:, 0] - grid.origin[0]) / res).astype(int)
+    r = np.floor((corners[:, 1] - grid.origin[1]) / res).astype(int)
+    h, w = grid.log_odds.shape
+    return (int(np.clip(r.min(), 0, h)), int(np.clip(r.max() + 1, 0, h)),
+            int(np.clip(c.min(), 0, w)), int(np.clip(c.max() + 1, 0, w)))
 
 
 def pure_pursuit(pose: np.ndarray, path: np.ndarray, lookahead: float) -> np.ndarray:
@@ -283,9 +373,12 @@ class Frontier(CommandExplorer):
 
     Every plan: frontier cells of ``info["grid"]`` are clustered (8-connected), path costs from
     the robot through the configuration space come from one ``MCP_Geometric`` run, and the goal
-    is the cheapest cell of the best cluster (:meth:`_choose`: the nearest here). Between plans
-    the path is followed by pure pursuit. With no reachable frontier it falls back to a random
-    walk. See :class:`FrontierConfig` for the settings.
+    is the cheapest cell of the best cluster (:meth:`_choose`: the nearest here, the current
+    goal's cluster favoured by ``hysteresis``). Between plans the path is followed by pure
+    pursuit. Goals that driving does not clear are given up (:class:`FrontierConfig`:
+    reached while the frontier stays, no progress for ``stall_steps``, blocked ``max_blocks``
+    times); when every frontier has been given up the list is forgotten once, and with no
+    reachable frontier at all it falls back to a random walk.
     """
 
     name = "frontier"
@@ -298,85 +391,160 @@ class Frontier(CommandExplorer):
         self.cfg = config or FrontierConfig()
         self._fallback = RandomWalk(max_range=self.cfg.max_range)
         self.plan: Plan | None = None
+        self.given_up: list[np.ndarray] = []
+        """Goals given up this episode (own frame)."""
         self._backoff = 0
+        self._idle = 0
+        self._steps = 0
+        self._track: dict[str, Any] = {}
+        self.events: dict[str, int] = {}
+        """Counts of this episode's plans, blocks, fallback steps and goals given up (by
+        reason), for diagnosis."""
+
+    def _count(self, event: str) -> None:
+        self.events[event] = self.events.get(event, 0) + 1
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self._fallback.reset(int(self.rng.integers(2**31)))
         self.plan = None
+        self.given_up = []
         self._backoff = 0
+        self._idle = 0
+        self._steps = 0
+        self._track = {}
+        self.events = {}
 
     def command(self, observation, info) -> np.ndarray:
+        self._steps += 1
         pose = _pose(info)
         ranges = sonar_metres(observation, self.cfg.max_range)
         if self._backoff > 0:
             self._backoff -= 1
             return np.array([-0.5, 0.0])
         if ranges[FRONT].min() < self.cfg.blocked_distance:
+            self._count("blocked")
+            if self.plan is not None and self._track:
+                self._track["blocks"] += 1
+                if self._track["blocks"] >= self.cfg.max_blocks:
+                    self._give_up(self._track["goal"], "given_up_blocked")
             self.plan = None
             self._backoff = 3
             return np.array([-0.5, 0.0])
-        if self._needs_plan(pose):
+        if self._idle > 0:
+            self._idle -= 1
+        elif self._needs_plan(pose):
             self.plan = self._make_plan(info, pose)
+            if self.plan is None:  # nothing reachable: wander a while before looking again
+                self._idle = self.cfg.replan_every
         if self.plan is None:
+            self._count("fallback_steps")
             return self._fallback.command(observation, info)
         self.plan.age += 1
         return pure_pursuit(pose, self.plan.path, self.cfg.lookahead)
 
+    def _give_up(self, goal: np.ndarray, reason: str) -> None:
+        self._count(reason)
+        self.given_up.append(np.asarray(goal, dtype=np.float64).copy())
+        self._track = {}
+
     def _needs_plan(self, pose: np.ndarray) -> bool:
         if self.plan is None or self.plan.age >= self.cfg.replan_every:
             return True
-        return bool(np.linalg.norm(self.plan.goal - pose[:2]) < self.cfg.arrive_distance)
+        if np.linalg.norm(self.plan.goal - pose[:2]) < self.cfg.arrive_distance:
+            # reached: if the frontier had gone the goal would not be there to reach
+            self._give_up(self.plan.goal, "given_up_reached")
+            return True
+        return False
+
+    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
+        exclude = np.array(self.given_up) if self.given_up else None
+        return frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude)
 
     def _make_plan(self, info: Mapping[str, Any], pose: np.ndarray) -> Plan | None:
-        fmap = frontier_map(info["grid"], pose[:2], self.cfg)
+        self._count("plans")
+        fmap = self._frontier_map(info, pose)
         if fmap is None:
             return None
         clusters = fmap.clusters(self.cfg.min_cluster_cells)
+        if not clusters and self.given_up:
+            self.given_up = []  # everything given up: try them all again, once
+            fmap = self._frontier_map(info, pose)
+            clusters = fmap.clusters(self.cfg.min_cluster_cells) if fmap is not None else []
         if not clusters:
             return None
+        current = self._track.get("goal")
+        for c in clusters:
+            c["current"] = bool(current is not None and np.linalg.norm(
+                fmap.cell_to_xy(np.array([c["cell"]]))[0] - current) < self.cfg.give_up_radius)
         best = self._choose(clusters, info, pose)
         path = fmap.path_to(best["cell"])
+        self._follow(path[-1], best["cost"])
         return Plan(path=path, goal=path[-1], cost=best["cost"])
+
+    def _follow(self, goal: np.ndarray, cost: float) -> None:
+        """Progress bookkeeping: the same target (within ``give_up_radius``) must get
+        ``min_progress`` cheaper every ``stall_steps`` steps, or it is given up."""
+        track = self._track
+        if not track or np.linalg.norm(goal - track["goal"]) >= self.cfg.give_up_radius:
+            self._track = {"goal": goal, "best": cost, "since": self._steps, "blocks": 0}
+            return
+        track["goal"] = goal
+        if cost < track["best"] - self.cfg.min_progress:
+            track["best"], track["since"] = cost, self._steps
+        elif self._steps - track["since"] > self.cfg.stall_steps:
+            self._give_up(goal, "given_up_stalled")
 
     def _choose(self, clusters: list[dict[str, Any]], info: Mapping[str, Any],
                 pose: np.ndarray) -> dict[str, Any]:
-        """The nearest cluster by path cost (Yamauchi)."""
-        return min(clusters, key=lambda c: c["cost"])
+        """The nearest cluster by path cost (Yamauchi), the current target's favoured."""
+        return min(clusters, key=lambda c: c["cost"] - self.cfg.hysteresis * c["current"])
 
 
 @dataclass
 class Blackboard:
     """What two :class:`CoordinatedFrontier` robots share: each robot's current goal in its
-    own frame, and the last accepted merge transform (robot 1's frame → robot 0's)."""
+    own frame, each robot's live grid, and the last accepted merge transform (robot 1's frame
+    → robot 0's)."""
 
     goals: dict[int, np.ndarray] = field(default_factory=dict)
+    grids: dict[int, Any] = field(default_factory=dict)
     transform: Rigid2D | None = None
 
     def clear(self) -> None:
         self.goals.clear()
+        self.grids.clear()
         self.transform = None
 
 
 class CoordinatedFrontier(Frontier):
     """Frontier exploration for a team (Burgard et al. 2005 style).
 
-    Utility of a frontier cluster = ``gain − beta · cost`` with gain its size (m of frontier)
-    and cost its path length (m). Once a merge has been accepted (``info["merge"]``), each robot
-    publishes its goal on the shared :class:`Blackboard`; the teammate's goal, moved into this
-    robot's frame with the merge transform, discounts the gain of clusters within
-    ``coordination_radius`` of it by ``discount``, so the two spread out. Before any merge it
-    behaves like :class:`Frontier` with the utility rule.
+    Before any merge it is :class:`Frontier`. Once a merge has been accepted
+    (``info["merge"]``), with the merge transform each robot:
+
+    * plans on the shared map: cells its teammate's grid knows are not unknown, so frontiers
+      the teammate has already explored are not goals;
+    * scores a frontier cluster by path cost plus ``mate_penalty · (1 − d / R)`` for ``d``, its
+      distance to the teammate's announced goal (on the :class:`Blackboard`) and to the
+      teammate's estimated position (the ``teammate`` observation), within
+      ``R = coordination_radius`` — Burgard's utility reduced near other robots' targets, so
+      the two spread out instead of chasing the same frontier.
 
     Args:
         index: 0 for ``robot_0`` (frame A), 1 for ``robot_1`` (frame B).
         blackboard: shared by the two robots of a team (:func:`agents.make_team` wires it).
+        config: see :class:`Frontier`.
+        mate_penalty: metres of path cost added to a frontier at the teammate's goal or
+            position (less farther out, none beyond ``coordination_radius``).
+        coordination_radius: metres.
+        action_type: see :class:`Explorer`.
     """
 
     name = "coordinated_frontier"
 
     def __init__(self, index: int, blackboard: Blackboard, config: FrontierConfig | None = None,
-                 beta: float = 1.0, coordination_radius: float = 4.0, discount: float = 0.1,
+                 mate_penalty: float = 8.0, coordination_radius: float = 5.0,
                  action_type: str = "continuous") -> None:
         super().__init__(config, action_type)
         if index not in (0, 1):
@@ -385,39 +553,66 @@ class CoordinatedFrontier(Frontier):
             raise TypeError(f"blackboard must be a Blackboard, got {type(blackboard).__name__}")
         self.index = index
         self.board = blackboard
-        self.beta = check_real(beta, "beta", low=0.0, low_inclusive=True)
+        self.mate_penalty = check_real(mate_penalty, "mate_penalty", low=0.0,
+                                       low_inclusive=True)
         self.coordination_radius = check_real(coordination_radius, "coordination_radius",
                                               low=0.0)
-        self.discount = check_real(discount, "discount", low=0.0, low_inclusive=True, high=1.0)
+        self._mate_xy: np.ndarray | None = None
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self.board.clear()
+        self._mate_xy = None
+
+    def _to_mate(self) -> Rigid2D | None:
+        """Transform from this robot's frame into the teammate's (``None`` before a merge)."""
+        t = self.board.transform
+        if t is None:
+            return None
+        return t.inverse() if self.index == 0 else t
 
     def _teammate_goal(self) -> np.ndarray | None:
         goal = self.board.goals.get(1 - self.index)
-        t = self.board.transform
-        if goal is None or t is None:
+        to_mate = self._to_mate()
+        if goal is None or to_mate is None:
             return None
-        return (t if self.index == 0 else t.inverse()).apply(goal)
+        return to_mate.inverse().apply(goal)
 
     def command(self, observation, info) -> np.ndarray:
         merge = info.get("merge")
         if merge is not None and getattr(merge, "accepted", False):
             self.board.transform = merge.transform
+        self.board.grids[self.index] = info["grid"]
+        mate = np.asarray(observation["teammate"], dtype=np.float64)
+        if mate[4] > 0.5:  # valid: robot-frame offset of the teammate -> own frame
+            pose = _pose(info)
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            self._mate_xy = pose[:2] + np.array([c * mate[0] - s * mate[1],
+                                                 s * mate[0] + c * mate[1]])
         return super().command(observation, info)
 
+    def _frontier_map(self, info, pose):
+        to_mate = self._to_mate()
+        mate_grid = self.board.grids.get(1 - self.index)
+        if to_mate is None or mate_grid is None:
+            return super()._frontier_map(info, pose)
+        exclude = np.array(self.given_up) if self.given_up else None
+        return frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude,
+                            teammate=(mate_grid, to_mate))
+
     def _choose(self, clusters, info, pose):
-        mate = self._teammate_goal()
-        res = float(info["grid"].resolution)
+        near = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
+                if p is not None]
+        radius = self.coordination_radius
 
-        def utility(c: dict[str, Any]) -> float:
-            gain = c["size"] * res
-            if mate is not None and np.linalg.norm(c["centroid"] - mate) < self.coordination_radius:
-                gain *= self.discount
-            return gain - self.beta * c["cost"]
+        def score(c: dict[str, Any]) -> float:
+            value = c["cost"] - self.cfg.hysteresis * c["current"]
+            for p in near:
+                d = float(np.linalg.norm(c["centroid"] - p))
+                value += self.mate_penalty * max(0.0, 1.0 - d / radius)
+            return value
 
-        best = max(clusters, key=utility)
+        best = min(clusters, key=score)
         self.board.goals[self.index] = best["centroid"]
         return best
 

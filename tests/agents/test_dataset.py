@@ -51,8 +51,10 @@ def test_round_trip_and_ground_truth(reference):
     assert pairs[0].step <= pairs[1].step
     # the stored transform takes B's frame onto A's: B's walls land on A's walls, and a
     # transform 10° / 0.3 m off does much worse
-    best = max(pairs, key=lambda p: p.overlap)
-    assert best.overlap > 0.3
+    # (of the pairs that overlap, the one with the most walls: small early maps discriminate
+    # little)
+    best = max((p for p in pairs if p.overlap > 0.3),
+               key=lambda p: int((p.grid_b.states == CellState.OCCUPIED).sum()))
     off = Rigid2D.from_degrees(10.0, (0.3, 0.0)) @ best.transform
     assert wall_agreement(best, best.transform) > 0.7
     assert wall_agreement(best, best.transform) > wall_agreement(best, off) + 0.2
