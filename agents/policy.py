@@ -2,7 +2,8 @@
 
 Three encoders, concatenated:
 
-* ``local_map`` (1 × L × L, uint8; SB3 scales images to [0, 1]) → a small CNN (3 strided convs);
+* ``local_map`` (1 × L × L, uint8; SB3 scales images to [0, 1]) → a small CNN (4 × 4 patches,
+  then one strided 3 × 3 conv);
 * ``sonar``, ``odometry``, ``teammate`` → one MLP layer, each input divided by its space's bound
   so every feature lies in [-1, 1];
 * the padded graph (``graph_nodes`` N × F, ``graph_mask``, ``graph_adjacency``) → a per-node
@@ -49,10 +50,12 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         sp = observation_space.spaces
 
         channels = sp["local_map"].shape[0]
+        # 4 × 4 patches (0.6 m at the default 0.15 m/pixel) then one 3 × 3 conv: 7× cheaper to
+        # train than three stride-2 convs (170 → 24 ms per 256-batch step on one thread) and
+        # fine enough for where to go next
         self.cnn = nn.Sequential(
-            nn.Conv2d(channels, 16, 5, stride=2, padding=2), nn.ReLU(),
+            nn.Conv2d(channels, 16, 4, stride=4), nn.ReLU(),
             nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(32, 32, 3, stride=2, padding=1), nn.ReLU(),
             nn.Flatten(),
         )
         with torch.no_grad():

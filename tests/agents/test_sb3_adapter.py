@@ -51,7 +51,7 @@ class CountdownEnv(ParallelEnv):
         rew = {a: float(self.t) for a in self.agents}
         terms = {a: term for a in self.agents}
         truncs = {a: trunc for a in self.agents}
-        infos = {a: {"t": self.t} for a in self.agents}
+        infos = {a: {"t": self.t, "map": np.zeros((100, 100))} for a in self.agents}
         if term or trunc:
             self.agents = []
         return obs, rew, terms, truncs, infos
@@ -116,6 +116,21 @@ def test_worker_processes_match_in_process():
         assert remote.env_method("action_space", "a", indices=[5])[0].shape == (1,)
     finally:
         remote.close()
+
+
+def test_infos_cross_processes_without_their_heavy_values():
+    local = ParallelVecEnv([make()])
+    remote = ParallelVecEnv([make()], n_workers=2)
+    try:
+        for venv in (local, remote):
+            venv.reset()
+        info_local = local.step(np.zeros((2, 1)))[3][0]
+        info_remote = remote.step(np.zeros((2, 1)))[3][0]
+    finally:
+        remote.close()
+    assert info_local["t"] == info_remote["t"] == 1
+    assert info_local["map"].shape == (100, 100)
+    assert "map" not in info_remote
 
 
 def test_bad_arguments():
