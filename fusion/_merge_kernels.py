@@ -494,3 +494,37 @@ def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_
                           branch_tol, min_sin, near_miss, match_b, d2_b)
     return out
 
+
+
+@njit(cache=True, nogil=True)
+def components_by_first(n, rows, cols):
+    """Connected components of the ``n``-node graph with edges ``rows[k]``–``cols[k]``
+    (union-find). Returns ``(label, first)``: components numbered in order of their lowest
+    node, ``first[c]`` that node."""
+    parent = np.arange(n)
+    for k in range(rows.shape[0]):
+        u, v = rows[k], cols[k]
+        while parent[u] != u:
+            parent[u] = parent[parent[u]]
+            u = parent[u]
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        if u < v:
+            parent[v] = u
+        elif v < u:
+            parent[u] = v
+    label = np.empty(n, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    c = 0
+    for i in range(n):  # a root is the lowest node of its component (unions keep the lower)
+        r = i
+        while parent[r] != r:
+            r = parent[r]
+        if r == i:
+            label[i] = c
+            first[c] = i
+            c += 1
+        else:
+            label[i] = label[r]
+    return label, first[:c]
