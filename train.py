@@ -1,7 +1,10 @@
 """Train an exploration policy with PPO (Stable-Baselines3), map fusion inside the RL loop.
 
 Both robots share one policy (parameter sharing): each robot of each env is one sub-environment
-of a :class:`agents.sb3.ParallelVecEnv`. The reward is the env's team reward — the growth of the
+of a :class:`agents.sb3.ParallelVecEnv`. The policy acts at one of two levels (``--level``):
+``goals`` (default) picks which frontier sector to explore next every ``--hold`` steps and a
+frontier planner drives there (:mod:`agents.goals`); ``motion`` outputs the env's velocity
+commands every step. The reward is the env's team reward — the growth of the
 *shared* map, i.e. of robot 0's map united with robot 1's map moved by the latest accepted
 ``fusion.merge_maps`` transform — so a wrong merge costs reward (``--reward-mode oracle`` uses the
 true union instead, for ablations).
@@ -28,6 +31,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import gymnasium as gym
 import numpy as np
 import torch
 import tyro
@@ -43,7 +47,7 @@ from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
 from agents.scripted import make_team
 from fusion.pairs import atomic_write_json
-from topo._io import atomic_write
+from topo._io import atomic_write, atomic_write_bytes
 
 ENV_ID = "two_robot_explore_v0"
 
@@ -53,7 +57,13 @@ class Args:
     """PPO on two_robot_explore_v0 with parameter sharing (both robots, one policy)."""
 
     total_timesteps: int = 200_000
-    """Agent-steps to train for (each env step gives two: one per robot)."""
+    """Agent-steps to train for (each env step gives two: one per robot; at the goals level
+    a decision counts its ``hold`` env steps)."""
+    level: Literal["goals", "motion"] = "goals"
+    """What the policy decides: a frontier sector every ``hold`` steps (a planner drives), or
+    the velocity command every step."""
+    hold: int = 10
+    """Env steps each goal decision is held (``level="goals"``)."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
@@ -78,13 +88,18 @@ class Args:
     n_epochs: int = 4
     """Optimisation epochs per rollout."""
     gamma: float = 0.99
-    """Discount factor."""
+    """Discount factor per env step (a goal decision discounts by ``gamma ** hold``)."""
     gae_lambda: float = 0.95
     """GAE lambda."""
     ent_coef: float = 0.005
     """Entropy bonus."""
     clip_range: float = 0.2
     """PPO clip range."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian actions (continuous actions)."""
+    forward_bias: float = 0.0
+    """Initial mean of the speed action (continuous actions). SB3 starts every action mean at
+    0, a robot that dithers in place; a positive bias starts it driving."""
     eval_every: int = 50_000
     """Agent-steps between evaluations (0: only at the end)."""
     eval_episodes: int = 4
@@ -108,7 +123,7 @@ class Args:
 
     def __post_init__(self) -> None:
         for name in ("total_timesteps", "n_envs", "n_workers", "n_steps", "batch_size",
-                     "n_epochs", "eval_episodes", "torch_threads", "max_cycles"):
+                     "n_epochs", "eval_episodes", "torch_threads", "max_cycles", "hold"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
@@ -116,6 +131,8 @@ class Args:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+        if self.level not in ("goals", "motion"):
+            raise ValueError(f"level must be one of ['goals', 'motion'], got {self.level!r}")
         if self.reward_mode not in ("shared", "oracle", "individual"):
             raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
                              f"got {self.reward_mode!r}")
@@ -135,6 +152,11 @@ class Args:
                 raise ValueError(f"eval_baselines: unknown explorer {name!r}; allowed: "
                                  f"{sorted(EXPLORERS)}")
 
+    @property
+    def steps_per_decision(self) -> int:
+        """Env steps per policy decision: ``hold`` at the goals level, else 1."""
+        return self.hold if self.level == "goals" else 1
+
     def env_config(self) -> dict[str, Any]:
         cfg = {"max_cycles": self.max_cycles, "reward_mode": self.reward_mode,
                "world": {"size": tuple(self.world_size)}}
@@ -146,19 +168,26 @@ class Args:
         return cfg
 
 
-def make_env(config: dict[str, Any]) -> Any:
-    """One ``two_robot_explore_v0`` ParallelEnv (a top-level function: picklable for workers)."""
+def make_env(config: dict[str, Any], level: str = "motion", hold: int = 10) -> Any:
+    """One ``two_robot_explore_v0`` ParallelEnv, wrapped in
+    :class:`agents.goals.FrontierGoalEnv` at the goals level (a top-level function: picklable
+    for workers)."""
     from envs.two_robot_explore_v0 import parallel_env
 
-    return parallel_env(**config)
+    env = parallel_env(**config)
+    if level == "goals":
+        from agents.goals import FrontierGoalEnv
+
+        env = FrontierGoalEnv(env, hold=hold)
+    return env
 
 
 class _EnvFactory:
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.config = config
+    def __init__(self, config: dict[str, Any], level: str, hold: int) -> None:
+        self.config, self.level, self.hold = config, level, hold
 
     def __call__(self) -> Any:
-        return make_env(self.config)
+        return make_env(self.config, self.level, self.hold)
 
 
 # ------------------------------------------------------------------------------- callbacks
@@ -166,20 +195,22 @@ class InfoLogger(BaseCallback):
     """Logs env infos at episode ends (true/shared coverage, merge acceptance and errors) and
     steps/s; drives the progress bar."""
 
-    def __init__(self, total: int, progress: bool) -> None:
+    def __init__(self, total: int, progress: bool, steps_per_decision: int) -> None:
         super().__init__()
-        self.total, self.progress = total, progress
+        self.total, self.progress, self.scale = total, progress, steps_per_decision
         self.bar: Any = None
         self.t0 = 0.0
-        self.start_steps = 0
+        self.agent_steps = 0
 
     def _on_training_start(self) -> None:
-        self.t0, self.start_steps = time.perf_counter(), self.num_timesteps
-        self.bar = tqdm(total=self.total, initial=self.num_timesteps, unit="step",
-                        disable=not self.progress, desc="train", smoothing=0.05)
+        self.t0, self.agent_steps = time.perf_counter(), 0
+        self.bar = tqdm(total=self.total, initial=self.num_timesteps * self.scale,
+                        unit="step", disable=not self.progress, desc="train", smoothing=0.05)
 
     def _on_step(self) -> bool:
-        self.bar.update(self.training_env.num_envs)
+        new = sum(int(info.get("env_steps", 1)) for info in self.locals["infos"])
+        self.agent_steps += new
+        self.bar.update(new)
         for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
             if not done:
                 continue
@@ -193,8 +224,7 @@ class InfoLogger(BaseCallback):
                         self.logger.record_mean(f"merge/{key}", float(info[key]))
         elapsed = time.perf_counter() - self.t0
         if elapsed > 0:
-            self.logger.record("time/agent_steps_per_s",
-                               (self.num_timesteps - self.start_steps) / elapsed)
+            self.logger.record("time/agent_steps_per_s", self.agent_steps / elapsed)
         return True
 
     def _on_training_end(self) -> None:
@@ -206,45 +236,55 @@ def save_model_atomic(model: PPO, path: Path) -> None:
     atomic_write(path, model.save)
 
 
-class Checkpointer(BaseCallback):
-    """Saves ``checkpoints/step_<N>.zip`` atomically every ``every`` agent-steps."""
+class _Periodic(BaseCallback):
+    """Calls :meth:`fire` with the agent-step count every ``every`` agent-steps (``0``: never;
+    SB3 counts decisions, ``scale`` env steps each)."""
 
-    def __init__(self, folder: Path, every: int) -> None:
+    def __init__(self, every: int, scale: int) -> None:
         super().__init__()
-        self.folder, self.every = folder, every
+        self.every, self.scale = every, scale
         self.next = 0
 
     def _on_training_start(self) -> None:
-        self.next = (self.num_timesteps // self.every + 1) * self.every if self.every else 0
+        steps = self.num_timesteps * self.scale
+        self.next = (steps // self.every + 1) * self.every if self.every else 0
 
     def _on_step(self) -> bool:
-        if self.every and self.num_timesteps >= self.next:
-            save_model_atomic(self.model, self.folder / f"step_{self.num_timesteps:09d}.zip")
+        steps = self.num_timesteps * self.scale
+        if self.every and steps >= self.next:
+            self.fire(steps)
             self.next += self.every
         return True
 
+    def fire(self, steps: int) -> None:
+        raise NotImplementedError
 
-class Evaluator(BaseCallback):
+
+class Checkpointer(_Periodic):
+    """Saves ``checkpoints/step_<N>.zip`` atomically every ``every`` agent-steps."""
+
+    def __init__(self, folder: Path, every: int, scale: int = 1) -> None:
+        super().__init__(every, scale)
+        self.folder = folder
+
+    def fire(self, steps: int) -> None:
+        save_model_atomic(self.model, self.folder / f"step_{steps:09d}.zip")
+
+
+class Evaluator(_Periodic):
     """Every ``every`` agent-steps, runs the current policy on the fixed evaluation worlds and
     writes the comparison with the scripted baselines (see :func:`evaluate`)."""
 
     def __init__(self, args: Args, run_dir: Path, every: int) -> None:
-        super().__init__()
-        self.args, self.run_dir, self.every = args, run_dir, every
-        self.next = 0
+        super().__init__(every, args.steps_per_decision)
+        self.args, self.run_dir = args, run_dir
 
-    def _on_training_start(self) -> None:
-        self.next = (self.num_timesteps // self.every + 1) * self.every if self.every else 0
-
-    def _on_step(self) -> bool:
-        if self.every and self.num_timesteps >= self.next:
-            report = evaluate(self.model, self.args, self.run_dir, self.num_timesteps)
-            for row in report["rows"]:
-                if row["explorer"] == "ppo":
-                    for key in ("T50", "T85", "final_coverage"):
-                        self.logger.record(f"eval/{key}", row[key])
-            self.next += self.every
-        return True
+    def fire(self, steps: int) -> None:
+        report = evaluate(self.model, self.args, self.run_dir, steps)
+        for row in report["rows"]:
+            if row["explorer"] == "ppo":
+                for key in ("T50", "T85", "final_coverage"):
+                    self.logger.record(f"eval/{key}", row[key])
 
 
 # ------------------------------------------------------------------------------- evaluation
@@ -306,7 +346,7 @@ def evaluate(model: PPO, args: Args, run_dir: Path, step: int) -> dict[str, Any]
         lines.append(f"| {r['explorer']} | {r['T50']:.0f} | {r['T85']:.0f} | {r['T95']:.0f} | "
                      f"{r['reached_T85']:.0%} | {r['final_coverage']:.2f} | {r['overlap']:.2f} "
                      f"| {r['collisions']:.1f} |")
-    (run_dir / "eval.md").write_text("\n".join(lines) + "\n")
+    atomic_write_bytes(run_dir / "eval.md", ("\n".join(lines) + "\n").encode())
     _plot_coverage(curves, run_dir / "eval_coverage.png", step)
     return report
 
@@ -363,8 +403,9 @@ def main(args: Args) -> Path:
     atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
 
     config = args.env_config()
-    venv = ParallelVecEnv([_EnvFactory(config) for _ in range(args.n_envs)],
-                          n_workers=args.n_workers)
+    scale = args.steps_per_decision
+    venv = ParallelVecEnv([_EnvFactory(config, args.level, args.hold)
+                           for _ in range(args.n_envs)], n_workers=args.n_workers)
     venv = VecMonitor(venv)
     venv.seed(args.seed)
     try:
@@ -375,23 +416,31 @@ def main(args: Args) -> Path:
             model = PPO(
                 "MultiInputPolicy", venv, learning_rate=args.learning_rate,
                 n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
-                gamma=args.gamma, gae_lambda=args.gae_lambda, ent_coef=args.ent_coef,
+                gamma=args.gamma ** scale, gae_lambda=args.gae_lambda, ent_coef=args.ent_coef,
                 clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
-                               "net_arch": {"pi": [64], "vf": [64]}},
+                               "net_arch": {"pi": [64], "vf": [64]},
+                               **({"log_std_init": args.log_std_init}
+                                  if isinstance(venv.action_space, gym.spaces.Box) else {})},
             )
+            if isinstance(venv.action_space, gym.spaces.Box):
+                with torch.no_grad():
+                    model.policy.action_net.bias[0] += args.forward_bias
+            if args.level == "goals":
+                model.goal_hold = args.hold  # saved with the model, read by SB3Explorer
         callbacks = CallbackList([
-            InfoLogger(args.total_timesteps, args.progress),
-            Checkpointer(run_dir / "checkpoints", args.checkpoint_every),
+            InfoLogger(args.total_timesteps, args.progress, scale),
+            Checkpointer(run_dir / "checkpoints", args.checkpoint_every, scale),
             Evaluator(args, run_dir, args.eval_every),
         ])
-        remaining = args.total_timesteps - model.num_timesteps  # a resumed run finishes the budget
+        # SB3 counts decisions; a resumed run finishes the budget
+        remaining = math.ceil(args.total_timesteps / scale) - model.num_timesteps
         if remaining > 0:
             model.learn(total_timesteps=remaining, callback=callbacks,
                         reset_num_timesteps=checkpoint is None, tb_log_name="ppo")
         save_model_atomic(model, run_dir / "model.zip")
-        evaluate(model, args, run_dir, model.num_timesteps)
+        evaluate(model, args, run_dir, model.num_timesteps * scale)
     finally:
         venv.close()
     print((run_dir / "eval.md").read_text())

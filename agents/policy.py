@@ -4,8 +4,9 @@ Three encoders, concatenated:
 
 * ``local_map`` (1 × L × L, uint8; SB3 scales images to [0, 1]) → a small CNN (4 × 4 patches,
   then one strided 3 × 3 conv);
-* ``sonar``, ``odometry``, ``teammate`` → one MLP layer, each input divided by its space's bound
-  so every feature lies in [-1, 1];
+* ``sonar``, ``odometry``, ``teammate`` (and ``frontiers`` when the observation has it:
+  :class:`agents.goals.FrontierGoalEnv`) → one MLP layer, each input divided by its space's
+  bound so every feature lies in [-1, 1];
 * the padded graph (``graph_nodes`` N × F, ``graph_mask``, ``graph_adjacency``) → a per-node
   MLP, one round of mean-neighbour message passing, then masked mean- and max-pooling: a
   permutation-invariant summary (Deep Sets with one graph-convolution step) that ignores
@@ -21,6 +22,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 VECTOR_KEYS = ("sonar", "odometry", "teammate")
+OPTIONAL_VECTOR_KEYS = ("frontiers",)
 GRAPH_KEYS = ("graph_nodes", "graph_mask", "graph_adjacency")
 
 
@@ -62,8 +64,10 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
             n_flat = self.cnn(torch.zeros(1, *sp["local_map"].shape)).shape[1]
         self.map_head = nn.Sequential(nn.Linear(n_flat, map_features), nn.ReLU())
 
-        self.register_buffer("vector_scale", torch.cat([_bound(sp[k]) for k in VECTOR_KEYS]))
-        n_vec = int(sum(np.prod(sp[k].shape) for k in VECTOR_KEYS))
+        self.vector_keys = VECTOR_KEYS + tuple(k for k in OPTIONAL_VECTOR_KEYS if k in sp)
+        self.register_buffer("vector_scale", torch.cat([_bound(sp[k]).flatten()
+                                                        for k in self.vector_keys]))
+        n_vec = int(sum(np.prod(sp[k].shape) for k in self.vector_keys))
         self.vector = nn.Sequential(nn.Linear(n_vec, vector_features), nn.ReLU())
 
         node_space = sp["graph_nodes"]
@@ -75,7 +79,7 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         m = self.map_head(self.cnn(obs["local_map"]))
-        vec = torch.cat([obs[k].flatten(1) for k in VECTOR_KEYS], dim=1) / self.vector_scale
+        vec = torch.cat([obs[k].flatten(1) for k in self.vector_keys], dim=1) / self.vector_scale
         v = self.vector(vec)
 
         mask = obs["graph_mask"].unsqueeze(-1)  # (B, N, 1)

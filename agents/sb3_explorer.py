@@ -1,6 +1,9 @@
 """``SB3Explorer``: a trained Stable-Baselines3 policy behind the :class:`Explorer` interface, so
 learned policies drive evaluations and generate map-pair datasets like scripted ones
-(``--explorer sb3:PATH``)."""
+(``--explorer sb3:PATH``). Motion-level policies (trained on the env) act every step; goal-level
+policies (trained on :class:`agents.goals.FrontierGoalEnv`: a ``frontiers`` observation and
+``Discrete(SECTORS)`` actions) pick a sector every ``hold`` steps and a
+:class:`agents.goals.GoalFrontier` drives, exactly as in training."""
 
 from __future__ import annotations
 
@@ -21,6 +24,9 @@ class SB3Explorer(Explorer):
             share it between the two robots (parameter sharing, as trained).
         deterministic: use the policy's mode instead of sampling.
         action_type: must match what the model was trained with.
+
+    A goal-level model holds each decision for its ``goal_hold`` attribute's steps (saved with
+    the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise).
     """
 
     name = "sb3"
@@ -33,6 +39,21 @@ class SB3Explorer(Explorer):
                             f"{type(policy).__name__}")
         self.policy = policy
         self.deterministic = bool(deterministic)
+        space = getattr(policy, "observation_space", None)
+        self.goal_level = "frontiers" in getattr(space, "spaces", {})
+        self.controller = None
+        if self.goal_level:
+            from agents.goals import DEFAULT_HOLD, GoalFrontier
+
+            self.controller = GoalFrontier(action_type=action_type)
+            self.hold = int(getattr(policy, "goal_hold", DEFAULT_HOLD))
+            self._since = self.hold
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if self.controller is not None:
+            self.controller.reset(int(self.rng.integers(2**31)))
+            self._since = self.hold
 
     @staticmethod
     def load_policy(path: str | Path, device: str = "cpu") -> Any:
@@ -45,6 +66,14 @@ class SB3Explorer(Explorer):
         return PPO.load(path, device=device)
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray | int:
+        if self.controller is not None:
+            if self._since >= self.hold:
+                obs = {**observation, "frontiers": self.controller.frontier_features(info)}
+                sector, _ = self.policy.predict(obs, deterministic=self.deterministic)
+                self.controller.choose_sector(int(sector))
+                self._since = 0
+            self._since += 1
+            return self.controller.act(observation, info)
         action, _ = self.policy.predict(dict(observation), deterministic=self.deterministic)
         if self.action_type == "discrete":
             return int(action)

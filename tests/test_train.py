@@ -11,7 +11,7 @@ from fusion.pairs import load_pairs
 from train import Args, main
 
 torch.set_num_threads(1)
-TINY = {"total_timesteps": 256, "n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1,
+TINY = {"total_timesteps": 256, "level": "motion", "n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1,
         "eval_every": 0, "eval_episodes": 1, "max_cycles": 40, "world_size": (8.0, 8.0),
         "checkpoint_every": 128, "progress": False, "eval_baselines": ("random_walk",)}
 
@@ -54,6 +54,29 @@ def test_resume_finishes_the_budget(run_dir, tmp_path):
     assert PPO.load(first / "model.zip").num_timesteps >= 256
 
 
+def test_goal_level_policy_trains_and_drives_the_plain_env(tmp_path):
+    from stable_baselines3 import PPO
+
+    from agents.base import run_episode
+    from agents.sb3_explorer import SB3Explorer
+    from envs import two_robot_explore_v0
+
+    run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "level": "goals", "hold": 5,
+                                                   "n_steps": 16, "batch_size": 16,
+                                                   "checkpoint_every": 0}))
+    model = PPO.load(run / "model.zip", device="cpu")
+    assert model.goal_hold == 5 and model.num_timesteps * 5 >= TINY["total_timesteps"]
+    explorer = SB3Explorer(model)
+    assert explorer.goal_level and explorer.hold == 5
+    env = two_robot_explore_v0.parallel_env(max_cycles=30, world={"size": (8.0, 8.0)})
+    decisions = []
+    original = explorer.controller.choose_sector
+    explorer.controller.choose_sector = lambda k: (decisions.append(k), original(k))
+    run_episode(env, {"robot_0": explorer, "robot_1": SB3Explorer(model)}, seed=1)
+    assert len(decisions) == 6  # steps 1, 6, ..., 26 of 30
+    assert "| ppo |" in (run / "eval.md").read_text()
+
+
 def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
     generate(GenerateArgs(out=tmp_path, pairs=1, snapshots=1, max_cycles=30,
                           explorer=f"sb3:{run_dir / 'model.zip'}", world_size=(8.0, 8.0),
@@ -70,6 +93,8 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"resume": Path("/nowhere/run")}, "resume: no run folder or checkpoint at '/nowhere/run'"),
         ({"learning_rate": 0.0}, r"learning_rate must be in \(0, 1\], got 0.0"),
         ({"eval_baselines": ("oracle",)}, "eval_baselines: unknown explorer 'oracle'"),
+        ({"level": "joints"}, r"level must be one of \['goals', 'motion'\], got 'joints'"),
+        ({"hold": 0}, "hold must be an integer >= 1, got 0"),
     ],
 )
 def test_bad_arguments(kwargs, match):

@@ -1,0 +1,206 @@
+"""Learned goal selection over the frontier planner: the policy picks *where* to explore next,
+:class:`agents.scripted.Frontier`'s planner and pure pursuit drive there.
+
+Learning exploration from raw velocity commands takes PPO millions of steps; choosing among
+frontiers is the decision that matters (which room next, whether to follow the teammate), so
+the policy acts at that level, as in hierarchical exploration policies (e.g. Active Neural SLAM's
+global policy over a local planner):
+
+* :class:`GoalFrontier` — a ``Frontier`` explorer steered by a **sector**: one of
+  :data:`SECTORS` directions around the robot (0 ahead, counter-clockwise, 45° each). At each
+  decision it plans to the cheapest frontier cluster whose centroid lies in that sector (the
+  cheapest anywhere if that sector has none). :meth:`GoalFrontier.frontier_features` summarises
+  the frontier clusters per sector for the policy.
+* :class:`FrontierGoalEnv` — a PettingZoo ``ParallelEnv`` wrapper of ``two_robot_explore``
+  whose action is a sector (``Discrete(8)``) held for ``hold`` env steps (the reward is their
+  sum) and whose observation adds ``frontiers`` (:data:`SECTORS` × 3) to the env's own.
+* ``agents.SB3Explorer`` runs a policy trained on the wrapper on the plain env (same decisions
+  every ``hold`` steps), so it evaluates and generates datasets like any explorer.
+
+A policy that picks sectors uniformly at random is already a frontier explorer; PPO learns
+which frontier to prefer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from agents.scripted import Frontier, FrontierConfig, FrontierMap, _pose
+from topo._checks import check_int
+
+SECTORS = 8
+"""Directions a goal can be chosen in: 45° sectors around the robot, 0 ahead, CCW."""
+
+DEFAULT_HOLD = 10
+"""Env steps a goal decision is held (1 s at the default ``dt``)."""
+
+COST_SCALE = 20.0
+"""Path cost (m) that maps to feature 1.0."""
+
+AREA_SCALE = 10.0
+"""Frontier cluster area (m²) that maps to feature 1.0."""
+
+
+def sector_of(xy: np.ndarray, pose: np.ndarray) -> int:
+    """The sector (0 ahead, CCW) in which point ``xy`` lies, seen from ``pose``."""
+    bearing = math.atan2(xy[1] - pose[1], xy[0] - pose[0]) - pose[2]
+    return int(round(bearing / (2 * math.pi / SECTORS))) % SECTORS
+
+
+class GoalFrontier(Frontier):
+    """A :class:`~agents.scripted.Frontier` explorer whose goals lie in a chosen sector
+    (module docstring). Without a sector (``sector is None``) it is plain ``Frontier``."""
+
+    name = "goal_frontier"
+
+    def __init__(self, config: FrontierConfig | None = None,
+                 action_type: str = "continuous") -> None:
+        super().__init__(config, action_type)
+        self.sector: int | None = None
+        self._cached: tuple[tuple[int, int], FrontierMap | None] | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.sector = None
+        self._cached = None
+
+    def choose_sector(self, sector: int) -> None:
+        """Steer to ``sector`` (``0 <= sector < SECTORS``): re-plan at the next step."""
+        if isinstance(sector, bool) or not isinstance(sector, (int, np.integer)) or not (
+                0 <= sector < SECTORS):
+            raise ValueError(f"sector must be an int in [0, {SECTORS}), got {sector!r}")
+        self.sector = int(sector)
+        self.plan = None
+
+    def frontier_features(self, info: Mapping[str, Any]) -> np.ndarray:
+        """``(SECTORS, 3)`` float32 in ``[0, 1]``, per sector: a reachable frontier cluster is
+        there (0/1), the path cost to the cheapest one (``/ COST_SCALE``; 1 if none), their
+        total area (``/ AREA_SCALE``)."""
+        pose = _pose(info)
+        fmap = self._frontier_map(info, pose)
+        # the plan of the very next step reuses it (unless a goal was given up meanwhile)
+        self._cached = ((len(self.given_up), self._steps + 1), fmap)
+        out = np.zeros((SECTORS, 3), dtype=np.float32)
+        out[:, 1] = 1.0
+        if fmap is None:
+            return out
+        cell_area = fmap.resolution ** 2
+        for c in fmap.clusters(self.cfg.min_cluster_cells):
+            k = sector_of(c["centroid"], pose)
+            out[k, 0] = 1.0
+            out[k, 1] = min(out[k, 1], c["cost"] / COST_SCALE)
+            out[k, 2] = min(out[k, 2] + c["size"] * cell_area / AREA_SCALE, 1.0)
+        return out
+
+    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
+        cached, self._cached = self._cached, None
+        if cached is not None and cached[0] == (len(self.given_up), self._steps):
+            return cached[1]
+        return super()._frontier_map(info, pose)
+
+    def _choose(self, clusters: list[dict[str, Any]], info: Mapping[str, Any],
+                pose: np.ndarray) -> dict[str, Any]:
+        if self.sector is None:
+            return super()._choose(clusters, info, pose)
+        inside = [c for c in clusters if sector_of(c["centroid"], pose) == self.sector]
+        return min(inside or clusters, key=lambda c: c["cost"])
+
+
+class FrontierGoalEnv(ParallelEnv):
+    """``two_robot_explore`` with goal-level actions (module docstring).
+
+    Args:
+        env: a ``two_robot_explore_v0`` ``ParallelEnv``.
+        hold: env steps each decision is held (the reward is their sum), ``>= 1``.
+        config: the :class:`~agents.scripted.FrontierConfig` of the robots' planners.
+
+    ``infos`` are the env's after the last held step, plus ``env_steps`` (how many were taken:
+    fewer than ``hold`` when the episode ended).
+    """
+
+    metadata = {"name": "two_robot_explore_goals_v0", "render_modes": ["rgb_array", "human"],
+                "is_parallelizable": True}
+
+    def __init__(self, env: Any, hold: int = DEFAULT_HOLD,
+                 config: FrontierConfig | None = None) -> None:
+        if not hasattr(env, "possible_agents") or not hasattr(env, "config"):
+            raise TypeError(f"env must be a two_robot_explore ParallelEnv, got "
+                            f"{type(env).__name__}")
+        self.env = env
+        self.hold = check_int(hold, "hold", low=1)
+        self.possible_agents = list(env.possible_agents)
+        self.agents: list[str] = []
+        self.render_mode = env.render_mode
+        action_type = env.config.action_type
+        self.controllers = {a: GoalFrontier(config, action_type=action_type)
+                            for a in self.possible_agents}
+        inner = env.observation_space(self.possible_agents[0])
+        self._obs_space = spaces.Dict({
+            **inner.spaces,
+            "frontiers": spaces.Box(0.0, 1.0, (SECTORS, 3), dtype=np.float32),
+        })
+        self._act_space = spaces.Discrete(SECTORS)
+        self._rng: np.random.Generator | None = None
+        self._last: tuple[dict, dict] | None = None
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._obs_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._act_space
+
+    def reset(self, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+        """Reset the env; the planners' generators derive from ``seed``."""
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        obs, infos = self.env.reset(seed=seed, options=options)
+        for c in self.controllers.values():
+            c.reset(int(self._rng.integers(2**31)))
+        self.agents = list(self.env.agents)
+        self._last = (obs, infos)
+        return self._augment(obs, infos), infos
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Steer each robot to its chosen sector and run ``hold`` env steps."""
+        if self._last is None:
+            raise RuntimeError("call reset() before step()")
+        if not self.agents:
+            raise RuntimeError("step() called after the episode ended; call reset()")
+        if not isinstance(actions, dict) or sorted(actions) != sorted(self.agents):
+            raise ValueError(f"actions must be a dict with one sector per agent "
+                             f"{self.agents}, got {actions!r}")
+        for a in self.agents:
+            try:
+                self.controllers[a].choose_sector(actions[a])
+            except ValueError as exc:
+                raise ValueError(f"action of {a}: {exc}") from None
+        obs, infos = self._last
+        total = dict.fromkeys(self.agents, 0.0)
+        taken = 0
+        while taken < self.hold and self.env.agents:
+            low = {a: self.controllers[a].act(obs[a], infos[a]) for a in self.env.agents}
+            obs, rewards, terms, truncs, infos = self.env.step(low)
+            taken += 1
+            for a, r in rewards.items():
+                total[a] += r
+        infos = {a: {**i, "env_steps": taken} for a, i in infos.items()}
+        self.agents = list(self.env.agents)
+        self._last = (obs, infos)
+        return self._augment(obs, infos), total, terms, truncs, infos
+
+    def _augment(self, obs: dict, infos: dict) -> dict:
+        return {a: {**o, "frontiers": self.controllers[a].frontier_features(infos[a])}
+                for a, o in obs.items()}
+
+    def render(self) -> Any:
+        return self.env.render()
+
+    def close(self) -> None:
+        self.env.close()

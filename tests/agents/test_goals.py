@@ -1,0 +1,111 @@
+"""Goal-level actions: the FrontierGoalEnv wrapper (PettingZoo API, held rewards, determinism,
+bad actions) and GoalFrontier's sector steering."""
+
+import math
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test
+
+from agents.goals import SECTORS, FrontierGoalEnv, GoalFrontier, sector_of
+from envs import two_robot_explore_v0
+
+SMALL = {"world": {"size": (8.0, 8.0)}, "max_cycles": 60}
+
+
+def goal_env(hold=5, **kw):
+    return FrontierGoalEnv(two_robot_explore_v0.parallel_env(**{**SMALL, **kw}), hold=hold)
+
+
+def test_passes_pettingzoo_parallel_api_test():
+    parallel_api_test(goal_env(), num_cycles=15)
+
+
+def test_sector_of_splits_the_circle_in_45_degree_sectors_from_the_heading():
+    pose = np.array([1.0, 2.0, math.pi / 2])  # facing +y
+    assert sector_of(np.array([1.0, 5.0]), pose) == 0  # ahead
+    assert sector_of(np.array([-2.0, 2.0]), pose) == 2  # left
+    assert sector_of(np.array([1.0, -1.0]), pose) == 4  # behind
+    assert sector_of(np.array([4.0, 2.0]), pose) == 6  # right
+    assert sector_of(np.array([0.0, 3.0]), pose) == 1  # ahead-left
+
+
+def test_a_decision_is_held_and_its_reward_is_the_sum_of_the_held_steps():
+    env = goal_env(hold=5)
+    inner_rewards = []
+    step = env.env.step
+
+    def recording(actions):
+        out = step(actions)
+        inner_rewards.append(out[1]["robot_0"])
+        return out
+
+    env.env.step = recording
+    env.reset(seed=4)
+    obs, rewards, *_rest, infos = env.step({"robot_0": 0, "robot_1": 3})
+    assert infos["robot_0"]["env_steps"] == 5 == len(inner_rewards)
+    assert rewards["robot_0"] == pytest.approx(sum(inner_rewards))
+    assert obs["robot_0"]["frontiers"].shape == (SECTORS, 3)
+    assert env.observation_space("robot_0").contains(obs["robot_0"])
+
+
+def test_the_last_decision_stops_at_the_episode_end():
+    env = goal_env(hold=7, max_cycles=10)
+    env.reset(seed=0)
+    env.step({"robot_0": 0, "robot_1": 0})
+    *_rest, truncs, infos = env.step({"robot_0": 0, "robot_1": 0})
+    assert infos["robot_0"]["env_steps"] == 3 and all(truncs.values()) and not env.agents
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step({"robot_0": 0, "robot_1": 0})
+
+
+def test_same_seed_same_episode():
+    def trace(seed):
+        env = goal_env(hold=4)
+        rng = np.random.default_rng(seed)
+        obs, _ = env.reset(seed=seed)
+        out = [obs["robot_0"]["frontiers"].tobytes()]
+        while env.agents:
+            obs, rew, *_rest, infos = env.step({a: int(rng.integers(SECTORS))
+                                                for a in env.agents})
+            out += [obs["robot_1"]["frontiers"].tobytes(), rew["robot_0"],
+                    infos["robot_0"]["pose"].tobytes()]
+        return out
+
+    assert trace(3) == trace(3)
+    assert trace(3) != trace(4)
+
+
+@pytest.mark.parametrize(("action", "error", "match"), [
+    (8, ValueError, r"action of robot_0: sector must be an int in \[0, 8\), got 8"),
+    (-1, ValueError, r"sector must be an int in \[0, 8\), got -1"),
+    (1.5, ValueError, r"sector must be an int in \[0, 8\), got 1.5"),
+])
+def test_bad_actions_name_the_problem(action, error, match):
+    env = goal_env()
+    env.reset(seed=0)
+    with pytest.raises(error, match=match):
+        env.step({"robot_0": action, "robot_1": 0})
+    with pytest.raises(ValueError, match="one sector per agent"):
+        env.step({"robot_0": 0})
+
+
+def test_the_chosen_sector_decides_the_goal():
+    env = two_robot_explore_v0.parallel_env(**SMALL)
+    obs, infos = env.reset(seed=2)
+    for _ in range(15):  # look around a little: frontiers in several directions
+        obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
+    info = infos["robot_0"]
+    robot = GoalFrontier()
+    robot.reset(0)
+    features = robot.frontier_features(info)
+    available = np.flatnonzero(features[:, 0])
+    assert len(available) >= 2, features
+    pose = np.asarray(info["odometry"])[:3]
+    for k in available:
+        robot.choose_sector(int(k))
+        robot.act(obs["robot_0"], info)
+        assert robot.plan is not None
+        # the goal is the cheapest cell of a cluster whose centroid lies in sector k
+        assert robot.plan.cost == pytest.approx(features[k, 1] * 20.0, abs=1e-6)
+        assert sector_of(robot.plan.goal, pose) in {(k - 1) % SECTORS, k, (k + 1) % SECTORS}
