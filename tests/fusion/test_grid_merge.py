@@ -106,6 +106,20 @@ def test_bad_config():
         GridMergeConfig(resolution=0.0)
     with pytest.raises(ValueError, match="GridMergeConfig.min_wall_agreement must be <= 1.0"):
         GridMergeConfig(min_wall_agreement=2.0)
+    with pytest.raises(ValueError, match="GridMergeConfig.coarse_factor must be >= 1, got 0"):
+        GridMergeConfig(coarse_factor=0)
+    with pytest.raises(TypeError, match="GridMergeConfig.refine_top must be an integer"):
+        GridMergeConfig(refine_top=2.5)
+
+
+def test_coarse_sweep_finds_what_the_full_resolution_sweep_finds():
+    # the coarse-to-fine search must not lose the alignment the exhaustive sweep finds
+    a, b, truth = overlapping_views(133.0, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
+    full = merge_grids(a, b, GridMergeConfig(coarse_factor=1, refine_top=1))
+    fast = merge_grids(a, b, GridMergeConfig(coarse_factor=3))
+    assert full.accepted and fast.accepted
+    assert math.degrees(fast.transform.rotation_error(full.transform)) < 1.0
+    assert fast.transform.translation_error(full.transform, at=np.zeros(2)) < 0.15
 
 
 def test_grids_refute_a_wrong_transform():
