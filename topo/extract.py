@@ -53,6 +53,7 @@ measure under ``corner_angle`` and get no corner node.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -439,6 +440,14 @@ class _Graph:
             self._split(e, sorted(set(cuts.tolist())))
 
 
+@functools.lru_cache(maxsize=8)
+def _disk(radius: int) -> np.ndarray:
+    """``skimage.morphology.disk``, made once per radius (read-only)."""
+    out = disk(radius)
+    out.setflags(write=False)
+    return out
+
+
 def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _Graph:
     """The skan graph of ``skel``; free-disc radii from ``free`` (the cleaned mask); nodes are
     kept in ``given`` (the caller's free cells)."""
@@ -508,7 +517,7 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     if config.min_hole_area > 0:
         free = remove_small_holes(free, max_size=int(config.min_hole_area / cell_area))
     if config.erode_radius > 0:
-        free = ndimage.binary_erosion(free, structure=disk(int(round(config.erode_radius / res))))
+        free = ndimage.binary_erosion(free, structure=_disk(int(round(config.erode_radius / res))))
     if config.min_component_area > 0:
         labels, n = ndimage.label(free)
         if n:
