@@ -318,17 +318,22 @@ def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
 
 @njit(cache=True, nogil=True)
 def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
+    """The point of ``P`` of a kind compatible with ``kind`` nearest to ``(x, y)`` within
+    ``gate2`` (squared): ``(index or -1, squared distance or gate2, whether any point of any
+    kind is within gate2)``."""
     best = gate2
     arg = -1
+    any_near = False
     for i in range(P.shape[0]):
-        ok = compat[kind, p_kind[i]] if compat_row_first else compat[p_kind[i], kind]
-        if not ok:
-            continue
         dd = (x - P[i, 0]) ** 2 + (y - P[i, 1]) ** 2
-        if dd <= best:
+        if dd > gate2:
+            continue
+        any_near = True
+        ok = compat[kind, p_kind[i]] if compat_row_first else compat[p_kind[i], kind]
+        if ok and dd <= best:
             best = dd
             arg = i
-    return arg, best
+    return arg, best, any_near
 
 
 @njit(cache=True, nogil=True)
@@ -352,11 +357,23 @@ def _segment_distance2(x, y, P, edges, limit2):
 
 
 @njit(cache=True, nogil=True)
-def _any_node_within(x, y, P, dist2):
-    for i in range(P.shape[0]):
-        if (x - P[i, 0]) ** 2 + (y - P[i, 1]) ** 2 <= dist2:
-            return True
-    return False
+def _bbox(P):
+    """``(x0, x1, y0, y1)`` of the points ``P``."""
+    x0 = x1 = P[0, 0]
+    y0 = y1 = P[0, 1]
+    for i in range(1, P.shape[0]):
+        x0, x1 = min(x0, P[i, 0]), max(x1, P[i, 0])
+        y0, y1 = min(y0, P[i, 1]), max(y1, P[i, 1])
+    return x0, x1, y0, y1
+
+
+@njit(cache=True, nogil=True)
+def _far_from_box(x, y, box, reach):
+    """Whether ``(x, y)`` is more than ``reach`` from the box (then it is more than ``reach``
+    from every point and segment inside it)."""
+    dx = max(box[0] - x, 0.0, x - box[1])
+    dy = max(box[2] - y, 0.0, y - box[3])
+    return dx * dx + dy * dy > reach * reach
 
 
 @njit(cache=True, nogil=True)
@@ -366,10 +383,25 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
     parallel paths are the same corridor seen twice, not a crossing): corridors that cross
     without a junction."""
     n = 0
+    if P.shape[0] == 0 or Q.shape[0] == 0:
+        return n
+    # only paths reaching into the other map's bounding box can cross one of its paths
+    qx0, qx1, qy0, qy1 = _bbox(Q)
+    px0, px1, py0, py1 = _bbox(P)
+    q_in = np.empty(q_edges.shape[0], dtype=np.bool_)
+    for f in range(q_edges.shape[0]):
+        u, v = q_edges[f, 0], q_edges[f, 1]
+        q_in[f] = not (max(Q[u, 0], Q[v, 0]) < px0 or min(Q[u, 0], Q[v, 0]) > px1
+                       or max(Q[u, 1], Q[v, 1]) < py0 or min(Q[u, 1], Q[v, 1]) > py1)
     for e in range(p_edges.shape[0]):
         ax, ay = P[p_edges[e, 0], 0], P[p_edges[e, 0], 1]
         rx, ry = P[p_edges[e, 1], 0] - ax, P[p_edges[e, 1], 1] - ay
+        if (max(ax, ax + rx) < qx0 or min(ax, ax + rx) > qx1 or max(ay, ay + ry) < qy0
+                or min(ay, ay + ry) > qy1):
+            continue
         for f in range(q_edges.shape[0]):
+            if not q_in[f]:
+                continue
             bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
             sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
             if (max(ax, ax + rx) < min(bx, bx + sx) or max(bx, bx + sx) < min(ax, ax + rx)
@@ -422,14 +454,31 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
         X[b, 0] = c * B[b, 0] - s * B[b, 1] + tx
         X[b, 1] = s * B[b, 0] + c * B[b, 1] + ty
     eps2 = eps * eps
+    # a node farther than ``reach`` from the other map's bounding box has no match, conflict or
+    # near miss there: skipped (about half the nodes of a half-overlapping pair)
+    reach = max(eps, near_miss)
+    box_a = np.array(_bbox(A))
+    box_x = np.array(_bbox(X))
+    far_b = np.empty(B.shape[0], dtype=np.bool_)
+    near_b = np.zeros(B.shape[0], dtype=np.bool_)  # some A node within eps
     nn_b = np.empty(B.shape[0], dtype=np.int64)
     for b in range(B.shape[0]):
-        nn_b[b], d2_b[b] = _nearest_compatible(X[b, 0], X[b, 1], b_kind[b], A, a_kind, False,
-                                               compat, eps2)
+        far_b[b] = _far_from_box(X[b, 0], X[b, 1], box_a, reach)
+        if far_b[b]:
+            nn_b[b], d2_b[b] = -1, eps2
+        else:
+            nn_b[b], d2_b[b], near_b[b] = _nearest_compatible(
+                X[b, 0], X[b, 1], b_kind[b], A, a_kind, False, compat, eps2)
+    far_a = np.empty(A.shape[0], dtype=np.bool_)
+    near_a = np.zeros(A.shape[0], dtype=np.bool_)
     nn_a = np.empty(A.shape[0], dtype=np.int64)
     for a in range(A.shape[0]):
-        nn_a[a], _ = _nearest_compatible(A[a, 0], A[a, 1], a_kind[a], X, b_kind, True,
-                                         compat, eps2)
+        far_a[a] = _far_from_box(A[a, 0], A[a, 1], box_x, reach)
+        if far_a[a]:
+            nn_a[a] = -1
+        else:
+            nn_a[a], _, near_a[a] = _nearest_compatible(A[a, 0], A[a, 1], a_kind[a], X, b_kind,
+                                                        True, compat, eps2)
     for b in range(B.shape[0]):
         a = nn_b[b]
         match_b[b] = -1
@@ -462,16 +511,17 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
         if u >= 0 and v >= 0 and a_near[u, v]:
             out[2] += 1.0
     miss2 = near_miss * near_miss
+    limit2 = max(eps2, miss2)  # farther paths make neither a conflict nor a near miss
     for b in range(B.shape[0]):
-        if b_kind[b] != loose_kind and not _any_node_within(X[b, 0], X[b, 1], A, eps2):
-            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, miss2)
+        if not far_b[b] and b_kind[b] != loose_kind and not near_b[b]:
+            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, limit2)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
                 out[8] += 1.0
     for a in range(A.shape[0]):
-        if a_kind[a] != loose_kind and not _any_node_within(A[a, 0], A[a, 1], X, eps2):
-            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, miss2)
+        if not far_a[a] and a_kind[a] != loose_kind and not near_a[a]:
+            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, limit2)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
