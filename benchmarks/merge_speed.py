@@ -10,6 +10,10 @@ of ``auto`` (what the merge costs when it has a core to itself). The exhaustive 
 (``n_A × n_B × 181`` placements): it runs up to ``--exhaustive-max`` nodes only.
 
     python benchmarks/merge_speed.py [--sizes 10,20,40,60,80,120,200] [--pairs 10]
+
+With ``--grids PAIRS_DIR`` (a map-pair dataset that ``python -m agents.dataset generate`` wrote)
+it times the occupancy-grid merges the environment runs instead: ``merge_grids`` and
+``hybrid_merge`` (with and without ``try_grids``), median and 90th percentile over the pairs.
 """
 
 from __future__ import annotations
@@ -17,11 +21,41 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
 from fusion.merge import METHODS, merge_maps
 from fusion.synthetic import SyntheticConfig, make_pair
+
+
+def grid_times(pairs_dir: Path) -> None:
+    """Print the time of the grid merges on every pair of ``pairs_dir``."""
+    from fusion.evaluate import load_pair_dir
+    from fusion.grid_merge import hybrid_merge, merge_grids
+
+    pairs = load_pair_dir(pairs_dir)
+    runs = {
+        "merge_grids": lambda p: merge_grids(*p.grids),
+        "hybrid_merge": lambda p: hybrid_merge(p.map_a, p.map_b, *p.grids, try_grids=True),
+        "hybrid (no grids)": lambda p: hybrid_merge(p.map_a, p.map_b, *p.grids,
+                                                    try_grids=False),
+    }
+    for run in runs.values():  # compiled kernels load on the first call
+        run(pairs[0])
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    accepted = dict.fromkeys(runs, 0)
+    for p in pairs:  # interleaved, so a busy machine slows every method alike
+        for name, run in runs.items():
+            t0 = time.perf_counter()
+            accepted[name] += run(p).accepted
+            times[name].append(time.perf_counter() - t0)
+    print(f"{len(pairs)} pairs from {pairs_dir}")
+    print(f"{'method':>20}{'median ms':>11}{'p90 ms':>9}{'accepted':>10}")
+    for name, t in times.items():
+        p90 = float(np.percentile(t, 90))
+        print(f"{name:>20}{1000 * statistics.median(t):>11.1f}{1000 * p90:>9.1f}"
+              f"{accepted[name]:>7}/{len(pairs)}")
 
 
 def main() -> None:
@@ -31,7 +65,12 @@ def main() -> None:
     parser.add_argument("--exhaustive-max", type=int, default=80,
                         help="largest size the exhaustive search runs at")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--grids", type=Path, default=None, metavar="PAIRS_DIR",
+                        help="time the grid merges on a map-pair dataset instead")
     args = parser.parse_args()
+    if args.grids is not None:
+        grid_times(args.grids)
+        return
     sizes = [int(s) for s in args.sizes.split(",")]
     cfg = SyntheticConfig(noise=0.15)
 
