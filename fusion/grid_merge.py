@@ -225,8 +225,9 @@ class _Correlator:
             th = thetas[i: i + 16]
             spec = self.fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
                                               workers=1)
-            spec += self.fa_free * sfft.rfft2(self._kernels(self.pts_free, th), self.fshape,
-                                              workers=1)
+            if len(self.pts_free):
+                spec += self.fa_free * sfft.rfft2(self._kernels(self.pts_free, th),
+                                                  self.fshape, workers=1)
             out[i: i + 16] = sfft.irfft2(spec, self.fshape, workers=1)[
                 :, : self.shape[0], : self.shape[1]]
         return out
