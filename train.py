@@ -31,7 +31,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import gymnasium as gym
 import numpy as np
 import torch
 import tyro
@@ -81,10 +80,11 @@ class Args:
     about 300–500 steps, so T85 separates explorers."""
     learning_rate: float = 3e-4
     """Adam learning rate."""
-    n_steps: int = 128
-    """Rollout length per sub-environment between updates."""
-    batch_size: int = 256
-    """Minibatch size."""
+    n_steps: int | None = None
+    """Rollout length (policy decisions) per sub-environment between updates; default 32 at
+    the goals level (a decision spans ``hold`` steps), 128 at the motion level."""
+    batch_size: int | None = None
+    """Minibatch size; default 64 at the goals level, 256 at the motion level."""
     n_epochs: int = 4
     """Optimisation epochs per rollout."""
     gamma: float = 0.99
@@ -95,11 +95,6 @@ class Args:
     """Entropy bonus."""
     clip_range: float = 0.2
     """PPO clip range."""
-    log_std_init: float = 0.0
-    """Initial log standard deviation of the Gaussian actions (continuous actions)."""
-    forward_bias: float = 0.0
-    """Initial mean of the speed action (continuous actions). SB3 starts every action mean at
-    0, a robot that dithers in place; a positive bias starts it driving."""
     eval_every: int = 50_000
     """Agent-steps between evaluations (0: only at the end)."""
     eval_episodes: int = 4
@@ -122,6 +117,11 @@ class Args:
     """Extra env config (EnvConfig fields) for training and evaluation."""
 
     def __post_init__(self) -> None:
+        goals = self.level == "goals"
+        if self.n_steps is None:
+            self.n_steps = 32 if goals else 128
+        if self.batch_size is None:
+            self.batch_size = 64 if goals else 256
         for name in ("total_timesteps", "n_envs", "n_workers", "n_steps", "batch_size",
                      "n_epochs", "eval_episodes", "torch_threads", "max_cycles", "hold"):
             value = getattr(self, name)
@@ -420,13 +420,8 @@ def main(args: Args) -> Path:
                 clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
-                               "net_arch": {"pi": [64], "vf": [64]},
-                               **({"log_std_init": args.log_std_init}
-                                  if isinstance(venv.action_space, gym.spaces.Box) else {})},
+                               "net_arch": {"pi": [64], "vf": [64]}},
             )
-            if isinstance(venv.action_space, gym.spaces.Box):
-                with torch.no_grad():
-                    model.policy.action_net.bias[0] += args.forward_bias
             if args.level == "goals":
                 model.goal_hold = args.hold  # saved with the model, read by SB3Explorer
         callbacks = CallbackList([
