@@ -109,7 +109,7 @@ class MergeConfig:
     coarse_tolerance: float = 0.7
     max_hypotheses: int = 1000
     candidates: int = 48
-    scored: int = 24
+    scored: int = 20
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
