@@ -17,7 +17,11 @@ exactly the same pairs. The format is :mod:`fusion.pairs`; ``fusion.evaluate DIR
 
 Ray: ``--backend ray`` runs one task per episode on ``ray.init()`` (a local cluster with
 ``--workers`` CPUs) or on an existing cluster (``--address``); tasks write their pair files into
-the output folder, which must then be on storage that every node shares.
+the output folder, which must then be on storage that every node shares. Workers of either
+backend run with one BLAS/OpenMP thread (one episode per CPU). Starting and stopping a local
+Ray cluster takes about 6 s on a 2-core machine, so on jobs of a few pairs the process backend
+is faster; on jobs of a minute or more the two are alike (``benchmarks/explorers.py --only
+dataset`` compares them).
 """
 
 from __future__ import annotations

@@ -1,0 +1,118 @@
+"""Frontier planning on hand-made grids: the shared map of CoordinatedFrontier (teammate's
+evidence moved by the merge transform), goals given up, and the teammate's goal steering the
+choice."""
+
+import math
+
+import numpy as np
+
+from agents.scripted import (
+    Blackboard,
+    CoordinatedFrontier,
+    Frontier,
+    FrontierConfig,
+    frontier_map,
+)
+from fusion import Rigid2D
+from topo.grid import OccupancyGrid
+
+CFG = FrontierConfig()
+
+
+def grid_with(free_boxes, wall_boxes=()) -> OccupancyGrid:
+    """A 0.1 m grid over ±8 m: cells in ``free_boxes`` (xmin, ymin, xmax, ymax) free, in
+    ``wall_boxes`` occupied (hit many times), the rest unknown."""
+    g = OccupancyGrid(0.1, (-8.0, -8.0, 8.0, 8.0))
+    xy = g.cell_to_world(np.argwhere(np.ones(g.shape, bool))).reshape(*g.shape, 2)
+    for value, boxes in ((-2.0, free_boxes), (3.0, wall_boxes)):
+        for x0, y0, x1, y1 in boxes:
+            inside = ((xy[..., 0] >= x0) & (xy[..., 0] < x1) & (xy[..., 1] >= y0)
+                      & (xy[..., 1] < y1))
+            g.log_odds[inside] = value
+    g._states[:] = g._classify(g.log_odds)
+    return g
+
+
+def frontier_xy(fmap) -> np.ndarray:
+    cells = np.argwhere(fmap.labels > 0)
+    return fmap.cell_to_xy(cells)
+
+
+# own robot: a room x in [-4, 0), y in [-3, 3) with walls above and below; open at x = 0
+OWN = grid_with([(-4.0, -3.0, 0.0, 3.0)], [(-4.0, 3.0, 0.0, 3.3), (-4.0, -3.3, 0.0, -3.0),
+                                          (-4.3, -3.3, -4.0, 3.3)])
+
+
+def test_frontier_of_own_grid_is_at_the_opening():
+    fmap = frontier_map(OWN, np.array([-3.0, 0.0]), CFG)
+    xy = frontier_xy(fmap)
+    assert len(xy) > 30 and np.all(np.abs(xy[:, 0]) < 0.3)  # the open side, x ≈ 0
+    (cluster,) = fmap.clusters(CFG.min_cluster_cells)
+    assert math.isfinite(cluster["cost"]) and 2.5 < cluster["cost"] < 6.0
+
+
+def test_teammate_evidence_moved_by_the_transform_removes_explored_frontiers():
+    # the teammate knows x in [0, 4) of the same room; its frame is ours rotated by 90°:
+    # p_mate = R(90°) p_own, so (x, y) lands at (-y, x)
+    to_mate = Rigid2D(math.pi / 2, (0.0, 0.0))
+    mate = grid_with([(-3.0, 0.0, 3.0, 4.0)], [(3.0, 0.0, 3.3, 4.0), (-3.3, 0.0, -3.0, 4.0)])
+    fmap = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammate=(mate, to_mate))
+    xy = frontier_xy(fmap)
+    # the opening at x = 0 is explored by the teammate; the shared map's frontier is at x ≈ 4,
+    # reached through the teammate's free cells
+    assert len(xy) > 30 and np.all(xy[:, 0] > 3.5)
+    (cluster,) = fmap.clusters(CFG.min_cluster_cells)
+    assert 6.0 < cluster["cost"] < 10.0
+    # a wrong transform (no rotation) puts the teammate's evidence elsewhere: opening stays
+    wrong = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammate=(mate, Rigid2D()))
+    assert np.any(np.abs(frontier_xy(wrong)[:, 0]) < 0.3)
+
+
+def test_excluded_points_drop_frontier_cells_within_the_give_up_radius():
+    fmap = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, exclude=np.array([[0.0, 1.5]]))
+    xy = frontier_xy(fmap)
+    assert len(xy) > 10
+    assert np.all(np.hypot(xy[:, 0], xy[:, 1] - 1.5) >= CFG.give_up_radius)
+    assert np.any(xy[:, 1] < 0.0)
+
+
+# a corridor y in [-1, 1) from x = -3 to 5 with walls along it: frontiers at both ends, the
+# left one nearer to a robot at x = 0
+CORRIDOR = grid_with([(-3.0, -1.0, 5.0, 1.0)], [(-3.0, 1.0, 5.0, 1.3), (-3.0, -1.3, 5.0, -1.0)])
+NO_ECHO = {"sonar": np.ones(8, np.float32), "teammate": np.zeros(5, np.float32)}
+
+
+def info_at(x: float, y: float = 0.0) -> dict:
+    return {"grid": CORRIDOR, "odometry": np.array([x, y, 0.0]), "merge": None}
+
+
+def test_frontier_goes_to_the_nearer_end_then_gives_it_up_when_reached():
+    robot = Frontier()
+    robot.reset(0)
+    robot.act(NO_ECHO, info_at(0.0))
+    goal = robot.plan.goal
+    assert goal[0] < -2.5
+    # arriving there does not clear it (the map is frozen): the goal is given up and the
+    # robot heads for the other end
+    robot.act(NO_ECHO, info_at(*goal))
+    assert any(np.allclose(g, goal) for g in robot.given_up)
+    assert robot.plan.goal[0] > 4.0
+    assert robot.events["given_up_reached"] == 1
+
+
+def test_coordinated_robot_leaves_the_teammates_goal_to_the_teammate():
+    alone = Frontier()
+    alone.reset(0)
+    alone.act(NO_ECHO, info_at(0.0))
+    assert alone.plan.goal[0] < -2.5
+    board = Blackboard()
+    robot = CoordinatedFrontier(0, board)
+    robot.reset(0)
+    # merged (identity transform); the teammate knows nothing extra and goes left
+    board.transform = Rigid2D()
+    board.grids[1] = grid_with([])
+    board.goals[1] = np.array([-2.9, 0.0])
+    robot.act(NO_ECHO, info_at(0.0))
+    assert robot.plan.goal[0] > 4.0
+    np.testing.assert_allclose(board.goals[0], robot.plan.goal, atol=1.0)
+
