@@ -266,7 +266,7 @@ class MappingConfig:
         merge_every: merge the two topological maps every this many steps (``0`` never).
         merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, or ``"none"``
             (:data:`MERGE_METHODS`).
-        grid_merge_every: with ``"hybrid"``, the (slower, ~0.1–0.4 s) occupancy-grid alignment
+        grid_merge_every: with ``"hybrid"``, the (slower, ~25–60 ms) occupancy-grid alignment
             is tried on merge steps that are multiples of this, until a transform is in use;
             ``0`` never. A multiple of ``merge_every`` (unused when ``merge_every`` is 0).
         grid_merge_growth: after a rejected grid alignment, the next one waits (beyond
