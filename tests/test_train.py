@@ -11,7 +11,7 @@ from fusion.pairs import load_pairs
 from train import Args, main
 
 torch.set_num_threads(1)
-TINY = {"total_timesteps": 256, "level": "motion", "n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1,
+TINY = {"total_timesteps": 256, "level": "motion", "n_envs": 1, "n_workers": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1,
         "eval_every": 0, "eval_episodes": 1, "max_cycles": 40, "world_size": (8.0, 8.0),
         "checkpoint_every": 128, "progress": False, "eval_baselines": ("random_walk",)}
 
@@ -62,6 +62,7 @@ def test_goal_level_policy_trains_and_drives_the_plain_env(tmp_path):
     from envs import two_robot_explore_v0
 
     run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "level": "goals", "hold": 5,
+                                                   "n_workers": 2,  # a worker process
                                                    "n_steps": 16, "batch_size": 16,
                                                    "checkpoint_every": 0}))
     model = PPO.load(run / "model.zip", device="cpu")
