@@ -198,8 +198,9 @@ class _EnvFactory:
 
 # ------------------------------------------------------------------------------- callbacks
 class InfoLogger(BaseCallback):
-    """Logs env infos at episode ends (true/shared coverage, merge acceptance and errors) and
-    steps/s; drives the progress bar."""
+    """Logs env infos at episode ends (true/shared coverage, merge acceptance and errors,
+    ``explore/episode_env_steps`` — SB3's ``rollout/ep_len_mean`` counts decisions) and
+    agent-steps/s; drives the progress bar."""
 
     def __init__(self, total: int, progress: bool, steps_per_decision: int) -> None:
         super().__init__()
@@ -210,16 +211,22 @@ class InfoLogger(BaseCallback):
 
     def _on_training_start(self) -> None:
         self.t0, self.agent_steps = time.perf_counter(), 0
+        self.episode_steps = np.zeros(self.training_env.num_envs, dtype=np.int64)
         self.bar = tqdm(total=self.total, initial=self.num_timesteps * self.scale,
                         unit="step", disable=not self.progress, desc="train", smoothing=0.05)
 
     def _on_step(self) -> bool:
-        new = sum(int(info.get("env_steps", 1)) for info in self.locals["infos"])
+        steps = np.array([int(info.get("env_steps", 1)) for info in self.locals["infos"]])
+        self.episode_steps += steps
+        new = int(steps.sum())
         self.agent_steps += new
         self.bar.update(new)
-        for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+        for k, (info, done) in enumerate(zip(self.locals["infos"], self.locals["dones"],
+                                             strict=True)):
             if not done:
                 continue
+            self.logger.record_mean("explore/episode_env_steps", float(self.episode_steps[k]))
+            self.episode_steps[k] = 0
             for key in ("true_coverage", "shared_coverage", "overlap", "merges"):
                 if key in info:
                     self.logger.record_mean(f"explore/{key}", float(info[key]))
