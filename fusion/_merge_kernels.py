@@ -479,6 +479,7 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
         else:
             nn_a[a], _, near_a[a] = _nearest_compatible(A[a, 0], A[a, 1], a_kind[a], X, b_kind,
                                                         True, compat, eps2)
+    a_hit = np.zeros(a_branch.shape[1], dtype=np.bool_)  # a's branches met by one of b
     for b in range(B.shape[0]):
         a = nn_b[b]
         match_b[b] = -1
@@ -487,6 +488,7 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
             out[0] += 1.0 - d2_b[b] / eps2
             out[1] += 1.0
             out[7] += d2_b[b]
+            a_hit[:] = False
             for i in range(b_branch.shape[1]):  # branches of b against those of a
                 if math.isnan(b_branch[b, i]):
                     continue
@@ -495,16 +497,10 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
                     if not math.isnan(a_branch[a, j]) and _angle_gap(
                             a_branch[a, j], b_branch[b, i] + theta) <= branch_tol:
                         hit = True
+                        a_hit[j] = True
                 out[5 if hit else 6] += 1.0
             for j in range(a_branch.shape[1]):  # branches of a without one of b
-                if math.isnan(a_branch[a, j]):
-                    continue
-                hit = False
-                for i in range(b_branch.shape[1]):
-                    if not math.isnan(b_branch[b, i]) and _angle_gap(
-                            a_branch[a, j], b_branch[b, i] + theta) <= branch_tol:
-                        hit = True
-                if not hit:
+                if not math.isnan(a_branch[a, j]) and not a_hit[j]:
                     out[6] += 1.0
     for e in range(b_edges.shape[0]):
         u, v = match_b[b_edges[e, 0]], match_b[b_edges[e, 1]]
