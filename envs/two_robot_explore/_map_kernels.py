@@ -24,6 +24,14 @@ def scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half, margin):
             py = y + reach[k] * math.sin(a)
             lo_x, hi_x = min(lo_x, px), max(hi_x, px)
             lo_y, hi_y = min(lo_y, py), max(hi_y, py)
+    return cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin)
+
+
+@njit(cache=True, nogil=True)
+def cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin):
+    """``[r0, r1, c0, c1]`` cells of an ``h × w`` grid (origin ``ox, oy``, cell size ``res``)
+    covering the box ``[lo_x, hi_x] × [lo_y, hi_y]`` plus ``margin`` cells, clipped to the
+    grid; all zero when that is empty."""
     inv = 1.0 / res
     out = np.empty(4, dtype=np.int64)
     out[0] = max(int(math.floor((lo_y - oy) * inv)) - margin, 0)

@@ -28,6 +28,7 @@ import numpy as np
 from envs.two_robot_explore._map_kernels import (
     NO_UNION,
     absorb,
+    cell_box,
     or_into,
     sample_states,
     scan_window,
@@ -57,14 +58,12 @@ class Geometry:
     def window(self, xy: np.ndarray, margin: int = _MARGIN_CELLS) -> tuple[slice, slice] | None:
         """Row and column slices of the cells covering points ``xy`` (``(N, 2)``) plus
         ``margin`` cells, clipped to the grid; ``None`` if that is empty."""
-        inv = 1.0 / self.resolution
         lo = xy.min(axis=0)
         hi = xy.max(axis=0)
-        c0 = max(int(math.floor((lo[0] - self.origin[0]) * inv)) - margin, 0)
-        r0 = max(int(math.floor((lo[1] - self.origin[1]) * inv)) - margin, 0)
-        c1 = min(int(math.floor((hi[0] - self.origin[0]) * inv)) + margin + 1, self.shape[1])
-        r1 = min(int(math.floor((hi[1] - self.origin[1]) * inv)) + margin + 1, self.shape[0])
-        if r0 >= r1 or c0 >= c1:
+        r0, r1, c0, c1 = cell_box(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]),
+                                  self.origin[0], self.origin[1], self.resolution,
+                                  self.shape[0], self.shape[1], margin).tolist()
+        if r0 == r1:
             return None
         return slice(r0, r1), slice(c0, c1)
 
