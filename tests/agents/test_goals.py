@@ -109,3 +109,12 @@ def test_the_chosen_sector_decides_the_goal():
         # the goal is the cheapest cell of a cluster whose centroid lies in sector k
         assert robot.plan.cost == pytest.approx(features[k, 1] * 20.0, abs=1e-6)
         assert sector_of(robot.plan.goal, pose) in {(k - 1) % SECTORS, k, (k + 1) % SECTORS}
+
+
+def test_bad_wrapper_arguments_name_the_problem():
+    with pytest.raises(ValueError, match="hold must be >= 1, got 0"):
+        goal_env(hold=0)
+    with pytest.raises(TypeError, match="env must be a two_robot_explore ParallelEnv, got dict"):
+        FrontierGoalEnv({})
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before step\(\)"):
+        goal_env().step({"robot_0": 0, "robot_1": 0})
