@@ -104,6 +104,10 @@ class Args:
     """Fixed-seed evaluation worlds per evaluation."""
     eval_baselines: tuple[str, ...] = ("frontier", "random_walk")
     """Scripted explorers evaluated on the same worlds (once per run)."""
+    eval_max_cycles: int | None = None
+    """Env steps per evaluation episode; default ``3 * max_cycles``. Longer than training's
+    episodes so that T85 is measured rather than cut off: in 500 steps ``RandomWalk`` never
+    reaches 85 % of a 10 m building, and a T that the episode end censors is only a bound."""
     checkpoint_every: int = 50_000
     """Agent-steps between checkpoints (0: only at the end)."""
     runs_dir: Path = Path("runs")
@@ -125,11 +129,14 @@ class Args:
             self.n_steps = 32 if goals else 128
         if self.batch_size is None:
             self.batch_size = 64 if goals else 256
+        if self.eval_max_cycles is None and isinstance(self.max_cycles, int):
+            self.eval_max_cycles = 3 * self.max_cycles
         if self.n_workers is None:
             envs = self.n_envs if isinstance(self.n_envs, int) else 1
             self.n_workers = max(1, min(os.cpu_count() or 1, envs))
         for name in ("total_timesteps", "n_envs", "n_workers", "n_steps", "batch_size",
-                     "n_epochs", "eval_episodes", "torch_threads", "max_cycles", "hold"):
+                     "n_epochs", "eval_episodes", "torch_threads", "max_cycles", "hold",
+                     "eval_max_cycles"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
@@ -333,26 +340,27 @@ def _summarise(name: str, episodes: list[dict]) -> dict[str, Any]:
 def evaluate(model: PPO, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
     """Evaluate the policy and the baselines on the fixed worlds; write ``eval.json``,
     ``eval.md`` and ``eval_coverage.png`` (atomically) into ``run_dir``."""
-    config = args.env_config()
+    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
     seeds = eval_seeds(args)
     cache = run_dir / "eval_baselines.json"
-    baselines: dict[str, list[dict]] = {}
-    if cache.exists():
-        baselines = json.loads(cache.read_text())
+    key = {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
+    stored = json.loads(cache.read_text()) if cache.exists() else {}
+    baselines: dict[str, list[dict]] = stored["explorers"] if stored.get("key") == key else {}
     for name in args.eval_baselines:
         if name not in baselines:
             eps = run_explorer(make_team(name), config, seeds)
             baselines[name] = [{**e, "coverage": e["coverage"].tolist()} for e in eps]
-    atomic_write_json(cache, baselines)
+    atomic_write_json(cache, {"key": key, "explorers": baselines})
 
     policy = {a: SB3Explorer(model) for a in ("robot_0", "robot_1")}
     ppo = [{**e, "coverage": e["coverage"].tolist()} for e in run_explorer(policy, config, seeds)]
     curves = {"ppo": ppo, **baselines}
     rows = [_summarise(name, eps) for name, eps in curves.items()]
-    report = {"step": step, "seeds": seeds, "rows": rows, "max_cycles": args.max_cycles}
+    report = {"step": step, "seeds": seeds, "rows": rows, "max_cycles": args.eval_max_cycles}
     atomic_write_json(run_dir / "eval.json", report)
     lines = [f"Evaluation at {step} agent-steps on {len(seeds)} fixed worlds "
-             f"(T = steps to that true coverage; not reached = episode length + 1)", "",
+             f"({args.eval_max_cycles}-step episodes; T = steps to that true coverage, "
+             f"not reached = {args.eval_max_cycles + 1})", "",
              "| explorer | T50 | T85 | T95 | reached 85% | final coverage | overlap | "
              "collisions |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -37,6 +37,15 @@ def test_tiny_training_writes_a_run(run_dir):
     assert "| ppo |" in (run_dir / "eval.md").read_text()
 
 
+def test_evaluation_runs_longer_episodes_than_training(run_dir):
+    import json
+
+    report = json.loads((run_dir / "eval.json").read_text())
+    assert report["max_cycles"] == 3 * TINY["max_cycles"]
+    (walk,) = json.loads((run_dir / "eval_baselines.json").read_text())["explorers"].values()
+    assert len(walk[0]["coverage"]) > TINY["max_cycles"]  # ran past the training horizon
+
+
 def test_same_seed_same_policy(run_dir, tmp_path):
     again = main(Args(runs_dir=tmp_path, seed=3, **TINY))
     np.testing.assert_array_equal(params(run_dir), params(again))
@@ -96,6 +105,7 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"eval_baselines": ("oracle",)}, "eval_baselines: unknown explorer 'oracle'"),
         ({"level": "joints"}, r"level must be one of \['goals', 'motion'\], got 'joints'"),
         ({"hold": 0}, "hold must be an integer >= 1, got 0"),
+        ({"eval_max_cycles": 0}, "eval_max_cycles must be an integer >= 1, got 0"),
     ],
 )
 def test_bad_arguments(kwargs, match):
