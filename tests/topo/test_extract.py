@@ -105,6 +105,14 @@ def test_empty_free_space_gives_an_empty_map():
     assert extract_topomap(np.zeros((20, 20), bool), resolution=RES).n_nodes == 0
 
 
+def test_specks_only_give_dead_ends():
+    """Free space whose skeleton is isolated pixels only (skan's ``Skeleton`` raises on it)."""
+    mask = np.zeros((20, 20), bool)
+    mask[5, 5] = mask[10, 12] = True
+    m = extract_topomap(mask, RES, config=ExtractConfig(min_component_area=0, min_hole_area=0))
+    assert m.n_nodes == 2 and m.n_edges == 0 and (m.kinds == NodeKind.DEAD_END).all()
+
+
 REAL_COUNTS = {  # (junctions, dead ends, corners), as documented in topo/extract.py
     "ros/turtlebot3_world.yaml": (12, 0, 0),
     "ros/tb3_sandbox.yaml": (12, 0, 0),
@@ -215,3 +223,29 @@ def test_sonar_preset_is_a_valid_simpler_config():
     assert cfg.erode_radius > 0 and cfg.min_spur_length > ExtractConfig().min_spur_length
     mask = SHAPES["plus"][0]
     assert counts(extract_topomap(mask, resolution=RES, config=cfg)) == (1, 4, 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.3, 0.7))
+def test_skeleton_paths_are_skans(seed, density):
+    """The array-operation junction step traces exactly the paths of ``skan.csr.Skeleton`` (same
+    pixels, same order), on skeletons of random blobs, which have junction clusters, loops and
+    isolated pixels; a skeleton of isolated pixels only (where skan raises) has no paths."""
+    from skan.csr import Skeleton
+    from skimage.morphology import skeletonize
+
+    from topo.extract import _skeleton_paths
+
+    rng = np.random.default_rng(seed)
+    blobs = ndimage.binary_opening(rng.random((48, 48)) < density)
+    skel = skeletonize(blobs)
+    if not skel.any():
+        return
+    coords, paths = _skeleton_paths(skel)
+    neighbours = ndimage.convolve(skel.astype(int), np.ones((3, 3), int), mode="constant") - 1
+    if not neighbours[skel].any():
+        assert paths == [] and len(coords) == skel.sum()
+        return
+    ref = Skeleton(skel, keep_images=False)
+    np.testing.assert_array_equal(coords, ref.coordinates)
+    assert [p.tolist() for p in paths] == [list(p) for p in ref.paths_list()]
