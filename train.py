@@ -42,7 +42,7 @@ from tqdm.auto import tqdm
 
 from agents.base import run_episode
 from agents.metrics import EpisodeRecorder
-from agents.policy import TopoExplorerExtractor
+from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
 from agents.scripted import make_team
@@ -64,6 +64,10 @@ class Args:
     the velocity command every step."""
     hold: int = 10
     """Env steps each goal decision is held (``level="goals"``)."""
+    sector_head: bool = True
+    """At the goals level, score every sector with one shared network
+    (:class:`agents.policy.SectorPolicy`); ``False``: SB3's ``MultiInputPolicy`` (one linear
+    layer from the context to the 8 logits)."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
@@ -434,8 +438,10 @@ def main(args: Args) -> Path:
             model = PPO.load(checkpoint, env=venv, device=args.device,
                              tensorboard_log=str(run_dir / "tb"))
         else:
+            sectors = args.level == "goals" and args.sector_head
             model = PPO(
-                "MultiInputPolicy", venv, learning_rate=args.learning_rate,
+                SectorPolicy if sectors else "MultiInputPolicy", venv,
+                learning_rate=args.learning_rate,
                 n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
                 gamma=args.gamma ** scale, gae_lambda=args.gae_lambda, ent_coef=args.ent_coef,
                 clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,

@@ -11,13 +11,21 @@ Three encoders, concatenated:
   MLP, one round of mean-neighbour message passing, then masked mean- and max-pooling: a
   permutation-invariant summary (Deep Sets with one graph-convolution step) that ignores
   padding.
+
+At the goals level, :class:`SectorPolicy` scores each frontier sector with one shared network
+(the context above, that sector's ``frontiers`` row and its direction) instead of one linear
+layer over the whole context: choosing "the sector whose frontier is cheap and large" is then one
+rule learnt once for all sectors rather than eight separate ones.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 from gymnasium import spaces
+from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
@@ -37,19 +45,29 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
     Args:
         observation_space: the env's per-robot ``Dict`` space.
         map_features, vector_features, graph_features: widths of the three encodings.
+        pass_through: observation keys appended, flattened and scaled to [-1, 1], after the
+            encodings (:class:`SectorPolicy` reads ``frontiers`` there).
     """
 
     def __init__(self, observation_space: spaces.Dict, map_features: int = 128,
-                 vector_features: int = 64, graph_features: int = 64) -> None:
+                 vector_features: int = 64, graph_features: int = 64,
+                 pass_through: tuple[str, ...] = ()) -> None:
         if not isinstance(observation_space, spaces.Dict):
             raise TypeError("TopoExplorerExtractor needs a Dict observation space, got "
                             f"{type(observation_space).__name__}")
         missing = [k for k in ("local_map", *VECTOR_KEYS, *GRAPH_KEYS)
                    if k not in observation_space.spaces]
+        missing += [k for k in pass_through if k not in observation_space.spaces]
         if missing:
             raise ValueError(f"observation space lacks keys {missing}")
-        super().__init__(observation_space, map_features + vector_features + graph_features)
         sp = observation_space.spaces
+        n_through = int(sum(np.prod(sp[k].shape) for k in pass_through))
+        super().__init__(observation_space,
+                         map_features + vector_features + graph_features + n_through)
+        self.pass_through = tuple(pass_through)
+        if self.pass_through:
+            self.register_buffer("through_scale", torch.cat([_bound(sp[k]).flatten()
+                                                             for k in self.pass_through]))
 
         channels = sp["local_map"].shape[0]
         # 4 × 4 patches (0.6 m at the default 0.15 m/pixel) then one 3 × 3 conv: 7× cheaper to
@@ -91,4 +109,92 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         mean = h.sum(1) / count
         top = (h - (1.0 - mask) * 1e4).amax(1) * (mask.sum(1) > 0)
         g = self.graph_head(torch.cat([mean, top], dim=1))
-        return torch.cat([m, v, g], dim=1)
+        if not self.pass_through:
+            return torch.cat([m, v, g], dim=1)
+        raw = torch.cat([obs[k].flatten(1) for k in self.pass_through], dim=1)
+        return torch.cat([m, v, g, raw / self.through_scale], dim=1)
+
+
+class _SectorLatent(nn.Module):
+    """SB3 ``mlp_extractor`` for :class:`SectorPolicy`: the actor's latent is an MLP of the
+    context followed by the raw per-sector rows (the features' last ``n_raw`` columns); the
+    critic sees the context only."""
+
+    def __init__(self, features_dim: int, n_raw: int, pi: int, vf: int) -> None:
+        super().__init__()
+        self.n_raw = n_raw
+        self.context_dim = pi
+        self.latent_dim_pi, self.latent_dim_vf = pi + n_raw, vf
+        self.policy_net = nn.Sequential(nn.Linear(features_dim - n_raw, pi), nn.Tanh())
+        self.value_net = nn.Sequential(nn.Linear(features_dim - n_raw, vf), nn.Tanh())
+
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+    def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
+        context = features[:, :-self.n_raw]
+        return torch.cat([self.policy_net(context), features[:, -self.n_raw:]], dim=1)
+
+    def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
+        return self.value_net(features[:, :-self.n_raw])
+
+
+class _SectorScorer(nn.Module):
+    """The action head of :class:`SectorPolicy`: logit of sector ``k`` =
+    ``MLP([context, frontiers[k], one_hot(k)])``, the same MLP for every sector."""
+
+    def __init__(self, context_dim: int, sectors: int, row: int, hidden: int) -> None:
+        super().__init__()
+        self.context_dim, self.sectors, self.row = context_dim, sectors, row
+        self.register_buffer("direction", torch.eye(sectors))
+        self.net = nn.Sequential(nn.Linear(context_dim + row + sectors, hidden), nn.Tanh(),
+                                 nn.Linear(hidden, 1))
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        b = latent.shape[0]
+        context = latent[:, :self.context_dim].unsqueeze(1).expand(b, self.sectors, -1)
+        rows = latent[:, self.context_dim:].reshape(b, self.sectors, self.row)
+        x = torch.cat([context, rows, self.direction.expand(b, -1, -1)], dim=2)
+        return self.net(x).squeeze(-1)
+
+
+class SectorPolicy(MultiInputActorCriticPolicy):
+    """PPO policy for :class:`agents.goals.FrontierGoalEnv`: :class:`TopoExplorerExtractor`
+    for the context, then one shared scorer per frontier sector (module docstring).
+
+    ``net_arch`` may give ``pi`` / ``vf`` widths (one layer each, default 64); the scorer's
+    hidden width is ``pi``'s. The action space must be ``Discrete(S)`` and the observation
+    must have ``frontiers`` of shape ``(S, F)``.
+    """
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space,
+                 lr_schedule, net_arch: dict | None = None, **kwargs) -> None:
+        if not isinstance(action_space, spaces.Discrete):
+            raise TypeError(f"SectorPolicy needs a Discrete action space, got {action_space}")
+        frontiers = observation_space.spaces.get("frontiers") if isinstance(
+            observation_space, spaces.Dict) else None
+        if frontiers is None or frontiers.shape[0] != action_space.n:
+            raise ValueError("SectorPolicy needs a 'frontiers' observation of shape "
+                             f"({action_space.n}, F), one row per action")
+        net_arch = net_arch or {"pi": [64], "vf": [64]}
+        self._widths = (int(net_arch.get("pi", [64])[0]), int(net_arch.get("vf", [64])[0]))
+        self._sectors, self._row = frontiers.shape
+        kwargs.setdefault("features_extractor_class", TopoExplorerExtractor)
+        kwargs["features_extractor_kwargs"] = {**kwargs.get("features_extractor_kwargs", {}),
+                                               "pass_through": ("frontiers",)}
+        super().__init__(observation_space, action_space, lr_schedule, net_arch=net_arch,
+                         **kwargs)
+
+    def _build_mlp_extractor(self) -> None:
+        pi, vf = self._widths
+        self.mlp_extractor = _SectorLatent(self.features_dim, self._sectors * self._row, pi, vf)
+
+    def _build(self, lr_schedule) -> None:
+        super()._build(lr_schedule)
+        pi = self._widths[0]
+        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi)
+        if self.ortho_init:
+            self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))
+            self.init_weights(self.action_net.net[-1], gain=0.01)
+        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1),
+                                              **self.optimizer_kwargs)

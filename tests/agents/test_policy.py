@@ -1,4 +1,4 @@
-"""TopoExplorerExtractor: shapes, padding is ignored, node order does not matter."""
+"""TopoExplorerExtractor: shapes, padding is ignored, node order does not matter; SectorPolicy."""
 
 import numpy as np
 import pytest
@@ -69,3 +69,40 @@ def test_needs_the_env_keys():
                                            if k != "graph_mask"}))
     with pytest.raises(TypeError, match="needs a Dict observation space, got Box"):
         TopoExplorerExtractor(spaces.Box(0, 1, (3,)))
+
+
+def goal_space() -> spaces.Dict:
+    return spaces.Dict({**obs_space().spaces,
+                        "frontiers": spaces.Box(0, 1, (8, 3), np.float32)})
+
+
+def test_sector_scorer_is_one_network_for_every_sector():
+    """Swapping two sectors' rows swaps their logits once the direction input is silenced: the
+    same weights score every sector."""
+    from agents.policy import _SectorScorer
+
+    torch.manual_seed(0)
+    scorer = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
+    with torch.no_grad():
+        scorer.net[0].weight[:, -8:] = 0.0  # the direction one-hot
+    latent = torch.rand(4, 16 + 8 * 3)
+    swapped = latent.clone().view(4, -1)
+    rows = swapped[:, 16:].view(4, 8, 3)
+    rows[:, [2, 6]] = rows[:, [6, 2]].clone()
+    base, other = scorer(latent), scorer(swapped)
+    torch.testing.assert_close(other[:, [6, 2]], base[:, [2, 6]])
+    torch.testing.assert_close(other[:, [0, 1, 3, 4, 5, 7]], base[:, [0, 1, 3, 4, 5, 7]])
+
+
+def test_sector_policy_acts_and_checks_its_spaces():
+    from agents.policy import SectorPolicy
+
+    policy = SectorPolicy(goal_space(), spaces.Discrete(8), lambda _: 3e-4)
+    obs = {k: torch.as_tensor(np.stack([s.sample() for _ in range(5)]), dtype=torch.float32)
+           for k, s in goal_space().spaces.items()}
+    probs = policy.get_distribution(obs).distribution.probs
+    assert probs.shape == (5, 8) and torch.allclose(probs.sum(1), torch.ones(5))
+    with pytest.raises(TypeError, match="needs a Discrete action space"):
+        SectorPolicy(goal_space(), spaces.Box(-1, 1, (2,)), lambda _: 3e-4)
+    with pytest.raises(ValueError, match=r"'frontiers' observation of shape \(5, F\)"):
+        SectorPolicy(goal_space(), spaces.Discrete(5), lambda _: 3e-4)
