@@ -241,9 +241,10 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
         exclude: ``(K, 2)`` points (own frame): frontier cells within ``cfg.give_up_radius`` of
             one are dropped (goals given up).
         teammate: the teammate's grid and the transform from this robot's frame into the
-            teammate's: its evidence (log-odds, nearest cell) is added to this robot's over
-            both robots' known area, so frontiers and paths are those of the shared map
-            (frontiers the teammate has already explored disappear).
+            teammate's: its evidence (log-odds, nearest cell) is added to this robot's in the
+            cells this robot does not know, over both robots' known area, so frontiers and
+            paths are those of the shared map (frontiers the teammate has already explored
+            disappear) while this robot's own walls and free space stay its own.
     """
     states = grid.states()
     known = states != CellState.UNKNOWN
@@ -265,12 +266,15 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
     if teammate is None:
         crop = states[r0:r1, c0:c1]
     else:
-        log_odds = log_odds + _sample_log_odds(teammate[0], teammate[1], origin, res,
-                                               log_odds.shape)
+        # the teammate's evidence fills only what this robot does not know: a wrong merge
+        # then cannot erase this robot's own walls (cancelling them into drivable space)
+        own_unknown = states[r0:r1, c0:c1] == CellState.UNKNOWN
+        log_odds = np.where(own_unknown, log_odds + _sample_log_odds(
+            teammate[0], teammate[1], origin, res, log_odds.shape), log_odds)
         t = grid.model.threshold
-        crop = np.full(log_odds.shape, CellState.UNKNOWN, dtype=np.int8)
-        crop[log_odds < -t] = CellState.FREE
-        crop[log_odds > t] = CellState.OCCUPIED
+        crop = states[r0:r1, c0:c1].copy()
+        crop[own_unknown & (log_odds < -t)] = CellState.FREE
+        crop[own_unknown & (log_odds > t)] = CellState.OCCUPIED
 
     free = crop == CellState.FREE
     unknown = crop == CellState.UNKNOWN
@@ -523,21 +527,27 @@ class CoordinatedFrontier(Frontier):
     Before any merge it is :class:`Frontier`. Once a merge has been accepted
     (``info["merge"]``), with the merge transform each robot:
 
-    * plans on the shared map: cells its teammate's grid knows are not unknown, so frontiers
-      the teammate has already explored are not goals;
-    * scores a frontier cluster by path cost plus ``mate_penalty · (1 − d / R)`` for ``d``, its
-      distance to the teammate's announced goal (on the :class:`Blackboard`) and to the
-      teammate's estimated position (the ``teammate`` observation), within
-      ``R = coordination_radius`` — Burgard's utility reduced near other robots' targets, so
-      the two spread out instead of chasing the same frontier.
+    * plans on the shared map: cells it does not know itself take its teammate's evidence, so
+      frontiers the teammate has already explored are not goals (its own cells keep its own
+      evidence: a wrong merge cannot turn its walls into drivable space);
+    * with the teammate's estimated position (the ``teammate`` observation) on that map,
+      assigns the two robots to distinct frontier clusters: the pair minimising its own path
+      cost plus the teammate's, plus ``mate_penalty · (1 − d / R)`` for clusters ``d`` apart
+      within ``R = coordination_radius`` (one target in all but name) — Burgard's utility with
+      the frontier going to the robot it is cheaper for;
+    * otherwise (``assign=False``, a single cluster, or the teammate off the map) scores a
+      cluster by path cost plus ``mate_penalty · (1 − d / R)`` for ``d``, its distance to the
+      teammate's announced goal (on the :class:`Blackboard`) and position.
 
     Args:
         index: 0 for ``robot_0`` (frame A), 1 for ``robot_1`` (frame B).
         blackboard: shared by the two robots of a team (:func:`agents.make_team` wires it).
         config: see :class:`Frontier`.
         mate_penalty: metres of path cost added to a frontier at the teammate's goal or
-            position (less farther out, none beyond ``coordination_radius``).
+            position, or between the two robots' targets (less farther out, none beyond
+            ``coordination_radius``).
         coordination_radius: metres.
+        assign: the joint assignment above (else the penalty alone).
         action_type: see :class:`Explorer`.
     """
 
@@ -545,8 +555,9 @@ class CoordinatedFrontier(Frontier):
 
     def __init__(self, index: int, blackboard: Blackboard, config: FrontierConfig | None = None,
                  mate_penalty: float = 8.0, coordination_radius: float = 5.0,
-                 action_type: str = "continuous") -> None:
+                 assign: bool = True, action_type: str = "continuous") -> None:
         super().__init__(config, action_type)
+        self.assign = bool(assign)
         if index not in (0, 1):
             raise ValueError(f"index must be 0 or 1, got {index!r}")
         if not isinstance(blackboard, Blackboard):
@@ -558,11 +569,13 @@ class CoordinatedFrontier(Frontier):
         self.coordination_radius = check_real(coordination_radius, "coordination_radius",
                                               low=0.0)
         self._mate_xy: np.ndarray | None = None
+        self._fmap: FrontierMap | None = None
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self.board.clear()
         self._mate_xy = None
+        self._fmap = None
 
     def _to_mate(self) -> Rigid2D | None:
         """Transform from this robot's frame into the teammate's (``None`` before a merge)."""
@@ -597,22 +610,52 @@ class CoordinatedFrontier(Frontier):
         if to_mate is None or mate_grid is None:
             return super()._frontier_map(info, pose)
         exclude = np.array(self.given_up) if self.given_up else None
-        return frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude,
-                            teammate=(mate_grid, to_mate))
+        self._fmap = frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude,
+                                  teammate=(mate_grid, to_mate))
+        return self._fmap
+
+    def _mate_costs(self, clusters, pose) -> np.ndarray | None:
+        """Path cost (m) from the teammate's estimated position to each cluster on this
+        robot's shared map (``None`` if unknown or the teammate is off the map)."""
+        fmap = self._fmap
+        if fmap is None or self._mate_xy is None or self._to_mate() is None:
+            return None
+        shape = np.array(fmap.labels.shape)
+        mate_rc = np.floor((self._mate_xy - fmap.origin) / fmap.resolution).astype(int)[::-1]
+        own_rc = np.floor((pose[:2] - fmap.origin) / fmap.resolution).astype(int)[::-1]
+        own_rc = np.clip(own_rc, 0, shape - 1)
+        if np.any(mate_rc < 0) or np.any(mate_rc >= shape):
+            return None
+        mate_cost, _ = fmap.mcp.find_costs([tuple(mate_rc)])
+        mate_cost = mate_cost.copy()
+        fmap.mcp.find_costs([tuple(own_rc)])  # the own paths' traceback again
+        idx = np.arange(1, fmap.n_clusters + 1)
+        per_label = np.asarray(ndimage.minimum(mate_cost, fmap.labels, idx), dtype=np.float64)
+        out = np.array([per_label[fmap.labels[c["cell"]] - 1] for c in clusters])
+        return out if np.isfinite(out).any() else None
 
     def _choose(self, clusters, info, pose):
-        near = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
-                if p is not None]
         radius = self.coordination_radius
-
-        def score(c: dict[str, Any]) -> float:
-            value = c["cost"] - self.cfg.hysteresis * c["current"]
+        own = np.array([c["cost"] - self.cfg.hysteresis * c["current"] for c in clusters])
+        mate = self._mate_costs(clusters, pose) if self.assign and len(clusters) > 1 else None
+        if mate is not None:
+            # joint assignment of the two robots to distinct clusters (the teammate taking
+            # whatever is cheaper for it), frontiers close together counting as one target
+            xy = np.array([c["centroid"] for c in clusters])
+            d = np.linalg.norm(xy[:, None] - xy[None, :], axis=-1)
+            total = own[:, None] + np.where(np.isfinite(mate), mate, 1e6)[None, :]
+            total = total + self.mate_penalty * np.clip(1.0 - d / radius, 0.0, None)
+            np.fill_diagonal(total, np.inf)
+            best = clusters[int(np.unravel_index(np.argmin(total), total.shape)[0])]
+            self._count("assigned")
+        else:
+            near = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
+                    if p is not None]
+            score = own.copy()
             for p in near:
-                d = float(np.linalg.norm(c["centroid"] - p))
-                value += self.mate_penalty * max(0.0, 1.0 - d / radius)
-            return value
-
-        best = min(clusters, key=score)
+                dist = np.linalg.norm(np.array([c["centroid"] for c in clusters]) - p, axis=1)
+                score += self.mate_penalty * np.clip(1.0 - dist / radius, 0.0, None)
+            best = clusters[int(np.argmin(score))]
         self.board.goals[self.index] = best["centroid"]
         return best
 
