@@ -2,7 +2,8 @@
 map-pair dataset generation speed (process pool vs Ray).
 
     python benchmarks/explorers.py [--worlds 20] [--sizes 10 20] [--workers 1] [--skip-ray]
-        [--only metrics|decision|dataset] [--json rows.json] [--from-json rows.json]
+        [--only metrics|decision|dataset] [--explorers NAME ...] [--json rows.json]
+        [--from-json rows.json]
 
 1. For each explorer, episodes on ``--worlds`` procedural buildings per size (seeds 0..N-1;
    ``max_cycles`` 150 steps per metre of building side: 1500 for 10 m, 3000 for 20 m) and on
@@ -139,9 +140,9 @@ def print_table(rows: list[dict]) -> None:
 
 
 def metrics_table(n_worlds: int, sizes: list[float], workers: int, json_out: Path | None,
-                  real: bool = True) -> None:
-    jobs = [(e, *w) for w in worlds(n_worlds, sizes, real) for e in EXPLORERS]
-    print(f"1. {len(jobs)} episodes ({len(EXPLORERS)} explorers × {len(jobs) // len(EXPLORERS)} "
+                  real: bool = True, explorers: tuple[str, ...] = EXPLORERS) -> None:
+    jobs = [(e, *w) for w in worlds(n_worlds, sizes, real) for e in explorers]
+    print(f"1. {len(jobs)} episodes ({len(explorers)} explorers × {len(jobs) // len(explorers)} "
           f"worlds, {workers} worker(s))", flush=True)
     if workers == 1:
         rows = [episode(j) for j in jobs]
@@ -228,6 +229,8 @@ def main() -> None:
                              "the dataset comparison uses 2")
     parser.add_argument("--skip-ray", action="store_true")
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
+    parser.add_argument("--explorers", nargs="+", choices=EXPLORERS, default=list(EXPLORERS),
+                        help="explorers of the metrics table (default: all)")
     parser.add_argument("--pairs", type=int, default=90, help="pairs per dataset run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--only", choices=("metrics", "decision", "dataset"), default=None)
@@ -239,7 +242,8 @@ def main() -> None:
         print_table(json.loads(args.from_json.read_text()))
         return
     if args.only in (None, "metrics"):
-        metrics_table(args.worlds, args.sizes, args.workers, args.json, not args.skip_real)
+        metrics_table(args.worlds, args.sizes, args.workers, args.json, not args.skip_real,
+                      tuple(args.explorers))
     if args.only in (None, "decision"):
         decision_time()
     if args.only in (None, "dataset"):
