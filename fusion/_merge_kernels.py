@@ -166,72 +166,148 @@ def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol,
 
 
 NEAR_ANY_NODE = 3
-"""Bit of a :func:`raster_scores` cell: within the coarse tolerance of an A node of any kind
-(bits 0–2: of a kind compatible with B kind 0–2)."""
+"""Bit of a :func:`refined_scores` raster cell: within the coarse tolerance of an A node."""
 ON_PATH = 4
-"""Bit of a :func:`raster_scores` cell: on one of A's paths."""
+"""Bit of a :func:`refined_scores` raster cell: on one of A's paths."""
 
 
 @njit(cache=True, nogil=True)
-def paint_disks(grid, x0, y0, cell, points, radius, bits):
-    """OR ``bits[p]`` into every cell of ``grid[iy, ix]`` (cells ``cell`` wide, cell (0, 0) at
-    ``(x0, y0)``) whose centre is within ``radius + cell / 2`` of point ``p``."""
-    ny, nx = grid.shape
+def _disk_cells(px, py, x0, y0, cell, radius, ny, nx):
+    """Cells ``grid[iy, ix]`` (``cell`` wide, cell (0, 0) at ``(x0, y0)``) whose centre may lie
+    within ``radius + cell / 2`` of ``(px, py)``: ``(iy0, iy1, ix0, ix1)``, end exclusive."""
     r = int(math.ceil(radius / cell))
+    cx = int(math.floor((px - x0) / cell))
+    cy = int(math.floor((py - y0) / cell))
+    return max(0, cy - r), min(ny, cy + r + 1), max(0, cx - r), min(nx, cx + r + 1)
+
+
+@njit(cache=True, nogil=True)
+def _cell_d2(ix, iy, px, py, x0, y0, cell):
+    """Squared distance from the centre of cell ``(ix, iy)`` to ``(px, py)``."""
+    dx = x0 + (ix + 0.5) * cell - px
+    dy = y0 + (iy + 0.5) * cell - py
+    return dx * dx + dy * dy
+
+
+@njit(cache=True, nogil=True)
+def paint_disk(grid, x0, y0, cell, px, py, radius, bit):
+    """OR ``bit`` into every cell of ``grid[iy, ix]`` (cells ``cell`` wide, cell (0, 0) at
+    ``(x0, y0)``) whose centre is within ``radius + cell / 2`` of ``(px, py)``."""
     reach2 = (radius + 0.5 * cell) ** 2
-    for p in range(points.shape[0]):
-        cx = int(math.floor((points[p, 0] - x0) / cell))
-        cy = int(math.floor((points[p, 1] - y0) / cell))
-        for iy in range(max(0, cy - r), min(ny, cy + r + 1)):
-            for ix in range(max(0, cx - r), min(nx, cx + r + 1)):
-                dx = x0 + (ix + 0.5) * cell - points[p, 0]
-                dy = y0 + (iy + 0.5) * cell - points[p, 1]
-                if dx * dx + dy * dy <= reach2:
-                    grid[iy, ix] |= bits[p]
+    iy0, iy1, ix0, ix1 = _disk_cells(px, py, x0, y0, cell, radius, grid.shape[0], grid.shape[1])
+    for iy in range(iy0, iy1):
+        for ix in range(ix0, ix1):
+            if _cell_d2(ix, iy, px, py, x0, y0, cell) <= reach2:
+                grid[iy, ix] |= bit
 
 
 @njit(cache=True, nogil=True)
 def paint_segments(grid, x0, y0, cell, P, edges, radius, bit):
     """OR ``bit`` into the cells within ~``radius`` of each segment ``P[u]``–``P[v]``
     (disks painted every half cell along it)."""
-    one = np.empty((1, 2))
-    bits = np.full(1, bit, dtype=np.uint8)
     for e in range(edges.shape[0]):
         ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
         vx, vy = P[edges[e, 1], 0], P[edges[e, 1], 1]
         steps = max(1, int(math.ceil(math.hypot(vx - ux, vy - uy) / (0.5 * cell))))
         for k in range(steps + 1):
             f = k / steps
-            one[0, 0] = ux + f * (vx - ux)
-            one[0, 1] = uy + f * (vy - uy)
-            paint_disks(grid, x0, y0, cell, one, radius, bits)
+            paint_disk(grid, x0, y0, cell, ux + f * (vx - ux), uy + f * (vy - uy), radius, bit)
 
 
 @njit(cache=True, nogil=True)
-def raster_scores(theta, tx, ty, B, b_kind, grid, x0, y0, inv_cell, loose_kind):
-    """Coarse score of each hypothesis from a bit raster of A (``grid[iy, ix]``): +1 per B node
-    landing near an A node of a compatible kind (bit ``b_kind``), −1 per B node (not of
-    ``loose_kind``) landing on an A path (bit :data:`ON_PATH`) far from any A node (bit
-    :data:`NEAR_ANY_NODE` clear) — A went there and saw no such place."""
+def paint_nearest(table, best2, x0, y0, cell, points, p_kind, radius, compat):
+    """For each B kind ``k`` and cell, ``table[iy, ix, k]`` becomes the index of the point of a
+    kind compatible with ``k`` (``compat[p_kind, k]``) nearest to the cell centre within
+    ``radius + cell / 2`` (cells holding ``-1`` where none stay so), and the cells within that
+    reach of any point get bit :data:`NEAR_ANY_NODE` in ``table[iy, ix, -1]``; ``best2``
+    (``table``'s shape, filled with ``inf``) is scratch."""
+    ny, nx = table.shape[0], table.shape[1]
+    reach2 = (radius + 0.5 * cell) ** 2
+    for p in range(points.shape[0]):
+        px, py = points[p, 0], points[p, 1]
+        iy0, iy1, ix0, ix1 = _disk_cells(px, py, x0, y0, cell, radius, ny, nx)
+        for iy in range(iy0, iy1):
+            for ix in range(ix0, ix1):
+                d2 = _cell_d2(ix, iy, px, py, x0, y0, cell)
+                if d2 > reach2:
+                    continue
+                table[iy, ix, -1] |= 1 << NEAR_ANY_NODE
+                for k in range(compat.shape[1]):
+                    if compat[p_kind[p], k] and d2 < best2[iy, ix, k]:
+                        best2[iy, ix, k] = d2
+                        table[iy, ix, k] = p
+
+
+@njit(cache=True, nogil=True)
+def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, loose_kind,
+                   min_pairs):
+    """Score each hypothesis after one closed-form fit step, updating it in place.
+
+    ``table[iy, ix]`` is a cell of A's raster: entries ``0..2``, the A node of a kind compatible
+    with B kind ``0..2`` nearest to the cell (``-1`` if none, :func:`paint_nearest`); the last,
+    bits :data:`NEAR_ANY_NODE` and :data:`ON_PATH`. Each moved B node is paired with its cell's
+    nearest compatible A node; with at least ``min_pairs`` pairs (else the hypothesis is left
+    as is and scored 0: it cannot gather enough matches to be accepted) the motion is refitted
+    to them, then scored: ``Σ max(0, 1 − d²/tol²)`` over B nodes at distance ``d`` from their
+    cell's nearest compatible A node, −1 per B node (not of ``loose_kind``) with none, landing
+    on an A path far from any A node (A went there and saw no such place). A soft, refitted
+    count: the right hypothesis of a pair sharing few nodes lands them tightly, chance
+    alignments of corridor lattices land more nodes loosely.
+    """
     n_h = theta.shape[0]
-    ny, nx = grid.shape
-    out = np.zeros(n_h, dtype=np.int64)
+    n_b = B.shape[0]
+    ny, nx, depth = table.shape
+    flat = table.ravel()
+    x_hi, y_hi = nx / inv_cell, ny / inv_cell
+    tol2 = tol * tol
+    bx, by = B[:, 0].copy(), B[:, 1].copy()
+    ax, ay = A[:, 0].copy(), A[:, 1].copy()
+    out = np.zeros(n_h)
     for h in range(n_h):
         c, s = math.cos(theta[h]), math.sin(theta[h])
+        ox, oy = tx[h] - x0, ty[h] - y0
         n = 0
-        for b in range(B.shape[0]):
-            x = c * B[b, 0] - s * B[b, 1] + tx[h]
-            y = s * B[b, 0] + c * B[b, 1] + ty[h]
-            ix = int(math.floor((x - x0) * inv_cell))
-            iy = int(math.floor((y - y0) * inv_cell))
-            if 0 <= ix < nx and 0 <= iy < ny:
-                cell = grid[iy, ix]
-                if (cell >> b_kind[b]) & 1:
+        spx = spy = sqx = sqy = sc = ss = 0.0
+        for b in range(n_b):
+            x = c * bx[b] - s * by[b] + ox
+            y = s * bx[b] + c * by[b] + oy
+            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
+                a = flat[(int(y * inv_cell) * nx + int(x * inv_cell)) * depth + b_kind[b]]
+                if a >= 0:
+                    spx += bx[b]
+                    spy += by[b]
+                    sqx += ax[a]
+                    sqy += ay[a]
+                    sc += bx[b] * ax[a] + by[b] * ay[a]
+                    ss += bx[b] * ay[a] - by[b] * ax[a]
                     n += 1
-                elif (b_kind[b] != loose_kind and not (cell >> NEAR_ANY_NODE) & 1
-                      and (cell >> ON_PATH) & 1):
-                    n -= 1
-        out[h] = n
+        if n < min_pairs:
+            continue  # scored 0, not refitted
+        # centred cross sums from the raw ones
+        sc -= (spx * sqx + spy * sqy) / n
+        ss -= (spx * sqy - spy * sqx) / n
+        ang = math.atan2(ss, sc)
+        c, s = math.cos(ang), math.sin(ang)
+        theta[h] = ang
+        tx[h] = (sqx - (c * spx - s * spy)) / n
+        ty[h] = (sqy - (s * spx + c * spy)) / n
+        ox, oy = tx[h] - x0, ty[h] - y0
+        score = 0.0
+        for b in range(n_b):
+            x = c * bx[b] - s * by[b] + ox
+            y = s * bx[b] + c * by[b] + oy
+            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
+                cell = (int(y * inv_cell) * nx + int(x * inv_cell)) * depth
+                a = flat[cell + b_kind[b]]
+                if a >= 0:
+                    d2 = (x + x0 - ax[a]) ** 2 + (y + y0 - ay[a]) ** 2
+                    if d2 < tol2:
+                        score += 1.0 - d2 / tol2
+                elif b_kind[b] != loose_kind:
+                    bits = flat[cell + depth - 1]
+                    if not (bits >> NEAR_ANY_NODE) & 1 and (bits >> ON_PATH) & 1:
+                        score -= 1.0
+        out[h] = score
     return out
 
 

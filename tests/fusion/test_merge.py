@@ -267,3 +267,27 @@ def test_zero_length_paths_do_not_crash_the_evidence_kernel():
     b = a.transformed(Rigid2D.from_degrees(30.0, (1.0, 2.0)))
     result = merge_maps(a, b)
     assert result.accepted
+
+
+def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
+    """The refitted coarse score (fusion._merge_kernels.refined_scores): a hypothesis 0.5° and
+    0.1 m off the motion that made B from A lands on it after one fit, every B node exactly on
+    its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
+    scored 0."""
+    from fusion import _merge_kernels as K
+    from fusion.merge import _hit_grid, _prepare
+
+    cfg = MergeConfig()
+    a = pair.map_a
+    truth = Rigid2D(0.7, np.array([3.0, -2.0]))
+    b = a.transformed(truth.inverse())  # p_A = truth(p_B)
+    table, x0, y0, inv_cell = _hit_grid(_prepare(a, cfg), cfg.coarse_tolerance, cfg.eps)
+    theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
+    tx = np.array([truth.T[0] + 0.1, truth.T[0]])
+    ty = np.array([truth.T[1] - 0.05, truth.T[1]])
+    scores = K.refined_scores(theta, tx, ty, a.xy, b.xy, b.kinds.astype(np.int64), table, x0,
+                              y0, inv_cell, cfg.eps, 1, 4)
+    assert theta[0] == pytest.approx(truth.theta, abs=1e-9)
+    assert [tx[0], ty[0]] == pytest.approx(truth.T.tolist(), abs=1e-9)
+    assert scores[0] == pytest.approx(a.n_nodes)
+    assert (theta[1], tx[1], ty[1], scores[1]) == (truth.theta + 2.0, truth.T[0], truth.T[1], 0.0)
