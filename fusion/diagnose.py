@@ -5,9 +5,12 @@ the true node correspondences: rotation < 2°, translation < 0.3 m at B's centro
 alignment is refined as ``auto`` refines its own (:func:`fusion.merge._polish`) and scored, and
 a miss of ``auto`` is put in one class:
 
-- ``truth_below_threshold``: even the refined true alignment fails :func:`fusion.decide`'s
-  evidence tests (score below ``min_score``, too few or collinear matches) — no search could
-  be accepted there with this evidence;
+- ``truth_too_few_matches``: the refined true alignment matches fewer than ``min_inliers``
+  nodes (compatible kinds, within ``eps``) or only collinear ones — the pair shares too little
+  for any accept rule on these matches (the oracle fits the true correspondences, 2–3 of
+  which are enough for it);
+- ``truth_below_threshold``: the refined true alignment has the matches but scores below
+  ``min_score`` — no search could be accepted there with this evidence;
 - ``right_rejected``: ``auto`` found the right alignment and the accept rule refused it;
 - ``refine_off``: ``auto`` is near the truth (< 5°, < 1 m) but not within the thresholds;
 - ``search_miss``: ``auto`` settled on a wrong alignment that scores below the true one (the
@@ -36,8 +39,8 @@ from fusion.evaluate import (
 )
 from fusion.merge import MergeConfig, _evaluate, _polish, _prepare, merge_maps
 
-CLASSES = ("truth_below_threshold", "right_rejected", "refine_off", "search_miss",
-           "score_prefers_wrong")
+CLASSES = ("truth_too_few_matches", "truth_below_threshold", "right_rejected", "refine_off",
+           "search_miss", "score_prefers_wrong")
 """Failure classes, in the order they are tested."""
 BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 1.01))
 
@@ -58,8 +61,9 @@ def classify(pair: EvalPair, config: MergeConfig) -> str | None:
         return None
     pa, pb = _prepare(pair.map_a, config), _prepare(pair.map_b, config)
     truth = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
-    if (truth.score < config.min_score or truth.collinear
-            or truth.inliers < config.min_inliers):
+    if truth.collinear or truth.inliers < config.min_inliers:
+        return "truth_too_few_matches"
+    if truth.score < config.min_score:
         return "truth_below_threshold"
     if _ok(errors):
         return "right_rejected"
@@ -72,7 +76,7 @@ def diagnose(pairs: Sequence[EvalPair], config: MergeConfig | None = None
              ) -> tuple[dict[tuple[float | None, str], Counter], list[tuple[str, str]]]:
     """Counts per ``(noise, overlap bin)`` (``pairs``, ``oracle``, ``auto`` successes and each
     failure class) and the ``(pair name, class)`` of the fixable failures (not
-    ``truth_below_threshold``)."""
+    ``truth_too_few_matches`` or ``truth_below_threshold``)."""
     cfg = config or MergeConfig()
     table: dict[tuple[float | None, str], Counter] = defaultdict(Counter)
     fixable = []
@@ -93,7 +97,7 @@ def diagnose(pairs: Sequence[EvalPair], config: MergeConfig | None = None
             row["auto"] += 1
             continue
         row[cls] += 1
-        if cls != "truth_below_threshold":
+        if cls not in ("truth_too_few_matches", "truth_below_threshold"):
             fixable.append((pair.name, cls))
     return dict(table), fixable
 
