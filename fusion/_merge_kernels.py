@@ -496,10 +496,17 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
     return n
 
 
-N_FEATURES = 9
+LIKELIHOOD_SIGMAS = (0.07, 0.14, 0.21)
+"""Spreads (m, per axis) of the distance between matched nodes that :func:`evidence` scores
+the matches' likelihood under: the distance between two copies of a node each off by node noise
+σ = 0.05, 0.1 and 0.15 m spreads by σ√2."""
+N_FEATURES = 9 + len(LIKELIHOOD_SIGMAS)
 """Columns of :func:`evidence`'s feature vector: closeness, inliers, matched paths, conflicts,
 crossings, branches agreeing, branches disagreeing, sum of squared match distances, near
-misses."""
+misses, then per spread ``s`` of :data:`LIKELIHOOD_SIGMAS` the log-likelihood ratio of the
+match distances: ``Σ log(0.9 p_s(d) / u(d) + 0.1)``, ``p_s`` the distance between two noisy
+copies of a node (Rayleigh, scale ``s``), ``u`` a chance match (uniform in the ``eps`` disk),
+one match in ten allowed to be chance."""
 
 
 @njit(cache=True, nogil=True)
@@ -564,6 +571,9 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
             out[0] += 1.0 - d2_b[b] / eps2
             out[1] += 1.0
             out[7] += d2_b[b]
+            for j in range(len(LIKELIHOOD_SIGMAS)):
+                s2 = 2.0 * LIKELIHOOD_SIGMAS[j] ** 2
+                out[9 + j] += math.log(0.9 * eps2 / s2 * math.exp(-d2_b[b] / s2) + 0.1)
             a_hit[:] = False
             for i in range(b_branch.shape[1]):  # branches of b against those of a
                 if math.isnan(b_branch[b, i]):

@@ -291,3 +291,22 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     assert [tx[0], ty[0]] == pytest.approx(truth.T.tolist(), abs=1e-9)
     assert scores[0] == pytest.approx(a.n_nodes)
     assert (theta[1], tx[1], ty[1], scores[1]) == (truth.theta + 2.0, truth.T[0], truth.T[1], 0.0)
+
+
+def test_likelihood_rewards_tight_matches(pair):
+    """MergeEvidence.likelihood: exact matches score the tightest spread's full log-ratio each;
+    the same matches 0.3 m off score less (a chance-like distance), and the score with them."""
+    from fusion import _merge_kernels as K
+    from fusion.merge import _evaluate, _prepare
+
+    cfg = MergeConfig()
+    a = pair.map_a
+    truth = Rigid2D(1.1, np.array([-4.0, 2.5]))
+    pa, pb = _prepare(a, cfg), _prepare(a.transformed(truth.inverse()), cfg)
+    exact = _evaluate(pa, pb, truth.theta, truth.T, cfg).evidence
+    s2 = 2 * K.LIKELIHOOD_SIGMAS[0] ** 2
+    assert exact.inliers == a.n_nodes
+    assert exact.likelihood == pytest.approx(a.n_nodes * math.log(0.9 * cfg.eps**2 / s2 + 0.1))
+    off = _evaluate(pa, pb, truth.theta, truth.T + np.array([0.3, 0.0]), cfg).evidence
+    assert off.likelihood < 0.5 * exact.likelihood
+    assert off.score < exact.score
