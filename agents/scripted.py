@@ -241,10 +241,9 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
         exclude: ``(K, 2)`` points (own frame): frontier cells within ``cfg.give_up_radius`` of
             one are dropped (goals given up).
         teammate: the teammate's grid and the transform from this robot's frame into the
-            teammate's: its evidence (log-odds, nearest cell) is added to this robot's in the
-            cells this robot does not know, over both robots' known area, so frontiers and
-            paths are those of the shared map (frontiers the teammate has already explored
-            disappear) while this robot's own walls and free space stay its own.
+            teammate's: its evidence (log-odds, nearest cell) is added to this robot's over
+            both robots' known area, so frontiers and paths are those of the shared map
+            (frontiers the teammate has already explored disappear).
     """
     states = grid.states()
     known = states != CellState.UNKNOWN
@@ -266,15 +265,12 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
     if teammate is None:
         crop = states[r0:r1, c0:c1]
     else:
-        # the teammate's evidence fills only what this robot does not know: a wrong merge
-        # then cannot erase this robot's own walls (cancelling them into drivable space)
-        own_unknown = states[r0:r1, c0:c1] == CellState.UNKNOWN
-        log_odds = np.where(own_unknown, log_odds + _sample_log_odds(
-            teammate[0], teammate[1], origin, res, log_odds.shape), log_odds)
+        log_odds = log_odds + _sample_log_odds(teammate[0], teammate[1], origin, res,
+                                               log_odds.shape)
         t = grid.model.threshold
-        crop = states[r0:r1, c0:c1].copy()
-        crop[own_unknown & (log_odds < -t)] = CellState.FREE
-        crop[own_unknown & (log_odds > t)] = CellState.OCCUPIED
+        crop = np.full(log_odds.shape, CellState.UNKNOWN, dtype=np.int8)
+        crop[log_odds < -t] = CellState.FREE
+        crop[log_odds > t] = CellState.OCCUPIED
 
     free = crop == CellState.FREE
     unknown = crop == CellState.UNKNOWN
@@ -527,9 +523,8 @@ class CoordinatedFrontier(Frontier):
     Before any merge it is :class:`Frontier`. Once a merge has been accepted
     (``info["merge"]``), with the merge transform each robot:
 
-    * plans on the shared map: cells it does not know itself take its teammate's evidence, so
-      frontiers the teammate has already explored are not goals (its own cells keep its own
-      evidence: a wrong merge cannot turn its walls into drivable space);
+    * plans on the shared map: its teammate's grid evidence is added to its own, so frontiers
+      the teammate has already explored are not goals;
     * with the teammate's estimated position (the ``teammate`` observation) on that map,
       assigns the two robots to distinct frontier clusters: the pair minimising its own path
       cost plus the teammate's, plus ``mate_penalty · (1 − d / R)`` for clusters ``d`` apart
