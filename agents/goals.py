@@ -16,6 +16,8 @@ global policy over a local planner):
   sum) and whose observation adds ``frontiers`` (:data:`SECTORS` × 3) to the env's own.
 * ``agents.SB3Explorer`` runs a policy trained on the wrapper on the plain env (same decisions
   every ``hold`` steps), so it evaluates and generates datasets like any explorer.
+* :class:`SectorRule` — the same decisions made by a fixed rule (always ahead, or a random
+  sector): the baselines a learnt goal-level policy has to beat.
 
 A policy that picks sectors uniformly at random is already a frontier explorer; PPO learns
 which frontier to prefer.
@@ -31,6 +33,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from agents.base import Explorer
 from agents.scripted import Frontier, FrontierConfig, FrontierMap, _pose
 from topo._checks import check_int
 
@@ -110,6 +113,48 @@ class GoalFrontier(Frontier):
             return super()._choose(clusters, info, pose)
         inside = [c for c in clusters if sector_of(c["centroid"], pose) == self.sector]
         return min(inside or clusters, key=lambda c: c["cost"])
+
+
+SECTOR_RULES = ("ahead", "random")
+"""Fixed goal-level rules of :class:`SectorRule`."""
+
+
+class SectorRule(Explorer):
+    """A goal-level baseline without learning: every ``hold`` steps a :class:`GoalFrontier`
+    is steered by a fixed rule, ``"ahead"`` (always sector 0, the frontier in front) or
+    ``"random"`` (a uniformly random sector, from the explorer's generator). What a learnt
+    goal-level policy must beat to have learnt more than a direction.
+
+    Args:
+        rule: one of :data:`SECTOR_RULES`.
+        hold: env steps each choice is held, ``>= 1`` (as :class:`FrontierGoalEnv`'s).
+        action_type: the env's ``action_type``.
+    """
+
+    name = "sector_rule"
+
+    def __init__(self, rule: str = "ahead", hold: int = DEFAULT_HOLD,
+                 action_type: str = "continuous") -> None:
+        super().__init__(action_type)
+        if rule not in SECTOR_RULES:
+            raise ValueError(f"rule must be one of {list(SECTOR_RULES)}, got {rule!r}")
+        self.rule = rule
+        self.hold = check_int(hold, "hold", low=1)
+        self.controller = GoalFrontier(action_type=action_type)
+        self._since = self.hold
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.controller.reset(int(self.rng.integers(2**31)))
+        self._since = self.hold
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray | int:
+        if self._since >= self.hold:
+            sector = 0 if self.rule == "ahead" else int(self.rng.integers(SECTORS))
+            self.controller.choose_sector(sector)
+            self._since = 0
+        self._since += 1
+        return self.controller.act(observation, info)
 
 
 class FrontierGoalEnv(ParallelEnv):

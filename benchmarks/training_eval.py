@@ -23,6 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import train  # noqa: E402
+from agents.goals import SECTOR_RULES, SectorRule  # noqa: E402
 from topo._io import atomic_write_bytes  # noqa: E402
 
 
@@ -38,12 +39,27 @@ def run_args(run_dir: Path, episodes: int | None) -> train.Args:
     return train.Args(**kwargs)
 
 
+def rule_row(rule: str, args: train.Args, cache: Path) -> dict:
+    """The summary row of :class:`SectorRule` ``rule`` on ``args``' evaluation worlds (cached
+    per seed in ``cache``, keyed by the worlds and the env config)."""
+    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
+    key = {"seeds": train.eval_seeds(args), "config": json.loads(json.dumps(config, default=str))}
+    if cache.exists() and (stored := json.loads(cache.read_text()))["key"] == key:
+        return stored["row"]
+    team = {a: SectorRule(rule, hold=args.hold) for a in ("robot_0", "robot_1")}
+    row = train._summarise(rule, train.run_explorer(team, config, key["seeds"]))
+    atomic_write_bytes(cache, json.dumps({"key": key, "row": row}).encode())
+    return row
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path, help="run folders (with model.zip)")
     parser.add_argument("--episodes", type=int, default=None,
                         help="evaluation worlds per run (default: the run's eval_episodes)")
     parser.add_argument("--out", type=Path, default=Path("out/training_eval"))
+    parser.add_argument("--rules", nargs="*", default=[], choices=SECTOR_RULES,
+                        help="goal-level rules evaluated on each seed's worlds too")
     opts = parser.parse_args()
     import torch
     from stable_baselines3 import PPO
@@ -66,6 +82,8 @@ def main() -> None:
         report = train.evaluate(model, args, out, steps)
         atomic_write_bytes(cache, (out / "eval_baselines.json").read_bytes())
         by = {r["explorer"]: r for r in report["rows"]}
+        for rule in opts.rules:
+            by[rule] = rule_row(rule, args, opts.out / f"rule_{rule}_seed{args.seed}.json")
         rows.append((run.name, args, steps, by))
         print(f"{run.name}: done", flush=True)
 
@@ -81,6 +99,12 @@ def main() -> None:
               f"{fr['T85']:.0f} | {ppo['T85'] / fr['T85']:.2f} | {bound}{rw['T85']:.0f} | "
               f"{bound}{1 - ppo['T85'] / rw['T85']:.0%} | {ppo['T95']:.0f} | {fr['T95']:.0f} | "
               f"{ppo['reached_T85']:.0%} |")
+    if opts.rules:
+        print("\n| run | " + " | ".join(f"{r} T85" for r in ("ppo", *opts.rules)) + " |")
+        print("|---|" + "---|" * (1 + len(opts.rules)))
+        for name, _args, _steps, by in rows:
+            print(f"| {name} | " + " | ".join(f"{by[r]['T85']:.0f}" for r in ("ppo", *opts.rules))
+                  + " |")
 
 if __name__ == "__main__":
     main()

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test
 
-from agents.goals import SECTORS, FrontierGoalEnv, GoalFrontier, sector_of
+from agents.base import run_episode
+from agents.goals import SECTORS, FrontierGoalEnv, GoalFrontier, SectorRule, sector_of
 from envs import two_robot_explore_v0
 
 SMALL = {"world": {"size": (8.0, 8.0)}, "max_cycles": 60}
@@ -118,3 +119,28 @@ def test_bad_wrapper_arguments_name_the_problem():
         FrontierGoalEnv({})
     with pytest.raises(RuntimeError, match=r"call reset\(\) before step\(\)"):
         goal_env().step({"robot_0": 0, "robot_1": 0})
+
+
+def test_sector_rules_hold_their_choice_and_repeat_with_a_seed():
+    def trace(rule, seed):
+        team = {a: SectorRule(rule, hold=5) for a in ("robot_0", "robot_1")}
+        chosen = []
+        env = two_robot_explore_v0.parallel_env(**SMALL)
+        run_episode(env, team, seed=seed,
+                    callback=lambda *_: chosen.append(team["robot_0"].controller.sector))
+        return chosen
+
+    ahead = trace("ahead", 1)
+    assert len(ahead) == SMALL["max_cycles"] and set(ahead) == {0}
+    random = trace("random", 1)
+    # one choice per 5 steps, several sectors over the episode, the same for the same seed
+    assert all(len(set(random[k:k + 5])) == 1 for k in range(0, len(random), 5))
+    assert len(set(random)) >= 3
+    assert random == trace("random", 1) and random != trace("random", 2)
+
+
+def test_bad_sector_rule_arguments_name_the_problem():
+    with pytest.raises(ValueError, match=r"rule must be one of \['ahead', 'random'\], got 'left'"):
+        SectorRule("left")
+    with pytest.raises(ValueError, match="hold must be >= 1, got 0"):
+        SectorRule("ahead", hold=0)
