@@ -7,11 +7,12 @@ Pipeline (all parameters in :class:`ExtractConfig`):
    speckle) are filled, the mask is optionally eroded by ``erode_radius`` (the robot), and free
    components smaller than ``min_component_area`` are dropped.
 2. **Skeleton** — ``skimage.morphology.skeletonize``.
-3. **Graph** — skan traces the skeleton into paths between junction and end pixels (no
-   hand-written tracing): the same steps as ``skan.csr.Skeleton`` (``pixel_graph``, each
-   cluster of junction pixels reduced to its minimum spanning tree, ``PathGraph``), with the
-   junction step done with array operations (skan's loops over every skeleton pixel in
-   Python, half of an extraction's time on sonar maps); the paths are identical.
+3. **Graph** — the skeleton is traced into paths between junction and end pixels exactly as
+   ``skan.csr.Skeleton`` does (``pixel_graph``, each cluster of junction pixels reduced to
+   scipy's minimum spanning tree, ``PathGraph``): the same paths, pixel for pixel and in the
+   same order, by the compiled kernel :func:`topo._extract_kernels.skeleton_paths` (on the
+   env's ~100-cell sonar grids the library calls' fixed cost, building scipy sparse matrices,
+   was a third of an extraction); ``tests/topo`` checks it against skan itself.
 4. **Spurs** — a dead-end path is pruned when it *protrudes* less than ``min_spur_length``
    beyond the free disc at its junction: ``length − (r_junction − r_end)``, with ``r`` the
    distance to the nearest non-free cell. A bump in a wall makes a skeleton branch about as
@@ -62,13 +63,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy import ndimage
 from scipy.spatial import cKDTree
-from skan.csr import PathGraph, pixel_graph
 from skimage.morphology import disk, remove_small_holes, skeletonize
 
 from topo._checks import check_real
+from topo._extract_kernels import polyline_length, skeleton_paths
 from topo.graph import TopoMap
 
 
@@ -155,8 +155,9 @@ def _as_mask(grid_or_free_mask: Any, resolution: float | None,
 
 
 def _polyline_length(poly: np.ndarray) -> float:
-    d = poly[1:] - poly[:-1]
-    return float(np.sqrt((d * d).sum(axis=1)).sum())
+    """Length of a float64 ``(K, 2)`` polyline (the compiled form of
+    ``np.sqrt((d * d).sum(axis=1)).sum()`` over its steps ``d``, the same float)."""
+    return float(polyline_length(poly))
 
 
 def _wall_tree(free: np.ndarray) -> cKDTree:
@@ -452,51 +453,13 @@ def _disk(radius: int) -> np.ndarray:
     return out
 
 
-def _junction_trees(adj: sparse.csr_matrix) -> sparse.csr_matrix:
-    """``adj`` (a skeleton's pixel graph) with each cluster of junction pixels (degree ≥ 3)
-    linked only by its minimum spanning tree: what ``skan.csr.Skeleton`` does with
-    ``_mst_junctions``, on the junction pixels' subgraph and without per-pixel Python loops."""
-    deg = np.diff(adj.indptr)
-    junction = np.flatnonzero(deg >= 3)
-    row = np.repeat(np.arange(adj.shape[0]), deg)
-    col = adj.indices
-    inner = (deg[row] >= 3) & (deg[col] >= 3)
-    if not inner.any():
-        return adj
-    n = len(junction)
-    local = np.full(adj.shape[0], -1, dtype=np.int64)
-    local[junction] = np.arange(n)
-    lr, lc = local[row[inner]], local[col[inner]]
-    tree = minimum_spanning_tree(sparse.csr_matrix((adj.data[inner], (lr, lc)), shape=(n, n)))
-    tree = tree.tocoo()
-    kept = np.concatenate([tree.row * n + tree.col, tree.col * n + tree.row])
-    drop = np.zeros(len(col), dtype=bool)
-    drop[inner] = ~np.isin(lr * n + lc, kept)
-    keep = ~drop
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(row[keep], minlength=adj.shape[0]))])
-    return sparse.csr_matrix((adj.data[keep], col[keep], indptr), shape=adj.shape)
-
-
-def _skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Pixel coordinates ``(N, 2)`` of a non-empty skeleton and its paths (arrays of pixel
-    indices from one junction or end pixel to the next), traced by skan. Isolated pixels are
-    on no path (skan's own ``Skeleton`` raises when every pixel is isolated)."""
-    adj, pixels = pixel_graph(skel, mask=skel, connectivity=2)
-    coords = np.stack(np.unravel_index(pixels, skel.shape), axis=1).astype(np.float64)
-    if adj.nnz == 0:
-        return coords, []
-    paths = PathGraph.from_graph(adj=_junction_trees(adj), node_coordinates=coords).paths
-    bounds = paths.indptr
-    return coords, [paths.indices[bounds[k]: bounds[k + 1]] for k in range(len(bounds) - 1)]
-
-
 def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _Graph:
     """The skan graph of ``skel``; free-disc radii from ``free`` (the cleaned mask); nodes are
     kept in ``given`` (the caller's free cells)."""
     g = _Graph(given)
     if not skel.any():
         return g
-    coords, paths = _skeleton_paths(skel)
+    coords, bounds, pixels = skeleton_paths(skel)
     pixel_node: dict[int, int] = {}
 
     def node_of(pixel: int) -> int:
@@ -505,8 +468,9 @@ def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _G
         return pixel_node[pixel]
 
     on_path = np.zeros(len(coords), dtype=bool)
-    for path in paths:
-        on_path[path] = True
+    on_path[pixels] = True
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+        path = pixels[a:b]
         u, v = node_of(int(path[0])), node_of(int(path[-1]))
         g.add_edge(u, v, coords[path])
     # isolated single pixels (a tiny blob) are nodes without paths

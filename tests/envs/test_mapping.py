@@ -95,3 +95,28 @@ def test_compose_pose_matches_rigid_apply():
     np.testing.assert_allclose(out[:2], t.apply(pose[:2]))
     assert math.cos(out[2]) == pytest.approx(math.cos(2.9 + math.radians(33.0)))
     assert -math.pi <= out[2] <= math.pi
+
+
+def test_env_skeletons_are_traced_like_skan(monkeypatch):
+    """On the skeletons of the env's own sonar grids (every extraction of a short episode), the
+    compiled tracing gives skan's paths exactly."""
+    from envs import two_robot_explore_v0
+    from topo import extract
+    from topo._extract_kernels import skan_paths, skeleton_paths
+
+    seen = []
+
+    def both(skel):
+        got = skeleton_paths(skel)
+        for a, b in zip(got, skan_paths(skel), strict=True):
+            np.testing.assert_array_equal(a, b)
+        seen.append(len(got[1]) - 1)
+        return got
+
+    monkeypatch.setattr(extract, "skeleton_paths", both)
+    par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
+    par.reset(seed=3)
+    rng = np.random.default_rng(3)
+    while par.agents:
+        par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
+    assert len(seen) >= 100 and max(seen) >= 10

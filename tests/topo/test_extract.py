@@ -226,26 +226,45 @@ def test_sonar_preset_is_a_valid_simpler_config():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.floats(0.3, 0.7))
-def test_skeleton_paths_are_skans(seed, density):
-    """The array-operation junction step traces exactly the paths of ``skan.csr.Skeleton`` (same
-    pixels, same order), on skeletons of random blobs, which have junction clusters, loops and
-    isolated pixels; a skeleton of isolated pixels only (where skan raises) has no paths."""
-    from skan.csr import Skeleton
+@given(st.integers(0, 2**32 - 1), st.floats(0.3, 0.7), st.integers(8, 64), st.integers(8, 64))
+def test_skeleton_paths_are_skans(seed, density, h, w):
+    """The compiled tracing gives exactly the paths of ``skan.csr.Skeleton`` (same pixels, same
+    order), on skeletons of random blobs, which have junction clusters, loops and isolated
+    pixels; a skeleton of isolated pixels only (where skan raises) has no paths."""
     from skimage.morphology import skeletonize
 
-    from topo.extract import _skeleton_paths
+    from topo._extract_kernels import skan_paths, skeleton_paths
 
     rng = np.random.default_rng(seed)
-    blobs = ndimage.binary_opening(rng.random((48, 48)) < density)
-    skel = skeletonize(blobs)
-    if not skel.any():
-        return
-    coords, paths = _skeleton_paths(skel)
-    neighbours = ndimage.convolve(skel.astype(int), np.ones((3, 3), int), mode="constant") - 1
-    if not neighbours[skel].any():
-        assert paths == [] and len(coords) == skel.sum()
-        return
-    ref = Skeleton(skel, keep_images=False)
-    np.testing.assert_array_equal(coords, ref.coordinates)
-    assert [p.tolist() for p in paths] == [list(p) for p in ref.paths_list()]
+    blobs = ndimage.binary_opening(rng.random((h, w)) < density)
+    for skel in (skeletonize(blobs), skeletonize(rng.random((h, w)) < density)):
+        got, want = skeleton_paths(skel), skan_paths(skel)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_skeleton_paths_of_isolated_pixels_and_nothing():
+    from topo._extract_kernels import skeleton_paths
+
+    skel = np.zeros((5, 6), bool)
+    coords, bounds, pixels = skeleton_paths(skel)
+    assert coords.shape == (0, 2) and bounds.tolist() == [0] and len(pixels) == 0
+    skel[1, 1] = skel[3, 4] = True
+    coords, bounds, pixels = skeleton_paths(skel)
+    assert coords.tolist() == [[1, 1], [3, 4]] and bounds.tolist() == [0] and len(pixels) == 0
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 400), st.sampled_from([1.0, 0.1, 0.05]),
+       st.booleans())
+def test_polyline_length_is_numpys_float(seed, n, scale, reverse):
+    """The compiled length is bit for bit numpy's (pairwise summation) on pixel paths, scaled
+    paths and random points, contiguous or reversed views."""
+    from topo._extract_kernels import polyline_length
+
+    rng = np.random.default_rng(seed)
+    poly = np.cumsum(rng.integers(-1, 2, (n, 2)), axis=0) * scale + rng.random((n, 2)) * (
+        seed % 2)
+    if reverse:
+        poly = poly[::-1]
+    d = poly[1:] - poly[:-1]
+    assert polyline_length(poly) == float(np.sqrt((d * d).sum(axis=1)).sum())

@@ -1,0 +1,276 @@
+"""Compiled pieces of :func:`topo.extract.extract_topomap` (numba, cached on disk), each giving
+bit for bit what the library or numpy code it replaces gives.
+
+:func:`polyline_length` is ``np.sqrt((d * d).sum(axis=1)).sum()`` of the steps ``d``, with numpy's
+pairwise summation (so the same float), at a tenth of the call cost.
+
+:func:`skeleton_paths` computes what ``topo.extract._skan_paths`` gets from skan (``pixel_graph``
+with 8-connectivity, each junction cluster reduced to scipy's ``minimum_spanning_tree``,
+``PathGraph``'s path tracing), the same paths in the same order, in a few passes over the skeleton's
+pixels. On the env's ~100-cell sonar grids the library path's cost is the per-call overhead of
+building half a dozen scipy sparse matrices, not the work; the library path stays the reference
+(``tests/topo/test_extract.py`` checks both agree on random and env skeletons).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# 8-neighbour offsets (row, col) in increasing raveled order: skan's CSR rows list neighbours by
+# increasing pixel index, and its tracing visits them in that order
+_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
+_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):
+    """numpy's pairwise summation of a block ``a[lo:lo + n]``, ``n <= 128``: a plain loop under
+    8 items, else 8 running sums combined as a tree, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo: lo + 8].copy()
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_sum(a, n):
+    """numpy's ``add.reduce`` of a contiguous float64 ``a[:n]``: blocks of up to 128 summed by
+    :func:`_block_sum`, longer runs split in halves (a multiple of 8 first) and the halves'
+    sums added. numpy recurses; this walks the same tree with an explicit stack (numba's disk
+    cache does not support recursion)."""
+    if n <= 128:
+        return _block_sum(a, 0, n)
+    los = np.empty(64, dtype=np.int64)
+    ns = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)
+    left = np.empty(64, dtype=np.float64)
+    sp = 0
+    los[0], ns[0] = 0, n
+    ret = 0.0
+    while sp >= 0:
+        lo, m = los[sp], ns[sp]
+        half = m // 2
+        half -= half % 8
+        if m <= 128:
+            ret = _block_sum(a, lo, m)
+            sp -= 1
+        elif stage[sp] == 0:  # first the left half
+            stage[sp] = 1
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo, half, 0
+        elif stage[sp] == 1:  # left done (in ret): now the right half
+            left[sp] = ret
+            stage[sp] = 2
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo + half, m - half, 0
+        else:
+            ret = left[sp] + ret
+            sp -= 1
+    return ret
+
+
+@njit(cache=True, nogil=True)
+def polyline_length(poly):
+    """Length of the ``(K, 2)`` float64 polyline ``poly`` (0 for fewer than two points)."""
+    n = max(poly.shape[0] - 1, 0)
+    steps = np.empty(n, dtype=np.float64)
+    for i in range(n):
+        dx = poly[i + 1, 0] - poly[i, 0]
+        dy = poly[i + 1, 1] - poly[i, 1]
+        steps[i] = math.sqrt(dx * dx + dy * dy)
+    return 0.0 + _pairwise_sum(steps, n)
+
+
+@njit(cache=True, nogil=True)
+def _find(parent, v):
+    root = v
+    while parent[root] != root:
+        root = parent[root]
+    while parent[v] != root:
+        parent[v], v = root, parent[v]
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _pixel_graph(skel, dr, dc):
+    """Pixel ids (raveled order), coordinates ``(N, 2)`` and the CSR neighbour lists
+    (``indptr``, ``indices``; neighbours by increasing id; ``diag``: the step is diagonal) of
+    the 8-connected pixel graph of ``skel``."""
+    h, w = skel.shape
+    ids = np.full((h, w), -1, dtype=np.int64)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if skel[r, c]:
+                ids[r, c] = n
+                n += 1
+    coords = np.empty((n, 2), dtype=np.float64)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    indices = np.empty(8 * n, dtype=np.int64)
+    diag = np.empty(8 * n, dtype=np.bool_)
+    k = 0
+    for r in range(h):
+        for c in range(w):
+            p = ids[r, c]
+            if p < 0:
+                continue
+            coords[p, 0] = r
+            coords[p, 1] = c
+            for j in range(8):
+                rr, cc = r + dr[j], c + dc[j]
+                if 0 <= rr < h and 0 <= cc < w and ids[rr, cc] >= 0:
+                    indices[k] = ids[rr, cc]
+                    diag[k] = dr[j] != 0 and dc[j] != 0
+                    k += 1
+            indptr[p + 1] = k
+    return coords, indptr, indices[:k], diag[:k]
+
+
+@njit(cache=True, nogil=True)
+def _junction_trees(indptr, indices, diag):
+    """Which CSR entries survive when every cluster of junction pixels (degree ≥ 3) keeps only
+    its minimum spanning tree: scipy's Kruskal (edges by weight, stable in CSR order, so the
+    straight steps of weight 1 before the diagonal ones of weight √2)."""
+    n = len(indptr) - 1
+    m = len(indices)
+    deg = indptr[1:] - indptr[:-1]
+    keep = np.ones(m, dtype=np.bool_)
+    inner = np.zeros(m, dtype=np.bool_)
+    for p in range(n):
+        if deg[p] >= 3:
+            for k in range(indptr[p], indptr[p + 1]):
+                inner[k] = deg[indices[k]] >= 3
+    parent = np.arange(n)
+    tree = np.zeros(m, dtype=np.bool_)
+    for want_diag in (False, True):
+        for p in range(n):
+            for k in range(indptr[p], indptr[p + 1]):
+                if inner[k] and diag[k] == want_diag:
+                    a, b = _find(parent, p), _find(parent, indices[k])
+                    if a != b:
+                        parent[b] = a
+                        tree[k] = True
+    for p in range(n):
+        for k in range(indptr[p], indptr[p + 1]):
+            if inner[k] and not tree[k]:
+                q = indices[k]
+                # kept if the tree holds the edge in either direction
+                found = False
+                for kk in range(indptr[q], indptr[q + 1]):
+                    if indices[kk] == p and tree[kk]:
+                        found = True
+                keep[k] = found
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _trace(indptr, indices, keep):
+    """skan's ``_build_paths`` on the kept entries: paths from every end or junction pixel along
+    each unvisited neighbour, then the isolated cycles; returns ``(bounds, pixels)``."""
+    n = len(indptr) - 1
+    m = len(indices)
+    # compact the kept entries
+    kptr = np.zeros(n + 1, dtype=np.int64)
+    kidx = np.empty(m, dtype=np.int64)
+    j = 0
+    for p in range(n):
+        for k in range(indptr[p], indptr[p + 1]):
+            if keep[k]:
+                kidx[j] = indices[k]
+                j += 1
+        kptr[p + 1] = j
+    kidx = kidx[:j]
+    deg = kptr[1:] - kptr[:-1]
+    visited = np.zeros(j, dtype=np.bool_)
+    out = np.empty(j + n + 1, dtype=np.int64)
+    bounds = np.zeros(j + 2, dtype=np.int64)
+    n_paths = 0
+    pos = 0
+    for phase in range(2):
+        for p in range(n):
+            if phase == 0 and not (deg[p] > 2 or deg[p] == 1):
+                continue
+            if phase == 1 and deg[p] == 0:
+                continue
+            last = kptr[p + 1] if phase == 0 else kptr[p] + 1
+            for e in range(kptr[p], last):
+                if visited[e]:
+                    continue
+                start = p
+                node = p
+                nb = kidx[e]
+                ee = e
+                out[pos] = node
+                pos += 1
+                while not visited[ee]:
+                    visited[ee] = True
+                    for back in range(kptr[nb], kptr[nb + 1]):
+                        if kidx[back] == node:
+                            visited[back] = True
+                    out[pos] = nb
+                    pos += 1
+                    if deg[nb] != 2 or nb == start:
+                        break
+                    a0 = kidx[kptr[nb]]
+                    nxt = a0 if a0 != node else kidx[kptr[nb] + 1]
+                    node = nb
+                    nb = nxt
+                    for cand in range(kptr[node], kptr[node + 1]):
+                        if kidx[cand] == nb:
+                            ee = cand
+                n_paths += 1
+                bounds[n_paths] = pos
+    return bounds[: n_paths + 1], out[:pos]
+
+
+@njit(cache=True, nogil=True)
+def _skeleton_paths(skel, dr, dc):
+    coords, indptr, indices, diag = _pixel_graph(skel, dr, dc)
+    keep = _junction_trees(indptr, indices, diag)
+    bounds, pixels = _trace(indptr, indices, keep)
+    return coords, bounds, pixels
+
+
+def skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel coordinates ``(N, 2)`` (float, raveled order) of the 2-D boolean skeleton ``skel``
+    and its paths as ``bounds`` (``P + 1``) and ``pixels``: path ``k`` is
+    ``pixels[bounds[k]:bounds[k + 1]]``, pixel indices into the coordinates, exactly skan's
+    ``PathGraph`` paths of the junction-tree pixel graph (no paths when no pixel has a
+    neighbour)."""
+    return _skeleton_paths(skel, _DR, _DC)
+
+
+def skan_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reference of :func:`skeleton_paths`: the same ``(coords, bounds, pixels)`` from
+    ``skan.csr.Skeleton`` itself (slow: skan walks every pixel in Python). Tests only."""
+    from skan.csr import Skeleton
+
+    coords = np.argwhere(skel).astype(np.float64)
+    if len(coords) == 0:
+        return coords, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    h, w = skel.shape
+    padded = np.pad(skel, 1).astype(np.int64)
+    around = sum(padded[1 + dr: 1 + dr + h, 1 + dc: 1 + dc + w]
+                 for dr in (-1, 0, 1) for dc in (-1, 0, 1)) - padded[1:-1, 1:-1]
+    if not around[skel].any():  # isolated pixels only: skan raises, there are no paths
+        return coords, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    ref = Skeleton(skel, keep_images=False)
+    paths = [np.asarray(p, dtype=np.int64) for p in ref.paths_list()]
+    bounds = np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64)
+    return np.asarray(ref.coordinates, dtype=np.float64), bounds, np.concatenate(paths)
