@@ -5,7 +5,9 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 1. **Free space** — a boolean mask (or an :class:`~topo.grid.OccupancyGrid`'s free cells),
    cropped to its free cells' bounding box; holes smaller than ``min_hole_area`` (sonar
    speckle) are filled, the mask is optionally eroded by ``erode_radius`` (the robot), and free
-   components smaller than ``min_component_area`` are dropped.
+   components smaller than ``min_component_area`` are dropped: skimage's ``remove_small_holes``,
+   scipy's ``binary_erosion`` by a ``disk`` and ``ndimage.label``, computed in one compiled pass
+   each (:func:`topo._extract_kernels.clean_free`, tested to give the libraries' mask).
 2. **Skeleton** — ``skimage.morphology.skeletonize``.
 3. **Graph** — the skeleton is traced into paths between junction and end pixels exactly as
    ``skan.csr.Skeleton`` does (``pixel_graph``, each cluster of junction pixels reduced to
@@ -63,12 +65,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
-from skimage.morphology import disk, remove_small_holes, skeletonize
+from skimage.morphology import disk, skeletonize
 
 from topo._checks import check_real
-from topo._extract_kernels import polyline_length, skeleton_paths
+from topo._extract_kernels import clean_free, polyline_length, skeleton_paths
 from topo.graph import TopoMap
 
 
@@ -516,19 +517,11 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     cols = np.flatnonzero(mask.any(axis=0))
     r0, c0 = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
     given = np.pad(mask[r0: rows[-1] + 2, c0: cols[-1] + 2], 1)  # a border of non-free cells
-    free = given
     cell_area = res * res
-    if config.min_hole_area > 0:
-        free = remove_small_holes(free, max_size=int(config.min_hole_area / cell_area))
-    if config.erode_radius > 0:
-        free = ndimage.binary_erosion(free, structure=_disk(int(round(config.erode_radius / res))))
-    if config.min_component_area > 0:
-        labels, n = ndimage.label(free)
-        if n:
-            sizes = np.bincount(labels.ravel(), minlength=n + 1)
-            small = sizes < config.min_component_area / cell_area
-            small[0] = False
-            free = free & ~small[labels]
+    footprint = (_disk(int(round(config.erode_radius / res))) if config.erode_radius > 0
+                 else None)
+    free = clean_free(given, int(config.min_hole_area / cell_area), footprint,
+                      config.min_component_area / cell_area)
 
     g = _skeleton_graph(skeletonize(free), free, given)
     to_px = 1.0 / res

@@ -97,23 +97,35 @@ def test_compose_pose_matches_rigid_apply():
     assert -math.pi <= out[2] <= math.pi
 
 
-def test_env_skeletons_are_traced_like_skan(monkeypatch):
-    """On the skeletons of the env's own sonar grids (every extraction of a short episode), the
-    compiled tracing gives skan's paths exactly."""
+def test_env_extraction_kernels_match_the_libraries(monkeypatch):
+    """On the env's own sonar grids (every extraction of a short episode), the compiled
+    free-space clean-up gives the skimage/scipy mask and the compiled tracing skan's paths,
+    exactly."""
     from envs import two_robot_explore_v0
     from topo import extract
-    from topo._extract_kernels import skan_paths, skeleton_paths
+    from topo._extract_kernels import (
+        clean_free,
+        clean_free_reference,
+        skan_paths,
+        skeleton_paths,
+    )
 
     seen = []
 
-    def both(skel):
+    def paths_both(skel):
         got = skeleton_paths(skel)
         for a, b in zip(got, skan_paths(skel), strict=True):
             np.testing.assert_array_equal(a, b)
         seen.append(len(got[1]) - 1)
         return got
 
-    monkeypatch.setattr(extract, "skeleton_paths", both)
+    def clean_both(*args):
+        got = clean_free(*args)
+        np.testing.assert_array_equal(got, clean_free_reference(*args))
+        return got
+
+    monkeypatch.setattr(extract, "skeleton_paths", paths_both)
+    monkeypatch.setattr(extract, "clean_free", clean_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
     par.reset(seed=3)
     rng = np.random.default_rng(3)
