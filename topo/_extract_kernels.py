@@ -8,6 +8,9 @@ pairwise summation (so the same float), at a tenth of the call cost.
 ``binary_erosion`` by a disk, dropping small ``ndimage.label`` components) in one pass each, the
 same mask; :func:`clean_free_reference` is the library path it is tested against.
 
+:func:`wall_distances` is the distance from pixels to the nearest non-free pixel bordering free
+space, what a ``cKDTree`` of those pixels answers (:func:`wall_distances_reference`).
+
 :func:`skeleton_paths` computes what ``topo.extract._skan_paths`` gets from skan (``pixel_graph``
 with 8-connectivity, each junction cluster reduced to scipy's ``minimum_spanning_tree``,
 ``PathGraph``'s path tracing), the same paths in the same order, in a few passes over the skeleton's
@@ -235,6 +238,60 @@ def clean_free_reference(given: np.ndarray, max_hole: int, footprint: np.ndarray
             small[0] = False
             free = free & ~small[labels]
     return free
+
+
+@njit(cache=True, nogil=True)
+def _wall_distances(free, points):
+    h, w = free.shape
+    walls = np.empty((h * w, 2), dtype=np.float64)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if free[r, c]:
+                continue
+            if ((r > 0 and free[r - 1, c]) or (r + 1 < h and free[r + 1, c])
+                    or (c > 0 and free[r, c - 1]) or (c + 1 < w and free[r, c + 1])):
+                walls[n, 0], walls[n, 1] = r, c
+                n += 1
+    out = np.full(points.shape[0], np.inf)
+    for k in range(points.shape[0]):
+        best = np.inf
+        for i in range(n):
+            dr = walls[i, 0] - points[k, 0]
+            dc = walls[i, 1] - points[k, 1]
+            d = dr * dr + dc * dc
+            if d < best:
+                best = d
+        out[k] = math.sqrt(best)
+    return out
+
+
+def wall_distances(free: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (pixels) from each ``(row, col)`` of ``points`` ``(K, 2)`` to the nearest
+    non-free pixel 4-adjacent to a free one: the radius of the largest free disc there (``inf``
+    without such pixels)."""
+    return _wall_distances(free, np.ascontiguousarray(points, dtype=np.float64))
+
+
+def wall_distances_reference(free: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The library path of :func:`wall_distances`: a scipy ``cKDTree`` of the wall pixels."""
+    from scipy.spatial import cKDTree
+
+    near = np.zeros_like(free)
+    near[1:] |= free[:-1]
+    near[:-1] |= free[1:]
+    near[:, 1:] |= free[:, :-1]
+    near[:, :-1] |= free[:, 1:]
+    return cKDTree(np.argwhere(near & ~free)).query(points)[0]
+
+
+@njit(cache=True, nogil=True)
+def path_lengths(points, bounds):
+    """:func:`polyline_length` of each ``points[bounds[k]:bounds[k + 1]]``."""
+    out = np.empty(len(bounds) - 1, dtype=np.float64)
+    for k in range(len(bounds) - 1):
+        out[k] = polyline_length(points[bounds[k]: bounds[k + 1]])
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -65,11 +65,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 from skimage.morphology import disk, skeletonize
 
 from topo._checks import check_real
-from topo._extract_kernels import clean_free, polyline_length, skeleton_paths
+from topo._extract_kernels import (
+    clean_free,
+    path_lengths,
+    polyline_length,
+    skeleton_paths,
+    wall_distances,
+)
 from topo.graph import TopoMap
 
 
@@ -159,18 +164,6 @@ def _polyline_length(poly: np.ndarray) -> float:
     """Length of a float64 ``(K, 2)`` polyline (the compiled form of
     ``np.sqrt((d * d).sum(axis=1)).sum()`` over its steps ``d``, the same float)."""
     return float(polyline_length(poly))
-
-
-def _wall_tree(free: np.ndarray) -> cKDTree:
-    """A KD-tree of the non-free pixels that border free space: its distance query gives the
-    radius of the largest free disc at a pixel. ``free`` has a non-free border, so there is
-    always a wall."""
-    near = np.zeros_like(free)
-    near[1:] |= free[:-1]
-    near[:-1] |= free[1:]
-    near[:, 1:] |= free[:, :-1]
-    near[:, :-1] |= free[:, 1:]
-    return cKDTree(np.argwhere(near & ~free))
 
 
 def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -285,10 +278,12 @@ class _Graph:
         self.mass[nid] = 1
         return nid
 
-    def add_edge(self, u: int, v: int, poly: np.ndarray) -> int:
+    def add_edge(self, u: int, v: int, poly: np.ndarray, length: float | None = None) -> int:
         e = self._next_edge
         self._next_edge += 1
-        self.edges[e] = _Edge(u, v, poly, _polyline_length(poly))
+        if length is None:
+            length = _polyline_length(poly)
+        self.edges[e] = _Edge(u, v, poly, length)
         self.inc[u].add(e)
         self.inc[v].add(e)
         return e
@@ -461,25 +456,24 @@ def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _G
     if not skel.any():
         return g
     coords, bounds, pixels = skeleton_paths(skel)
-    pixel_node: dict[int, int] = {}
-
-    def node_of(pixel: int) -> int:
-        if pixel not in pixel_node:
-            pixel_node[pixel] = g.add_node(coords[pixel])
-        return pixel_node[pixel]
-
+    # nodes: path ends in order of first appearance (start, end, next path...), then the
+    # pixels on no path (a tiny blob's single pixel), as skan's paths list them
+    ends = np.stack([pixels[bounds[:-1]], pixels[bounds[1:] - 1]], axis=1).ravel()
     on_path = np.zeros(len(coords), dtype=bool)
     on_path[pixels] = True
-    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
-        path = pixels[a:b]
-        u, v = node_of(int(path[0])), node_of(int(path[-1]))
-        g.add_edge(u, v, coords[path])
-    # isolated single pixels (a tiny blob) are nodes without paths
-    for pixel in np.flatnonzero(~on_path):
-        node_of(int(pixel))
-    ids = list(g.pos)
-    radii = _wall_tree(free).query(np.array([g.pos[n] for n in ids]))[0]
-    g.radius = dict(zip(ids, radii.tolist(), strict=True))
+    seq = np.concatenate([ends, np.flatnonzero(~on_path)])
+    uniq, first = np.unique(seq, return_index=True)
+    node_pixels = uniq[np.argsort(first)]
+    node_of = np.empty(len(coords), dtype=np.int64)
+    for pixel in node_pixels.tolist():
+        node_of[pixel] = g.add_node(coords[pixel])
+    points = coords[pixels]
+    lengths = path_lengths(points, bounds).tolist()
+    ends_node = node_of[ends].tolist()
+    for k, (a, b) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)):
+        g.add_edge(ends_node[2 * k], ends_node[2 * k + 1], points[a:b], lengths[k])
+    radii = wall_distances(free, coords[node_pixels])
+    g.radius = dict(enumerate(radii.tolist()))
     return g
 
 
@@ -544,19 +538,26 @@ def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     rc = np.array([g.pos[n] for n in ids])
     xy = np.stack([origin[0] + (rc[:, 1] + 0.5) * res, origin[1] + (rc[:, 0] + 0.5) * res], 1)
     order = np.lexsort((xy[:, 0], xy[:, 1]))
-    index = {ids[k]: i for i, k in enumerate(order)}
+    index = {ids[k]: i for i, k in enumerate(order.tolist())}
     xy = xy[order]
-    edges, paths, lengths = [], [], []
-    for e in sorted(g.edges, key=lambda k: (index[g.edges[k].u], index[g.edges[k].v])):
-        u, v, poly = g.edges[e].u, g.edges[e].v, g.edges[e].poly
-        iu, iv = index[u], index[v]
-        pts = np.stack([origin[0] + (poly[:, 1] + 0.5) * res,
-                        origin[1] + (poly[:, 0] + 0.5) * res], 1)
-        pts[0], pts[-1] = xy[iu], xy[iv]
-        if iu > iv:
-            iu, iv, pts = iv, iu, pts[::-1]
-        edges.append((iu, iv))
-        paths.append(pts)
-        lengths.append(max(_polyline_length(pts), float(np.linalg.norm(xy[iu] - xy[iv]))))
-    return TopoMap.from_arrays(xy, np.asarray(edges, dtype=np.int64).reshape(-1, 2),
-                               lengths=lengths, paths=paths)
+    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
+    pairs, paths, lengths = [], [], []
+    if edges:
+        # all polylines to metres at once (the same arithmetic per point), then cut apart
+        cells = np.concatenate([edge.poly for edge in edges])
+        metres = np.stack([origin[0] + (cells[:, 1] + 0.5) * res,
+                           origin[1] + (cells[:, 0] + 0.5) * res], 1)
+        stops = np.cumsum([len(edge.poly) for edge in edges]).tolist()
+        for edge, start, stop in zip(edges, [0, *stops[:-1]], stops, strict=True):
+            iu, iv = index[edge.u], index[edge.v]
+            pts = metres[start:stop]
+            pts[0], pts[-1] = xy[iu], xy[iv]
+            if iu > iv:
+                iu, iv, pts = iv, iu, pts[::-1]
+            chord = xy[iu] - xy[iv]
+            pairs.append((iu, iv))
+            paths.append(pts)
+            # chord length as np.linalg.norm computes it (sqrt of the dot product)
+            lengths.append(max(_polyline_length(pts), math.sqrt(chord.dot(chord))))
+    return TopoMap.from_valid_arrays(xy, np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+                                     lengths, paths)

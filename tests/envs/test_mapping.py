@@ -99,8 +99,8 @@ def test_compose_pose_matches_rigid_apply():
 
 def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     """On the env's own sonar grids (every extraction of a short episode), the compiled
-    free-space clean-up gives the skimage/scipy mask and the compiled tracing skan's paths,
-    exactly."""
+    free-space clean-up gives the skimage/scipy mask, the compiled tracing skan's paths and the
+    compiled free-disc radii the cKDTree's, exactly."""
     from envs import two_robot_explore_v0
     from topo import extract
     from topo._extract_kernels import (
@@ -108,6 +108,8 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         clean_free_reference,
         skan_paths,
         skeleton_paths,
+        wall_distances,
+        wall_distances_reference,
     )
 
     seen = []
@@ -124,6 +126,12 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         np.testing.assert_array_equal(got, clean_free_reference(*args))
         return got
 
+    def walls_both(free, points):
+        got = wall_distances(free, points)
+        np.testing.assert_array_equal(got, wall_distances_reference(free, points))
+        return got
+
+    monkeypatch.setattr(extract, "wall_distances", walls_both)
     monkeypatch.setattr(extract, "skeleton_paths", paths_both)
     monkeypatch.setattr(extract, "clean_free", clean_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
