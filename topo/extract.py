@@ -355,8 +355,13 @@ class _Graph:
             self.dissolve(n)
 
     def _is_free(self, rc: np.ndarray) -> bool:
-        r, c = (int(v) for v in np.floor(np.asarray(rc) + 0.5))  # the cell holding the point
-        return bool(self.free[r, c])
+        # the cell holding the point
+        return bool(self.free[math.floor(rc[0] + 0.5), math.floor(rc[1] + 0.5)])
+
+    def _free_at(self, points: np.ndarray) -> np.ndarray:
+        """:meth:`_is_free` of each row of ``points``."""
+        cells = np.floor(points + 0.5).astype(np.intp)
+        return self.free[cells[:, 0], cells[:, 1]]
 
     def snap_to_free(self) -> None:
         """Move a node that sits on a non-free cell (a filled speck, or a merged mean) to the
@@ -367,7 +372,7 @@ class _Graph:
             best, best_d = None, np.inf
             for e in self.inc[n]:
                 poly = self.edges[e].poly
-                ok = np.fromiter((self._is_free(q) for q in poly), dtype=bool, count=len(poly))
+                ok = self._free_at(poly)
                 if ok.any():
                     d = np.sqrt(((poly[ok] - rc) ** 2).sum(axis=1))
                     if d.min() < best_d:
