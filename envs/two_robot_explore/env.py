@@ -526,8 +526,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._shared_delta = 0
         self._oracle_delta = 0
         for i, (robot, sonar) in enumerate(zip(self.robots, self.sonars, strict=True)):
-            sonar.measure(self.space, robot.true_pose(), robot.sensor_filter, self._rng,
-                          travelled[i])
+            pose = robot.true_pose()
+            sonar.measure(self.space, pose, robot.sensor_filter, self._rng, travelled[i])
             if not sonar.fresh:
                 self._own_delta[i] = 0
                 continue
@@ -538,7 +538,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             if fresh[0]:
                 window = slice(int(fresh[1]), int(fresh[2])), slice(int(fresh[3]), int(fresh[4]))
                 self._shared_delta += self.shared.add(i, rmap, window)
-            self._oracle_delta += self.oracle.add(i, robot.true_pose(), sonar.true_last,
+            self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
                                                   scfg.max_range, half)
         every = cfg.mapping.topo_every
