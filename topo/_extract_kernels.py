@@ -109,8 +109,9 @@ def _component_sizes(mask):
     """4-connected components of ``mask`` (``ndimage.label``'s default structure), two-pass
     labelling: each pixel's component (0 off the mask) and each component's pixel count."""
     h, w = mask.shape
-    lab = np.zeros((h, w), dtype=np.int64)
-    parent = np.zeros(h * w + 1, dtype=np.int64)
+    lab = np.zeros((h, w), dtype=np.int32)
+    parent = np.empty(h * w // 2 + 2, dtype=np.int32)  # a raster scan opens <= h*w/2 labels
+    parent[0] = 0
     n = 0
     for r in range(h):
         for c in range(w):
@@ -118,26 +119,26 @@ def _component_sizes(mask):
                 continue
             up = lab[r - 1, c] if r > 0 else 0
             left = lab[r, c - 1] if c > 0 else 0
-            if up and left:
-                a = _find(parent, up)
-                if left != up:
-                    b = _find(parent, left)
-                    if a != b:
-                        if b < a:
-                            a, b = b, a
-                        parent[b] = a
+            if up != 0 and left != 0 and up != left:
+                a, b = _find(parent, up), _find(parent, left)
+                if b < a:
+                    a, b = b, a
+                parent[b] = a
                 lab[r, c] = a
-            elif up or left:
-                lab[r, c] = up + left
+            elif up != 0 or left != 0:
+                lab[r, c] = max(up, left)
             else:
                 n += 1
                 parent[n] = n
                 lab[r, c] = n
+    for k in range(1, n + 1):
+        parent[k] = _find(parent, k)
     size = np.zeros(n + 1, dtype=np.int64)
     for r in range(h):
         for c in range(w):
-            if lab[r, c]:
-                k = _find(parent, lab[r, c])
+            k = lab[r, c]
+            if k:
+                k = parent[k]
                 lab[r, c] = k
                 size[k] += 1
     return lab, size
@@ -158,7 +159,7 @@ def _erode(mask, footprint):
         for j in range(footprint.shape[1]):
             if footprint[i, j]:
                 half[i] = max(half[i], j - footprint.shape[1] // 2)
-    run = np.zeros((h, w), dtype=np.int64)
+    run = np.zeros((h, w), dtype=np.int32)
     for r in range(h):
         n = 0
         for c in range(w):
@@ -300,7 +301,9 @@ def _find(parent, v):
     while parent[root] != root:
         root = parent[root]
     while parent[v] != root:
-        parent[v], v = root, parent[v]
+        up = parent[v]
+        parent[v] = root
+        v = up
     return root
 
 

@@ -270,6 +270,22 @@ class _Graph:
         self._next_edge = 0
         self._next_node = 0
 
+    def start(self, node_rc: np.ndarray, ends: list[list[int]], polys: list[np.ndarray],
+              lengths: list[float]) -> None:
+        """Fill an empty graph at once: nodes ``0..N-1`` at the rows of ``node_rc``, edge ``k``
+        from ``ends[k][0]`` to ``ends[k][1]`` along ``polys[k]`` of length ``lengths[k]`` (what
+        as many :meth:`add_node` and :meth:`add_edge` calls do)."""
+        n = len(node_rc)
+        self.pos = dict(enumerate(node_rc))
+        self.inc = {k: set() for k in range(n)}
+        self.mass = dict.fromkeys(range(n), 1)
+        self._next_node = n
+        for e, ((u, v), poly, length) in enumerate(zip(ends, polys, lengths, strict=True)):
+            self.edges[e] = _Edge(u, v, poly, length)
+            self.inc[u].add(e)
+            self.inc[v].add(e)
+        self._next_edge = len(polys)
+
     def add_node(self, rc: np.ndarray) -> int:
         nid = self._next_node
         self._next_node += 1
@@ -278,12 +294,10 @@ class _Graph:
         self.mass[nid] = 1
         return nid
 
-    def add_edge(self, u: int, v: int, poly: np.ndarray, length: float | None = None) -> int:
+    def add_edge(self, u: int, v: int, poly: np.ndarray) -> int:
         e = self._next_edge
         self._next_edge += 1
-        if length is None:
-            length = _polyline_length(poly)
-        self.edges[e] = _Edge(u, v, poly, length)
+        self.edges[e] = _Edge(u, v, poly, _polyline_length(poly))
         self.inc[u].add(e)
         self.inc[v].add(e)
         return e
@@ -470,15 +484,13 @@ def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _G
     uniq, first = np.unique(seq, return_index=True)
     node_pixels = uniq[np.argsort(first)]
     node_of = np.empty(len(coords), dtype=np.int64)
-    for pixel in node_pixels.tolist():
-        node_of[pixel] = g.add_node(coords[pixel])
+    node_of[node_pixels] = np.arange(len(node_pixels))
+    node_rc = coords[node_pixels]
     points = coords[pixels]
-    lengths = path_lengths(points, bounds).tolist()
-    ends_node = node_of[ends].tolist()
-    for k, (a, b) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)):
-        g.add_edge(ends_node[2 * k], ends_node[2 * k + 1], points[a:b], lengths[k])
-    radii = wall_distances(free, coords[node_pixels])
-    g.radius = dict(enumerate(radii.tolist()))
+    g.start(node_rc, node_of[ends].reshape(-1, 2).tolist(),
+            [points[a:b] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)],
+            path_lengths(points, bounds).tolist())
+    g.radius = dict(enumerate(wall_distances(free, node_rc).tolist()))
     return g
 
 
