@@ -287,6 +287,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         obs = self._observation_spaces[AGENTS[0]]
         self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
         self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
+        self._odo_bound = float(self._obs_high["odometry"][0])  # R as a float32 value
 
     def _observation_space(self) -> spaces.Dict:
         cfg = self.config
@@ -612,8 +613,11 @@ class TwoRobotExploreEnv(ParallelEnv):
         odo = robot.odometry
         lo, hi = self._obs_low, self._obs_high
         c, s = math.cos(odo[2]), math.sin(odo[2])
-        odometry = np.array([odo[0], odo[1], c, s], dtype=np.float32)
-        np.clip(odometry, lo["odometry"], hi["odometry"], out=odometry)
+        # clipped as floats, then rounded: the bounds are float32 values, so this is the
+        # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
+        r = self._odo_bound
+        odometry = np.array([min(max(odo[0], -r), r), min(max(odo[1], -r), r), c, s],
+                            dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graph_obs(i, odo, c, s)
         teammate = np.zeros(5, dtype=np.float32)
@@ -646,10 +650,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         order = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
         k = len(order)
         lim = 2 * self.frame_radius
-        nodes[:k, :2] = np.clip(rel[order], -lim, lim)
+        nodes[:k, :2] = np.minimum(np.maximum(rel[order], -lim), lim)  # np.clip, without its cost
         nodes[:k, 2:] = static[order]
         mask[:k] = 1.0
-        if last_order is not None and np.array_equal(order, last_order):
+        if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)
         if topo.n_edges:
