@@ -242,27 +242,45 @@ def clean_free_reference(given: np.ndarray, max_hole: int, footprint: np.ndarray
 
 
 @njit(cache=True, nogil=True)
+def _is_wall(free, r, c):
+    h, w = free.shape
+    if r < 0 or r >= h or c < 0 or c >= w or free[r, c]:
+        return False
+    return ((r > 0 and free[r - 1, c]) or (r + 1 < h and free[r + 1, c])
+            or (c > 0 and free[r, c - 1]) or (c + 1 < w and free[r, c + 1]))
+
+
+@njit(cache=True, nogil=True)
+def _ring_min(free, pr, pc, ir, ic, d, best):
+    """``best`` lowered by the squared distances from ``(pr, pc)`` to the wall pixels at
+    Chebyshev distance ``d`` from pixel ``(ir, ic)``."""
+    for c in range(ic - d, ic + d + 1):
+        for r in (ir - d, ir + d):
+            if _is_wall(free, r, c):
+                best = min(best, (r - pr) * (r - pr) + (c - pc) * (c - pc))
+            if d == 0:
+                break
+    for r in range(ir - d + 1, ir + d):
+        for c in (ic - d, ic + d):
+            if _is_wall(free, r, c):
+                best = min(best, (r - pr) * (r - pr) + (c - pc) * (c - pc))
+    return best
+
+
+@njit(cache=True, nogil=True)
 def _wall_distances(free, points):
     h, w = free.shape
-    walls = np.empty((h * w, 2), dtype=np.float64)
-    n = 0
-    for r in range(h):
-        for c in range(w):
-            if free[r, c]:
-                continue
-            if ((r > 0 and free[r - 1, c]) or (r + 1 < h and free[r + 1, c])
-                    or (c > 0 and free[r, c - 1]) or (c + 1 < w and free[r, c + 1])):
-                walls[n, 0], walls[n, 1] = r, c
-                n += 1
-    out = np.full(points.shape[0], np.inf)
+    out = np.empty(points.shape[0])
     for k in range(points.shape[0]):
+        pr, pc = points[k, 0], points[k, 1]
+        ir, ic = int(round(pr)), int(round(pc))
         best = np.inf
-        for i in range(n):
-            dr = walls[i, 0] - points[k, 0]
-            dc = walls[i, 1] - points[k, 1]
-            d = dr * dr + dc * dc
-            if d < best:
-                best = d
+        d = 0
+        # square rings around the point's pixel (at most half a pixel from the point): a wall
+        # in ring d or beyond is at least d - 0.5 away
+        while best > (d - 0.5) * (d - 0.5) and d <= h + w + abs(ir) + abs(ic):
+            best = _ring_min(free, pr, pc, ir, ic, d, best)
+            d += 1
         out[k] = math.sqrt(best)
     return out
 

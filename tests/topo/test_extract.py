@@ -293,13 +293,15 @@ def test_clean_free_is_the_library_morphology(seed, density, h, w, max_hole, rad
 
 @given(st.integers(0, 2**32 - 1), st.floats(0.1, 0.95), st.integers(1, 50), st.integers(1, 50))
 def test_wall_distances_are_the_kd_trees(seed, density, h, w):
-    """The compiled free-disc radius is the cKDTree distance to the wall pixels, bit for bit, at
-    free and non-free pixels (inf when no pixel borders free space)."""
+    """The compiled free-disc radius (a search in square rings) is the cKDTree distance to the
+    wall pixels, bit for bit, at free and non-free pixels and points between pixels (inf when
+    no pixel borders free space)."""
     from topo._extract_kernels import wall_distances, wall_distances_reference
 
     rng = np.random.default_rng(seed)
     free = np.pad(rng.random((h, w)) < density, 1)
     points = rng.integers(0, [h + 2, w + 2], (20, 2)).astype(np.float64)
+    points[10:] += rng.uniform(-0.5, 0.5, (10, 2))  # merged node means lie between pixels
     np.testing.assert_array_equal(wall_distances(free, points),
                                   wall_distances_reference(free, points))
     assert np.isinf(wall_distances(np.zeros((4, 4), bool), points[:3])).all()
