@@ -194,7 +194,7 @@ def _peaks(turn: np.ndarray, candidate: np.ndarray, group: np.ndarray) -> np.nda
 
 
 def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
-                  margin: float) -> list[np.ndarray]:
+                  margin: float) -> list[list[int]]:
     """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
     if not polys:
         return []
@@ -212,8 +212,10 @@ def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
     turn = _turns(points, arc, first[group], last[group], arm)
     candidate = ((turn > min_turn) & (arc - arc[first][group] >= margin)
                  & (arc[last][group] - arc >= margin))
-    peaks = _peaks(turn, candidate, group)
-    return [peaks[group[peaks] == k] - first[k] for k in range(len(polys))]
+    peaks = _peaks(turn, candidate, group)  # ascending, so grouped by polyline
+    cuts = (peaks - first[group[peaks]]).tolist()
+    bounds = np.searchsorted(group[peaks], np.arange(len(polys) + 1)).tolist()
+    return [cuts[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) -> np.ndarray:
@@ -362,7 +364,7 @@ class _Graph:
         self.remove_edge(ea)
         self.remove_edge(eb)
         self._forget(n)
-        self.add_edge(ua, vb, np.vstack([pa, pb[1:]]))
+        self.add_edge(ua, vb, np.concatenate((pa, pb[1:])))
 
     def dissolve_degree_two(self) -> None:
         for n in list(self.pos):
@@ -424,8 +426,8 @@ class _Graph:
         open_ids = [e for e, edge in self.edges.items() if edge.u != edge.v]
         found = _open_corners([self.edges[e].poly for e in open_ids], arm, min_turn, margin)
         for e, cuts in zip(open_ids, found, strict=True):
-            if len(cuts):
-                self._split(e, cuts.tolist())
+            if cuts:
+                self._split(e, cuts)
         for e in [k for k, edge in self.edges.items() if edge.u == edge.v]:
             edge = self.edges[e]
             anchored = self.degree(edge.u) > 2 or edge.u in self.corners
