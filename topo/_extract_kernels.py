@@ -105,43 +105,45 @@ def polyline_length(poly):
 
 
 @njit(cache=True, nogil=True)
-def _component_sizes(mask):
-    """4-connected components of ``mask`` (``ndimage.label``'s default structure), two-pass
-    labelling: each pixel's component (0 off the mask) and each component's pixel count."""
+def _run_components(mask, value):
+    """4-connected components of the pixels of ``mask`` equal to ``value`` (``ndimage.label``'s
+    default structure), labelled by horizontal runs: ``runs`` ``(R, 3)`` as ``row, start,
+    stop``, each run's component ``root`` (a run index) and ``size``, the pixel count of each
+    root's component (runs of adjacent rows that share a column are joined)."""
     h, w = mask.shape
-    lab = np.zeros((h, w), dtype=np.int32)
-    parent = np.empty(h * w // 2 + 2, dtype=np.int32)  # a raster scan opens <= h*w/2 labels
-    parent[0] = 0
+    runs = np.empty((h * ((w + 1) // 2) + 1, 3), dtype=np.int64)
+    first = np.zeros(h + 1, dtype=np.int64)
     n = 0
     for r in range(h):
-        for c in range(w):
-            if not mask[r, c]:
+        first[r] = n
+        c = 0
+        while c < w:
+            if mask[r, c] != value:
+                c += 1
                 continue
-            up = lab[r - 1, c] if r > 0 else 0
-            left = lab[r, c - 1] if c > 0 else 0
-            if up != 0 and left != 0 and up != left:
-                a, b = _find(parent, up), _find(parent, left)
-                if b < a:
-                    a, b = b, a
-                parent[b] = a
-                lab[r, c] = a
-            elif up != 0 or left != 0:
-                lab[r, c] = max(up, left)
+            start = c
+            while c < w and mask[r, c] == value:
+                c += 1
+            runs[n, 0], runs[n, 1], runs[n, 2] = r, start, c
+            n += 1
+    first[h] = n
+    root = np.arange(n)
+    for r in range(1, h):
+        a, b = first[r - 1], first[r]
+        while a < first[r] and b < first[r + 1]:
+            if runs[a, 2] > runs[b, 1] and runs[b, 2] > runs[a, 1]:  # columns overlap
+                x, y = _find(root, a), _find(root, b)
+                if x != y:
+                    root[max(x, y)] = min(x, y)
+            if runs[a, 2] < runs[b, 2]:
+                a += 1
             else:
-                n += 1
-                parent[n] = n
-                lab[r, c] = n
-    for k in range(1, n + 1):
-        parent[k] = _find(parent, k)
-    size = np.zeros(n + 1, dtype=np.int64)
-    for r in range(h):
-        for c in range(w):
-            k = lab[r, c]
-            if k:
-                k = parent[k]
-                lab[r, c] = k
-                size[k] += 1
-    return lab, size
+                b += 1
+    size = np.zeros(n, dtype=np.int64)
+    for k in range(n):
+        root[k] = _find(root, k)
+        size[root[k]] += runs[k, 2] - runs[k, 1]
+    return runs[:n], root, size
 
 
 @njit(cache=True, nogil=True)
@@ -185,25 +187,20 @@ def _erode(mask, footprint):
 
 @njit(cache=True, nogil=True)
 def _clean_free(given, max_hole, footprint, min_cells):
-    h, w = given.shape
     filled = given.copy()
     if max_hole > 0:
-        lab, size = _component_sizes(~given)
-        for r in range(h):
-            for c in range(w):
-                k = lab[r, c]
-                if k and size[k] <= max_hole:
-                    filled[r, c] = True
+        runs, root, size = _run_components(given, False)
+        for k in range(len(runs)):
+            if size[root[k]] <= max_hole:
+                filled[runs[k, 0], runs[k, 1]: runs[k, 2]] = True
     out = filled
     if footprint.size:
         out = _erode(filled, footprint)
     if min_cells > 0:
-        lab, size = _component_sizes(out)
-        for r in range(h):
-            for c in range(w):
-                k = lab[r, c]
-                if k and size[k] < min_cells:
-                    out[r, c] = False
+        runs, root, size = _run_components(out, True)
+        for k in range(len(runs)):
+            if size[root[k]] < min_cells:
+                out[runs[k, 0], runs[k, 1]: runs[k, 2]] = False
     return out
 
 
