@@ -105,11 +105,10 @@ def polyline_length(poly):
 
 
 @njit(cache=True, nogil=True)
-def _run_components(mask, value):
-    """4-connected components of the pixels of ``mask`` equal to ``value`` (``ndimage.label``'s
-    default structure), labelled by horizontal runs: ``runs`` ``(R, 3)`` as ``row, start,
-    stop``, each run's component ``root`` (a run index) and ``size``, the pixel count of each
-    root's component (runs of adjacent rows that share a column are joined)."""
+def _row_runs(mask, value):
+    """The horizontal runs of pixels of ``mask`` equal to ``value``: ``(R, 3)`` rows ``row,
+    start, stop`` in raster order, and ``first`` (``H + 1``): row ``r``'s runs are
+    ``first[r]:first[r + 1]``."""
     h, w = mask.shape
     runs = np.empty((h * ((w + 1) // 2) + 1, 3), dtype=np.int64)
     first = np.zeros(h + 1, dtype=np.int64)
@@ -127,6 +126,18 @@ def _run_components(mask, value):
             runs[n, 0], runs[n, 1], runs[n, 2] = r, start, c
             n += 1
     first[h] = n
+    return runs[:n], first
+
+
+@njit(cache=True, nogil=True)
+def _run_components(mask, value):
+    """4-connected components of the pixels of ``mask`` equal to ``value`` (``ndimage.label``'s
+    default structure), labelled by horizontal runs: ``runs`` ``(R, 3)`` as ``row, start,
+    stop``, each run's component ``root`` (a run index) and ``size``, the pixel count of each
+    root's component (runs of adjacent rows that share a column are joined)."""
+    h = mask.shape[0]
+    runs, first = _row_runs(mask, value)
+    n = len(runs)
     root = np.arange(n)
     for r in range(1, h):
         a, b = first[r - 1], first[r]
@@ -143,7 +154,7 @@ def _run_components(mask, value):
     for k in range(n):
         root[k] = _find(root, k)
         size[root[k]] += runs[k, 2] - runs[k, 1]
-    return runs[:n], root, size
+    return runs, root, size
 
 
 @njit(cache=True, nogil=True)
@@ -151,8 +162,8 @@ def _erode(mask, footprint):
     """Binary erosion of ``mask`` by ``footprint`` (centred; outside the array counts as
     non-free), for footprints whose rows are each one centred run (a disk): pixel ``(r, c)``
     stays iff in every footprint row ``i`` (half width ``a``) the ``2a + 1`` pixels of row
-    ``r + i - centre`` around ``c`` are set, read off the run of set pixels ending at
-    ``c + a``."""
+    ``r + i - centre`` around ``c`` are set, i.e. ``c`` lies in a run ``[s, e)`` of that row
+    shrunk to ``[s + a, e - a)``; the shrunk runs of each row are counted per column."""
     h, w = mask.shape
     fh = footprint.shape[0]
     centre = fh // 2
@@ -161,27 +172,35 @@ def _erode(mask, footprint):
         for j in range(footprint.shape[1]):
             if footprint[i, j]:
                 half[i] = max(half[i], j - footprint.shape[1] // 2)
-    run = np.zeros((h, w), dtype=np.int32)
-    for r in range(h):
-        n = 0
-        for c in range(w):
-            n = n + 1 if mask[r, c] else 0
-            run[r, c] = n
+    need = 0
+    for i in range(fh):
+        if half[i] >= 0:
+            need += 1
+    runs, first = _row_runs(mask, True)
     out = np.zeros((h, w), dtype=np.bool_)
+    count = np.zeros(w + 1, dtype=np.int64)
     for r in range(h):
-        for c in range(w):
-            if not mask[r, c]:
+        count[:] = 0
+        inside = True
+        for i in range(fh):
+            a = half[i]
+            if a < 0:
                 continue
-            ok = True
-            for i in range(fh):
-                a = half[i]
-                if a < 0:
-                    continue
-                rr, cc = r + i - centre, c + a
-                if rr < 0 or rr >= h or cc >= w or run[rr, cc] < 2 * a + 1:
-                    ok = False
-                    break
-            out[r, c] = ok
+            rr = r + i - centre
+            if rr < 0 or rr >= h:
+                inside = False
+                break
+            for k in range(first[rr], first[rr + 1]):
+                s, e = runs[k, 1] + a, runs[k, 2] - a
+                if s < e:
+                    count[s] += 1
+                    count[e] -= 1
+        if not inside:
+            continue
+        acc = 0
+        for c in range(w):
+            acc += count[c]
+            out[r, c] = acc == need
     return out
 
 
