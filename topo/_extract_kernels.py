@@ -490,6 +490,33 @@ def skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return _skeleton_paths(skel, _DR, _DC)
 
 
+@njit(cache=True, nogil=True)
+def path_nodes(n_pixels, bounds, pixels):
+    """The graph of traced paths: node pixels in order of first appearance as a path end
+    (start, end, next path...), then the pixels on no path in increasing order (a tiny blob's
+    single pixel); each path's ``(start, end)`` node numbers ``(P, 2)``."""
+    node_of = np.full(n_pixels, -1, dtype=np.int64)
+    order = np.empty(n_pixels, dtype=np.int64)
+    n = 0
+    n_paths = len(bounds) - 1
+    ends = np.empty((n_paths, 2), dtype=np.int64)
+    for k in range(n_paths):
+        for j, p in enumerate((pixels[bounds[k]], pixels[bounds[k + 1] - 1])):
+            if node_of[p] < 0:
+                node_of[p] = n
+                order[n] = p
+                n += 1
+            ends[k, j] = node_of[p]
+    on_path = np.zeros(n_pixels, dtype=np.bool_)
+    for p in pixels:
+        on_path[p] = True
+    for p in range(n_pixels):
+        if not on_path[p]:
+            order[n] = p
+            n += 1
+    return order[:n], ends
+
+
 def skan_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The reference of :func:`skeleton_paths`: the same ``(coords, bounds, pixels)`` from
     ``skan.csr.Skeleton`` itself (slow: skan walks every pixel in Python). Tests only."""

@@ -71,6 +71,7 @@ from topo._checks import check_real
 from topo._extract_kernels import (
     clean_free,
     path_lengths,
+    path_nodes,
     polyline_length,
     skeleton_paths,
     wall_distances,
@@ -477,19 +478,10 @@ def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _G
     if not skel.any():
         return g
     coords, bounds, pixels = skeleton_paths(skel)
-    # nodes: path ends in order of first appearance (start, end, next path...), then the
-    # pixels on no path (a tiny blob's single pixel), as skan's paths list them
-    ends = np.stack([pixels[bounds[:-1]], pixels[bounds[1:] - 1]], axis=1).ravel()
-    on_path = np.zeros(len(coords), dtype=bool)
-    on_path[pixels] = True
-    seq = np.concatenate([ends, np.flatnonzero(~on_path)])
-    uniq, first = np.unique(seq, return_index=True)
-    node_pixels = uniq[np.argsort(first)]
-    node_of = np.empty(len(coords), dtype=np.int64)
-    node_of[node_pixels] = np.arange(len(node_pixels))
+    node_pixels, ends = path_nodes(len(coords), bounds, pixels)
     node_rc = coords[node_pixels]
     points = coords[pixels]
-    g.start(node_rc, node_of[ends].reshape(-1, 2).tolist(),
+    g.start(node_rc, ends.tolist(),
             [points[a:b] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)],
             path_lengths(points, bounds).tolist())
     g.radius = dict(enumerate(wall_distances(free, node_rc).tolist()))
