@@ -491,6 +491,41 @@ def skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 @njit(cache=True, nogil=True)
+def peaks(turn, candidate, group):
+    """Corner step 6 of ``extract_topomap``: one index per run of consecutive ``candidate``
+    points within one ``group`` (polyline), its sharpest point by ``turn``, the middle one if
+    several are as sharp (within 1e-9)."""
+    out = np.empty(len(turn), dtype=np.int64)
+    n = 0
+    i = 0
+    size = len(turn)
+    while i < size:
+        if not candidate[i]:
+            i += 1
+            continue
+        j = i + 1
+        while j < size and candidate[j] and group[j] == group[i]:
+            j += 1
+        top = turn[i]
+        for k in range(i + 1, j):
+            top = max(top, turn[k])
+        sharp = 0
+        for k in range(i, j):
+            if turn[k] >= top - 1e-9:
+                sharp += 1
+        want = sharp // 2
+        for k in range(i, j):
+            if turn[k] >= top - 1e-9:
+                if want == 0:
+                    out[n] = k
+                    n += 1
+                    break
+                want -= 1
+        i = j
+    return out[:n]
+
+
+@njit(cache=True, nogil=True)
 def path_nodes(n_pixels, bounds, pixels):
     """The graph of traced paths: node pixels in order of first appearance as a path end
     (start, end, next path...), then the pixels on no path in increasing order (a tiny blob's

@@ -72,6 +72,7 @@ from topo._extract_kernels import (
     clean_free,
     path_lengths,
     path_nodes,
+    peaks,
     polyline_length,
     skeleton_paths,
     wall_distances,
@@ -179,21 +180,6 @@ def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1)))
 
 
-def _peaks(turn: np.ndarray, candidate: np.ndarray, group: np.ndarray) -> np.ndarray:
-    """One index per run of consecutive candidates (within one group): its sharpest point, the
-    middle one if several are equally sharp."""
-    idx = np.flatnonzero(candidate)
-    if len(idx) == 0:
-        return idx
-    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(group[idx]) != 0)) + 1
-    out = []
-    for run in np.split(idx, breaks):
-        t = turn[run]
-        best = run[np.flatnonzero(t >= t.max() - 1e-9)]
-        out.append(int(best[len(best) // 2]))
-    return np.asarray(out, dtype=np.int64)
-
-
 def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
                   margin: float) -> list[list[int]]:
     """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
@@ -213,9 +199,9 @@ def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
     turn = _turns(points, arc, first[group], last[group], arm)
     candidate = ((turn > min_turn) & (arc - arc[first][group] >= margin)
                  & (arc[last][group] - arc >= margin))
-    peaks = _peaks(turn, candidate, group)  # ascending, so grouped by polyline
-    cuts = (peaks - first[group[peaks]]).tolist()
-    bounds = np.searchsorted(group[peaks], np.arange(len(polys) + 1)).tolist()
+    at = peaks(turn, candidate, group)  # ascending, so grouped by polyline
+    cuts = (at - first[group[at]]).tolist()
+    bounds = np.searchsorted(group[at], np.arange(len(polys) + 1)).tolist()
     return [cuts[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
@@ -237,10 +223,10 @@ def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) 
     local = arc - arc[n]
     candidate = np.zeros(len(points), dtype=bool)
     candidate[n // 2: 2 * n + n // 2] = turn[n // 2: 2 * n + n // 2] > min_turn
-    peaks = _peaks(turn, candidate, zeros)
-    peaks = peaks[(peaks >= n) & (peaks < 2 * n)]
-    away = (local[peaks] >= margin) & (total - local[peaks] >= margin)
-    return np.sort(peaks[away] - n)
+    at = peaks(turn, candidate, zeros)
+    at = at[(at >= n) & (at < 2 * n)]
+    away = (local[at] >= margin) & (total - local[at] >= margin)
+    return np.sort(at[away] - n)
 
 
 @dataclass(slots=True)

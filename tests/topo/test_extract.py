@@ -305,3 +305,33 @@ def test_wall_distances_are_the_kd_trees(seed, density, h, w):
     np.testing.assert_array_equal(wall_distances(free, points),
                                   wall_distances_reference(free, points))
     assert np.isinf(wall_distances(np.zeros((4, 4), bool), points[:3])).all()
+
+
+def _peaks_reference(turn, candidate, group):
+    """The numpy form of the corner peaks (as extract_topomap had it): each run of consecutive
+    candidates within a group, its sharpest point, the middle one of equally sharp ones."""
+    idx = np.flatnonzero(candidate)
+    if len(idx) == 0:
+        return idx
+    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(group[idx]) != 0)) + 1
+    out = []
+    for run in np.split(idx, breaks):
+        t = turn[run]
+        best = run[np.flatnonzero(t >= t.max() - 1e-9)]
+        out.append(int(best[len(best) // 2]))
+    return np.asarray(out, dtype=np.int64)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.sampled_from([0.3, 0.6, 0.9]))
+def test_corner_peaks_kernel_is_the_numpy_form(seed, n, density):
+    """Ties (quantised turns, and turns within 1e-9), runs across group boundaries, empty
+    input."""
+    from topo._extract_kernels import peaks
+
+    rng = np.random.default_rng(seed)
+    turn = np.round(rng.uniform(0, 3, n), int(rng.integers(0, 3)))
+    turn[rng.random(n) < 0.1] += 5e-10
+    candidate = rng.random(n) < density
+    group = np.sort(rng.integers(0, max(n // 10, 1), n))
+    np.testing.assert_array_equal(peaks(turn, candidate, group),
+                                  _peaks_reference(turn, candidate, group))
