@@ -196,6 +196,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from envs.two_robot_explore.config import EnvConfig
+from envs.two_robot_explore._map_kernels import nearest_nodes
 from envs.two_robot_explore.mapping import (
     LOCAL_MAP_VALUES,
     LocalMapSampler,
@@ -647,12 +648,9 @@ class TwoRobotExploreEnv(ParallelEnv):
             return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
         static, last_order, last_adj = self._graph_cache[i]
         rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
-        order = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
+        order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static,
+                              2 * self.frame_radius, nodes, mask)
         k = len(order)
-        lim = 2 * self.frame_radius
-        nodes[:k, :2] = np.minimum(np.maximum(rel[order], -lim), lim)  # np.clip, without its cost
-        nodes[:k, 2:] = static[order]
-        mask[:k] = 1.0
         if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)

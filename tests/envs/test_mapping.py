@@ -140,3 +140,25 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     while par.agents:
         par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
     assert len(seen) >= 100 and max(seen) >= 10
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(1, 40))
+def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
+    """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip."""
+    from envs.two_robot_explore._map_kernels import nearest_nodes
+
+    rng = np.random.default_rng(seed)
+    rel = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
+    static = rng.random((n, 4)).astype(np.float32)
+    lim = 20.0
+    nodes = np.zeros((n_max, 6), np.float32)
+    mask = np.zeros(n_max, np.float32)
+    order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static, lim, nodes, mask)
+    want = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
+    k = len(want)
+    ref_nodes = np.zeros_like(nodes)
+    ref_nodes[:k, :2] = np.clip(rel[want], -lim, lim)
+    ref_nodes[:k, 2:] = static[want]
+    np.testing.assert_array_equal(order, want)
+    np.testing.assert_array_equal(nodes, ref_nodes)
+    np.testing.assert_array_equal(mask, (np.arange(n_max) < k).astype(np.float32))
