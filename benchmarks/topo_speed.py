@@ -101,7 +101,7 @@ def env_row(steps: int = 1000) -> None:
     """The env's own extractions: the free masks of both robots' sonar grids every 50 steps of a
     default episode (seed 0, random commands), against ``skeletonize`` of the same raw masks."""
     from envs import two_robot_explore_v0
-    from envs.two_robot_explore.mapping import CellState
+    from topo.grid import CellState
 
     par = two_robot_explore_v0.parallel_env(max_cycles=steps)
     par.reset(seed=0)
