@@ -3,7 +3,8 @@
 Masks are crops of a DungeonMaps floor plan (real corridors and rooms) at 0.1 m/cell, and a
 400x400 sonar grid built by scanning that plan (ragged free space, ``ExtractConfig.for_sonar``);
 medians over repeats, all in this one process, so the ratio to ``skeletonize`` is fair on a busy
-machine.
+machine. The last row ("env sonar") extracts the env's own grids (the nodes column there is the
+number of masks).
 
     python benchmarks/topo_speed.py
 """
@@ -11,14 +12,17 @@ machine.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 from _timing import interleaved_medians, median_time
 from skimage.morphology import skeletonize
 
-from topo import OccupancyGrid, load_floor_plan
-from topo.extract import ExtractConfig, extract_topomap
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
+
+from topo import OccupancyGrid, load_floor_plan  # noqa: E402
+from topo.extract import ExtractConfig, extract_topomap  # noqa: E402
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 SONAR = np.radians([-90, -50, -30, -10, 10, 30, 50, 90])
@@ -54,6 +58,7 @@ def main() -> None:
         print(f"{n:>4}x{n:<5} {m.n_nodes:>6} {t_ex * 1e3:>9.2f} {t_sk * 1e3:>9.2f} "
               f"{t_ex / t_sk:>6.2f} {goal:>12}")
     sonar_row(plan.free)
+    env_row()
 
 
 def sonar_grid(free: np.ndarray, res: float, rng: np.random.Generator,
@@ -90,6 +95,31 @@ def sonar_row(plan_free: np.ndarray) -> None:
                              "sk": lambda: skeletonize(free)}, 20)
     print(f"{'sonar 400':>10} {m.n_nodes:>6} {t['ex'] * 1e3:>9.2f} {t['sk'] * 1e3:>9.2f} "
           f"{t['ex'] / t['sk']:>6.2f} {'≤20 ms, ≤2×':>12}")
+
+
+def env_row(steps: int = 1000) -> None:
+    """The env's own extractions: the free masks of both robots' sonar grids every 50 steps of a
+    default episode (seed 0, random commands), against ``skeletonize`` of the same raw masks."""
+    from envs import two_robot_explore_v0
+    from topo.grid import CellState
+
+    par = two_robot_explore_v0.parallel_env(max_cycles=steps)
+    par.reset(seed=0)
+    rng = np.random.default_rng(0)
+    masks = []
+    for k in range(steps - 1):
+        par.step({a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
+        if k % 50 == 49:
+            for rmap in par.maps:
+                win = rmap.known_window()
+                masks.append((np.ascontiguousarray(rmap.states[win] == CellState.FREE)))
+    cfg = ExtractConfig.for_sonar()
+    t = interleaved_medians({"ex": lambda: [extract_topomap(m, 0.1, config=cfg) for m in masks],
+                             "sk": lambda: [skeletonize(m) for m in masks]}, 5)
+    side = np.mean([np.sqrt(m.size) for m in masks])
+    print(f"{'env sonar':>10} {len(masks):>6} {t['ex'] / len(masks) * 1e3:>9.2f} "
+          f"{t['sk'] / len(masks) * 1e3:>9.2f} {t['ex'] / t['sk']:>6.2f} "
+          f"{'(masks ~' + format(side, '.0f') + ' cells)':>12}")
 
 
 if __name__ == "__main__":

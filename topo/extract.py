@@ -5,13 +5,16 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 1. **Free space** — a boolean mask (or an :class:`~topo.grid.OccupancyGrid`'s free cells),
    cropped to its free cells' bounding box; holes smaller than ``min_hole_area`` (sonar
    speckle) are filled, the mask is optionally eroded by ``erode_radius`` (the robot), and free
-   components smaller than ``min_component_area`` are dropped.
+   components smaller than ``min_component_area`` are dropped: skimage's ``remove_small_holes``,
+   scipy's ``binary_erosion`` by a ``disk`` and ``ndimage.label``, computed in one compiled pass
+   each (:func:`topo._extract_kernels.clean_free`, tested to give the libraries' mask).
 2. **Skeleton** — ``skimage.morphology.skeletonize``.
-3. **Graph** — skan traces the skeleton into paths between junction and end pixels (no
-   hand-written tracing): the same steps as ``skan.csr.Skeleton`` (``pixel_graph``, each
-   cluster of junction pixels reduced to its minimum spanning tree, ``PathGraph``), with the
-   junction step done with array operations (skan's loops over every skeleton pixel in
-   Python, half of an extraction's time on sonar maps); the paths are identical.
+3. **Graph** — the skeleton is traced into paths between junction and end pixels exactly as
+   ``skan.csr.Skeleton`` does (``pixel_graph``, each cluster of junction pixels reduced to
+   scipy's minimum spanning tree, ``PathGraph``): the same paths, pixel for pixel and in the
+   same order, by the compiled kernel :func:`topo._extract_kernels.skeleton_paths` (on the
+   env's ~100-cell sonar grids the library calls' fixed cost, building scipy sparse matrices,
+   was a third of an extraction); ``tests/topo`` checks it against skan itself.
 4. **Spurs** — a dead-end path is pruned when it *protrudes* less than ``min_spur_length``
    beyond the free disc at its junction: ``length − (r_junction − r_end)``, with ``r`` the
    distance to the nearest non-free cell. A bump in a wall makes a skeleton branch about as
@@ -32,6 +35,11 @@ Pipeline (all parameters in :class:`ExtractConfig`):
    nodes at thirds of its length (a map has no self-loops).
 7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
+
+Steps 1 and 3, the free-disc radii of step 4, polyline lengths and step 6's choice of peaks run
+as compiled kernels (:mod:`topo._extract_kernels`, each tested to give exactly the library's or
+numpy's result, on random masks and on every extraction of an env episode); step 2 is
+skimage's ``skeletonize`` itself.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -62,13 +70,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.csgraph import minimum_spanning_tree
-from scipy.spatial import cKDTree
-from skan.csr import PathGraph, pixel_graph
-from skimage.morphology import disk, remove_small_holes, skeletonize
+from skimage.morphology import disk, skeletonize
 
 from topo._checks import check_real
+from topo._extract_kernels import (
+    clean_free,
+    path_lengths,
+    path_nodes,
+    peaks,
+    polyline_length,
+    skeleton_paths,
+    wall_distances,
+)
 from topo.graph import TopoMap
 
 
@@ -155,20 +168,9 @@ def _as_mask(grid_or_free_mask: Any, resolution: float | None,
 
 
 def _polyline_length(poly: np.ndarray) -> float:
-    d = poly[1:] - poly[:-1]
-    return float(np.sqrt((d * d).sum(axis=1)).sum())
-
-
-def _wall_tree(free: np.ndarray) -> cKDTree:
-    """A KD-tree of the non-free pixels that border free space: its distance query gives the
-    radius of the largest free disc at a pixel. ``free`` has a non-free border, so there is
-    always a wall."""
-    near = np.zeros_like(free)
-    near[1:] |= free[:-1]
-    near[:-1] |= free[1:]
-    near[:, 1:] |= free[:, :-1]
-    near[:, :-1] |= free[:, 1:]
-    return cKDTree(np.argwhere(near & ~free))
+    """Length of a float64 ``(K, 2)`` polyline (the compiled form of
+    ``np.sqrt((d * d).sum(axis=1)).sum()`` over its steps ``d``, the same float)."""
+    return float(polyline_length(poly))
 
 
 def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -183,23 +185,8 @@ def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1)))
 
 
-def _peaks(turn: np.ndarray, candidate: np.ndarray, group: np.ndarray) -> np.ndarray:
-    """One index per run of consecutive candidates (within one group): its sharpest point, the
-    middle one if several are equally sharp."""
-    idx = np.flatnonzero(candidate)
-    if len(idx) == 0:
-        return idx
-    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(group[idx]) != 0)) + 1
-    out = []
-    for run in np.split(idx, breaks):
-        t = turn[run]
-        best = run[np.flatnonzero(t >= t.max() - 1e-9)]
-        out.append(int(best[len(best) // 2]))
-    return np.asarray(out, dtype=np.int64)
-
-
 def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
-                  margin: float) -> list[np.ndarray]:
+                  margin: float) -> list[list[int]]:
     """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
     if not polys:
         return []
@@ -217,8 +204,10 @@ def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
     turn = _turns(points, arc, first[group], last[group], arm)
     candidate = ((turn > min_turn) & (arc - arc[first][group] >= margin)
                  & (arc[last][group] - arc >= margin))
-    peaks = _peaks(turn, candidate, group)
-    return [peaks[group[peaks] == k] - first[k] for k in range(len(polys))]
+    at = peaks(turn, candidate, group)  # ascending, so grouped by polyline
+    cuts = (at - first[group[at]]).tolist()
+    bounds = np.searchsorted(group[at], np.arange(len(polys) + 1)).tolist()
+    return [cuts[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) -> np.ndarray:
@@ -239,10 +228,10 @@ def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) 
     local = arc - arc[n]
     candidate = np.zeros(len(points), dtype=bool)
     candidate[n // 2: 2 * n + n // 2] = turn[n // 2: 2 * n + n // 2] > min_turn
-    peaks = _peaks(turn, candidate, zeros)
-    peaks = peaks[(peaks >= n) & (peaks < 2 * n)]
-    away = (local[peaks] >= margin) & (total - local[peaks] >= margin)
-    return np.sort(peaks[away] - n)
+    at = peaks(turn, candidate, zeros)
+    at = at[(at >= n) & (at < 2 * n)]
+    away = (local[at] >= margin) & (total - local[at] >= margin)
+    return np.sort(at[away] - n)
 
 
 @dataclass(slots=True)
@@ -274,6 +263,22 @@ class _Graph:
         self.corners: set[int] = set()  # nodes placed where a path turns: never dissolved
         self._next_edge = 0
         self._next_node = 0
+
+    def start(self, node_rc: np.ndarray, ends: list[list[int]], polys: list[np.ndarray],
+              lengths: list[float]) -> None:
+        """Fill an empty graph at once: nodes ``0..N-1`` at the rows of ``node_rc``, edge ``k``
+        from ``ends[k][0]`` to ``ends[k][1]`` along ``polys[k]`` of length ``lengths[k]`` (what
+        as many :meth:`add_node` and :meth:`add_edge` calls do)."""
+        n = len(node_rc)
+        self.pos = dict(enumerate(node_rc))
+        self.inc = {k: set() for k in range(n)}
+        self.mass = dict.fromkeys(range(n), 1)
+        self._next_node = n
+        for e, ((u, v), poly, length) in enumerate(zip(ends, polys, lengths, strict=True)):
+            self.edges[e] = _Edge(u, v, poly, length)
+            self.inc[u].add(e)
+            self.inc[v].add(e)
+        self._next_edge = len(polys)
 
     def add_node(self, rc: np.ndarray) -> int:
         nid = self._next_node
@@ -351,15 +356,20 @@ class _Graph:
         self.remove_edge(ea)
         self.remove_edge(eb)
         self._forget(n)
-        self.add_edge(ua, vb, np.vstack([pa, pb[1:]]))
+        self.add_edge(ua, vb, np.concatenate((pa, pb[1:])))
 
     def dissolve_degree_two(self) -> None:
         for n in list(self.pos):
             self.dissolve(n)
 
     def _is_free(self, rc: np.ndarray) -> bool:
-        r, c = (int(v) for v in np.floor(np.asarray(rc) + 0.5))  # the cell holding the point
-        return bool(self.free[r, c])
+        # the cell holding the point
+        return bool(self.free[math.floor(rc[0] + 0.5), math.floor(rc[1] + 0.5)])
+
+    def _free_at(self, points: np.ndarray) -> np.ndarray:
+        """:meth:`_is_free` of each row of ``points``."""
+        cells = np.floor(points + 0.5).astype(np.intp)
+        return self.free[cells[:, 0], cells[:, 1]]
 
     def snap_to_free(self) -> None:
         """Move a node that sits on a non-free cell (a filled speck, or a merged mean) to the
@@ -370,7 +380,7 @@ class _Graph:
             best, best_d = None, np.inf
             for e in self.inc[n]:
                 poly = self.edges[e].poly
-                ok = np.fromiter((self._is_free(q) for q in poly), dtype=bool, count=len(poly))
+                ok = self._free_at(poly)
                 if ok.any():
                     d = np.sqrt(((poly[ok] - rc) ** 2).sum(axis=1))
                     if d.min() < best_d:
@@ -408,8 +418,8 @@ class _Graph:
         open_ids = [e for e, edge in self.edges.items() if edge.u != edge.v]
         found = _open_corners([self.edges[e].poly for e in open_ids], arm, min_turn, margin)
         for e, cuts in zip(open_ids, found, strict=True):
-            if len(cuts):
-                self._split(e, cuts.tolist())
+            if cuts:
+                self._split(e, cuts)
         for e in [k for k, edge in self.edges.items() if edge.u == edge.v]:
             edge = self.edges[e]
             anchored = self.degree(edge.u) > 2 or edge.u in self.corners
@@ -452,69 +462,20 @@ def _disk(radius: int) -> np.ndarray:
     return out
 
 
-def _junction_trees(adj: sparse.csr_matrix) -> sparse.csr_matrix:
-    """``adj`` (a skeleton's pixel graph) with each cluster of junction pixels (degree ≥ 3)
-    linked only by its minimum spanning tree: what ``skan.csr.Skeleton`` does with
-    ``_mst_junctions``, on the junction pixels' subgraph and without per-pixel Python loops."""
-    deg = np.diff(adj.indptr)
-    junction = np.flatnonzero(deg >= 3)
-    row = np.repeat(np.arange(adj.shape[0]), deg)
-    col = adj.indices
-    inner = (deg[row] >= 3) & (deg[col] >= 3)
-    if not inner.any():
-        return adj
-    n = len(junction)
-    local = np.full(adj.shape[0], -1, dtype=np.int64)
-    local[junction] = np.arange(n)
-    lr, lc = local[row[inner]], local[col[inner]]
-    tree = minimum_spanning_tree(sparse.csr_matrix((adj.data[inner], (lr, lc)), shape=(n, n)))
-    tree = tree.tocoo()
-    kept = np.concatenate([tree.row * n + tree.col, tree.col * n + tree.row])
-    drop = np.zeros(len(col), dtype=bool)
-    drop[inner] = ~np.isin(lr * n + lc, kept)
-    keep = ~drop
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(row[keep], minlength=adj.shape[0]))])
-    return sparse.csr_matrix((adj.data[keep], col[keep], indptr), shape=adj.shape)
-
-
-def _skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Pixel coordinates ``(N, 2)`` of a non-empty skeleton and its paths (arrays of pixel
-    indices from one junction or end pixel to the next), traced by skan. Isolated pixels are
-    on no path (skan's own ``Skeleton`` raises when every pixel is isolated)."""
-    adj, pixels = pixel_graph(skel, mask=skel, connectivity=2)
-    coords = np.stack(np.unravel_index(pixels, skel.shape), axis=1).astype(np.float64)
-    if adj.nnz == 0:
-        return coords, []
-    paths = PathGraph.from_graph(adj=_junction_trees(adj), node_coordinates=coords).paths
-    bounds = paths.indptr
-    return coords, [paths.indices[bounds[k]: bounds[k + 1]] for k in range(len(bounds) - 1)]
-
-
 def _skeleton_graph(skel: np.ndarray, free: np.ndarray, given: np.ndarray) -> _Graph:
     """The skan graph of ``skel``; free-disc radii from ``free`` (the cleaned mask); nodes are
     kept in ``given`` (the caller's free cells)."""
     g = _Graph(given)
     if not skel.any():
         return g
-    coords, paths = _skeleton_paths(skel)
-    pixel_node: dict[int, int] = {}
-
-    def node_of(pixel: int) -> int:
-        if pixel not in pixel_node:
-            pixel_node[pixel] = g.add_node(coords[pixel])
-        return pixel_node[pixel]
-
-    on_path = np.zeros(len(coords), dtype=bool)
-    for path in paths:
-        on_path[path] = True
-        u, v = node_of(int(path[0])), node_of(int(path[-1]))
-        g.add_edge(u, v, coords[path])
-    # isolated single pixels (a tiny blob) are nodes without paths
-    for pixel in np.flatnonzero(~on_path):
-        node_of(int(pixel))
-    ids = list(g.pos)
-    radii = _wall_tree(free).query(np.array([g.pos[n] for n in ids]))[0]
-    g.radius = dict(zip(ids, radii.tolist(), strict=True))
+    coords, bounds, pixels = skeleton_paths(skel)
+    node_pixels, ends = path_nodes(len(coords), bounds, pixels)
+    node_rc = coords[node_pixels]
+    points = coords[pixels]
+    g.start(node_rc, ends.tolist(),
+            [points[a:b] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)],
+            path_lengths(points, bounds).tolist())
+    g.radius = dict(enumerate(wall_distances(free, node_rc).tolist()))
     return g
 
 
@@ -552,19 +513,11 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     cols = np.flatnonzero(mask.any(axis=0))
     r0, c0 = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
     given = np.pad(mask[r0: rows[-1] + 2, c0: cols[-1] + 2], 1)  # a border of non-free cells
-    free = given
     cell_area = res * res
-    if config.min_hole_area > 0:
-        free = remove_small_holes(free, max_size=int(config.min_hole_area / cell_area))
-    if config.erode_radius > 0:
-        free = ndimage.binary_erosion(free, structure=_disk(int(round(config.erode_radius / res))))
-    if config.min_component_area > 0:
-        labels, n = ndimage.label(free)
-        if n:
-            sizes = np.bincount(labels.ravel(), minlength=n + 1)
-            small = sizes < config.min_component_area / cell_area
-            small[0] = False
-            free = free & ~small[labels]
+    footprint = (_disk(int(round(config.erode_radius / res))) if config.erode_radius > 0
+                 else None)
+    free = clean_free(given, int(config.min_hole_area / cell_area), footprint,
+                      config.min_component_area / cell_area)
 
     g = _skeleton_graph(skeletonize(free), free, given)
     to_px = 1.0 / res
@@ -587,19 +540,26 @@ def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     rc = np.array([g.pos[n] for n in ids])
     xy = np.stack([origin[0] + (rc[:, 1] + 0.5) * res, origin[1] + (rc[:, 0] + 0.5) * res], 1)
     order = np.lexsort((xy[:, 0], xy[:, 1]))
-    index = {ids[k]: i for i, k in enumerate(order)}
+    index = {ids[k]: i for i, k in enumerate(order.tolist())}
     xy = xy[order]
-    edges, paths, lengths = [], [], []
-    for e in sorted(g.edges, key=lambda k: (index[g.edges[k].u], index[g.edges[k].v])):
-        u, v, poly = g.edges[e].u, g.edges[e].v, g.edges[e].poly
-        iu, iv = index[u], index[v]
-        pts = np.stack([origin[0] + (poly[:, 1] + 0.5) * res,
-                        origin[1] + (poly[:, 0] + 0.5) * res], 1)
-        pts[0], pts[-1] = xy[iu], xy[iv]
-        if iu > iv:
-            iu, iv, pts = iv, iu, pts[::-1]
-        edges.append((iu, iv))
-        paths.append(pts)
-        lengths.append(max(_polyline_length(pts), float(np.linalg.norm(xy[iu] - xy[iv]))))
-    return TopoMap.from_arrays(xy, np.asarray(edges, dtype=np.int64).reshape(-1, 2),
-                               lengths=lengths, paths=paths)
+    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
+    pairs, paths, lengths = [], [], []
+    if edges:
+        # all polylines to metres at once (the same arithmetic per point), then cut apart
+        cells = np.concatenate([edge.poly for edge in edges])
+        metres = np.stack([origin[0] + (cells[:, 1] + 0.5) * res,
+                           origin[1] + (cells[:, 0] + 0.5) * res], 1)
+        stops = np.cumsum([len(edge.poly) for edge in edges]).tolist()
+        for edge, start, stop in zip(edges, [0, *stops[:-1]], stops, strict=True):
+            iu, iv = index[edge.u], index[edge.v]
+            pts = metres[start:stop]
+            pts[0], pts[-1] = xy[iu], xy[iv]
+            if iu > iv:
+                iu, iv, pts = iv, iu, pts[::-1]
+            chord = xy[iu] - xy[iv]
+            pairs.append((iu, iv))
+            paths.append(pts)
+            # chord length as np.linalg.norm computes it (sqrt of the dot product)
+            lengths.append(max(_polyline_length(pts), math.sqrt(chord.dot(chord))))
+    return TopoMap.from_valid_arrays(xy, np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+                                     lengths, paths)

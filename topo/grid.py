@@ -151,11 +151,20 @@ class OccupancyGrid:
         pose, ranges, angles = self._check_scan(pose, ranges, sensor_angles)
         max_range = check_real(max_range, "max_range", low=0.0)
         beta = check_real(cone_half_width, "cone_half_width", low=0.0, high=math.pi / 2)
+        self.update_valid(pose, ranges, angles, max_range, beta)
+
+    def update_valid(self, pose: np.ndarray, ranges: np.ndarray, sensor_angles: np.ndarray,
+                     max_range: float, cone_half_width: float) -> None:
+        """:meth:`update` without its checks, for callers whose scans are valid by construction
+        (the env, four grids every step, where the checks cost as much as the update): ``pose``
+        a float64 ``(3,)`` array, ``ranges`` and ``sensor_angles`` float64 ``(K,)`` arrays,
+        all finite, ranges ``>= 0``, ``max_range > 0``, ``cone_half_width`` in ``(0, pi/2]``.
+        The same update; bad input here is not diagnosed."""
         m = self.model
         sonar_update(self.log_odds, self._states, self.origin[0], self.origin[1],
-                     self.resolution, pose[0], pose[1], pose[2], ranges, angles, max_range,
-                     beta, (m.hit_width or self.resolution) / 2.0, m.l_free, m.l_occupied,
-                     m.clamp, m.threshold)
+                     self.resolution, pose[0], pose[1], pose[2], ranges, sensor_angles,
+                     max_range, cone_half_width, (m.hit_width or self.resolution) / 2.0,
+                     m.l_free, m.l_occupied, m.clamp, m.threshold)
 
     def _check_scan(self, pose: Any, ranges: Any, angles: Any):
         # sums instead of np.isfinite(...).all(): NaN and inf survive a sum, and on arrays this

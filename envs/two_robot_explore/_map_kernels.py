@@ -1,7 +1,7 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
-disk): the window a sonar scan can touch, and folding the cells it made known into the "ever
-known" masks. Each replaces a dozen small numpy calls whose overhead, not arithmetic, was the
-cost (four grids are updated every env step)."""
+disk): the window a sonar scan can touch, folding the cells it made known into the "ever
+known" masks, and the ``graph_nodes`` observation. Each replaces a dozen small numpy calls
+whose overhead, not arithmetic, was the cost (four grids are updated every env step)."""
 
 from __future__ import annotations
 
@@ -112,3 +112,19 @@ def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
             val = states[int(v), int(u)]
             if val > out[k]:
                 out[k] = val
+
+
+@njit(cache=True, nogil=True)
+def nearest_nodes(rel, dist2, static, lim, nodes, mask):
+    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest by ``dist2`` (stable order:
+    ties by index) get their offsets ``rel`` clipped to ``[-lim, lim]`` and their ``static``
+    features, and a 1 in ``mask``; returns their indices."""
+    order = np.argsort(dist2, kind="mergesort")[: nodes.shape[0]]
+    for j in range(order.shape[0]):
+        q = order[j]
+        nodes[j, 0] = min(max(rel[q, 0], -lim), lim)
+        nodes[j, 1] = min(max(rel[q, 1], -lim), lim)
+        for f in range(static.shape[1]):
+            nodes[j, 2 + f] = static[q, f]
+        mask[j] = 1.0
+    return order

@@ -196,6 +196,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from envs.two_robot_explore.config import EnvConfig
+from envs.two_robot_explore._map_kernels import nearest_nodes
 from envs.two_robot_explore.mapping import (
     LOCAL_MAP_VALUES,
     LocalMapSampler,
@@ -287,6 +288,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         obs = self._observation_spaces[AGENTS[0]]
         self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
         self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
+        self._odo_bound = float(self._obs_high["odometry"][0])  # R as a float32 value
 
     def _observation_space(self) -> spaces.Dict:
         cfg = self.config
@@ -526,8 +528,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._shared_delta = 0
         self._oracle_delta = 0
         for i, (robot, sonar) in enumerate(zip(self.robots, self.sonars, strict=True)):
-            sonar.measure(self.space, robot.true_pose(), robot.sensor_filter, self._rng,
-                          travelled[i])
+            pose = robot.true_pose()
+            sonar.measure(self.space, pose, robot.sensor_filter, self._rng, travelled[i])
             if not sonar.fresh:
                 self._own_delta[i] = 0
                 continue
@@ -538,7 +540,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             if fresh[0]:
                 window = slice(int(fresh[1]), int(fresh[2])), slice(int(fresh[3]), int(fresh[4]))
                 self._shared_delta += self.shared.add(i, rmap, window)
-            self._oracle_delta += self.oracle.add(i, robot.true_pose(), sonar.true_last,
+            self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
                                                   scfg.max_range, half)
         every = cfg.mapping.topo_every
@@ -612,8 +614,11 @@ class TwoRobotExploreEnv(ParallelEnv):
         odo = robot.odometry
         lo, hi = self._obs_low, self._obs_high
         c, s = math.cos(odo[2]), math.sin(odo[2])
-        odometry = np.array([odo[0], odo[1], c, s], dtype=np.float32)
-        np.clip(odometry, lo["odometry"], hi["odometry"], out=odometry)
+        # clipped as floats, then rounded: the bounds are float32 values, so this is the
+        # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
+        r = self._odo_bound
+        odometry = np.array([min(max(odo[0], -r), r), min(max(odo[1], -r), r), c, s],
+                            dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graph_obs(i, odo, c, s)
         teammate = np.zeros(5, dtype=np.float32)
@@ -643,13 +648,10 @@ class TwoRobotExploreEnv(ParallelEnv):
             return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
         static, last_order, last_adj = self._graph_cache[i]
         rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
-        order = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
+        order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static,
+                              2 * self.frame_radius, nodes, mask)
         k = len(order)
-        lim = 2 * self.frame_radius
-        nodes[:k, :2] = np.clip(rel[order], -lim, lim)
-        nodes[:k, 2:] = static[order]
-        mask[:k] = 1.0
-        if last_order is not None and np.array_equal(order, last_order):
+        if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)
         if topo.n_edges:

@@ -154,8 +154,9 @@ class RobotMap:
         counts ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: how many cells became known
         for the first time and their bounding box (all zero if none).
         """
-        self.grid.update(pose, ranges + mount_radius, angles, max_range + mount_radius,
-                         half_cone)
+        # the env's scans are valid by construction: the grid's checks would double the cost
+        self.grid.update_valid(pose, ranges + mount_radius, angles, max_range + mount_radius,
+                               half_cone)
         g = self.geometry
         reach = np.minimum(ranges, max_range) + mount_radius
         win = scan_window(g.origin[0], g.origin[1], g.resolution, g.shape[0], g.shape[1],

@@ -95,3 +95,70 @@ def test_compose_pose_matches_rigid_apply():
     np.testing.assert_allclose(out[:2], t.apply(pose[:2]))
     assert math.cos(out[2]) == pytest.approx(math.cos(2.9 + math.radians(33.0)))
     assert -math.pi <= out[2] <= math.pi
+
+
+def test_env_extraction_kernels_match_the_libraries(monkeypatch):
+    """On the env's own sonar grids (every extraction of a short episode), the compiled
+    free-space clean-up gives the skimage/scipy mask, the compiled tracing skan's paths and the
+    compiled free-disc radii the cKDTree's, exactly."""
+    from envs import two_robot_explore_v0
+    from topo import extract
+    from topo._extract_kernels import (
+        clean_free,
+        clean_free_reference,
+        skan_paths,
+        skeleton_paths,
+        wall_distances,
+        wall_distances_reference,
+    )
+
+    seen = []
+
+    def paths_both(skel):
+        got = skeleton_paths(skel)
+        for a, b in zip(got, skan_paths(skel), strict=True):
+            np.testing.assert_array_equal(a, b)
+        seen.append(len(got[1]) - 1)
+        return got
+
+    def clean_both(*args):
+        got = clean_free(*args)
+        np.testing.assert_array_equal(got, clean_free_reference(*args))
+        return got
+
+    def walls_both(free, points):
+        got = wall_distances(free, points)
+        np.testing.assert_array_equal(got, wall_distances_reference(free, points))
+        return got
+
+    monkeypatch.setattr(extract, "wall_distances", walls_both)
+    monkeypatch.setattr(extract, "skeleton_paths", paths_both)
+    monkeypatch.setattr(extract, "clean_free", clean_both)
+    par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
+    par.reset(seed=3)
+    rng = np.random.default_rng(3)
+    while par.agents:
+        par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
+    assert len(seen) >= 100 and max(seen) >= 10
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(1, 40))
+def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
+    """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip."""
+    from envs.two_robot_explore._map_kernels import nearest_nodes
+
+    rng = np.random.default_rng(seed)
+    rel = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
+    static = rng.random((n, 4)).astype(np.float32)
+    lim = 20.0
+    nodes = np.zeros((n_max, 6), np.float32)
+    mask = np.zeros(n_max, np.float32)
+    order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static, lim, nodes, mask)
+    want = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
+    k = len(want)
+    ref_nodes = np.zeros_like(nodes)
+    ref_nodes[:k, :2] = np.clip(rel[want], -lim, lim)
+    ref_nodes[:k, 2:] = static[want]
+    np.testing.assert_array_equal(order, want)
+    np.testing.assert_array_equal(nodes, ref_nodes)
+    np.testing.assert_array_equal(mask, (np.arange(n_max) < k).astype(np.float32))

@@ -226,26 +226,112 @@ def test_sonar_preset_is_a_valid_simpler_config():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.floats(0.3, 0.7))
-def test_skeleton_paths_are_skans(seed, density):
-    """The array-operation junction step traces exactly the paths of ``skan.csr.Skeleton`` (same
-    pixels, same order), on skeletons of random blobs, which have junction clusters, loops and
-    isolated pixels; a skeleton of isolated pixels only (where skan raises) has no paths."""
-    from skan.csr import Skeleton
+@given(st.integers(0, 2**32 - 1), st.floats(0.3, 0.7), st.integers(8, 64), st.integers(8, 64))
+def test_skeleton_paths_are_skans(seed, density, h, w):
+    """The compiled tracing gives exactly the paths of ``skan.csr.Skeleton`` (same pixels, same
+    order), on skeletons of random blobs, which have junction clusters, loops and isolated
+    pixels; a skeleton of isolated pixels only (where skan raises) has no paths."""
     from skimage.morphology import skeletonize
 
-    from topo.extract import _skeleton_paths
+    from topo._extract_kernels import skan_paths, skeleton_paths
 
     rng = np.random.default_rng(seed)
-    blobs = ndimage.binary_opening(rng.random((48, 48)) < density)
-    skel = skeletonize(blobs)
-    if not skel.any():
-        return
-    coords, paths = _skeleton_paths(skel)
-    neighbours = ndimage.convolve(skel.astype(int), np.ones((3, 3), int), mode="constant") - 1
-    if not neighbours[skel].any():
-        assert paths == [] and len(coords) == skel.sum()
-        return
-    ref = Skeleton(skel, keep_images=False)
-    np.testing.assert_array_equal(coords, ref.coordinates)
-    assert [p.tolist() for p in paths] == [list(p) for p in ref.paths_list()]
+    blobs = ndimage.binary_opening(rng.random((h, w)) < density)
+    for skel in (skeletonize(blobs), skeletonize(rng.random((h, w)) < density)):
+        got, want = skeleton_paths(skel), skan_paths(skel)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_skeleton_paths_of_isolated_pixels_and_nothing():
+    from topo._extract_kernels import skeleton_paths
+
+    skel = np.zeros((5, 6), bool)
+    coords, bounds, pixels = skeleton_paths(skel)
+    assert coords.shape == (0, 2) and bounds.tolist() == [0] and len(pixels) == 0
+    skel[1, 1] = skel[3, 4] = True
+    coords, bounds, pixels = skeleton_paths(skel)
+    assert coords.tolist() == [[1, 1], [3, 4]] and bounds.tolist() == [0] and len(pixels) == 0
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 400), st.sampled_from([1.0, 0.1, 0.05]),
+       st.booleans())
+def test_polyline_length_is_numpys_float(seed, n, scale, reverse):
+    """The compiled length is bit for bit numpy's (pairwise summation) on pixel paths, scaled
+    paths and random points, contiguous or reversed views."""
+    from topo._extract_kernels import polyline_length
+
+    rng = np.random.default_rng(seed)
+    poly = np.cumsum(rng.integers(-1, 2, (n, 2)), axis=0) * scale + rng.random((n, 2)) * (
+        seed % 2)
+    if reverse:
+        poly = poly[::-1]
+    d = poly[1:] - poly[:-1]
+    assert polyline_length(poly) == float(np.sqrt((d * d).sum(axis=1)).sum())
+
+
+@given(st.integers(0, 2**32 - 1), st.floats(0.2, 0.9), st.integers(3, 70), st.integers(3, 70),
+       st.integers(0, 60), st.integers(-1, 4), st.floats(0.0, 80.0))
+def test_clean_free_is_the_library_morphology(seed, density, h, w, max_hole, radius,
+                                              min_cells):
+    """The compiled free-space clean-up (hole filling, erosion by a disk, dropping small
+    components) gives exactly skimage's and scipy's mask, on random blobs with holes, specks
+    and free cells on the array's edge."""
+    from skimage.morphology import disk
+
+    from topo._extract_kernels import clean_free, clean_free_reference
+
+    rng = np.random.default_rng(seed)
+    given = rng.random((h, w)) < density
+    if seed % 3:
+        given = ndimage.binary_opening(given)
+    footprint = None if radius < 0 else disk(radius)
+    got = clean_free(given, max_hole, footprint, min_cells)
+    np.testing.assert_array_equal(got, clean_free_reference(given, max_hole, footprint,
+                                                            min_cells))
+
+
+@given(st.integers(0, 2**32 - 1), st.floats(0.1, 0.95), st.integers(1, 50), st.integers(1, 50))
+def test_wall_distances_are_the_kd_trees(seed, density, h, w):
+    """The compiled free-disc radius (a search in square rings) is the cKDTree distance to the
+    wall pixels, bit for bit, at free and non-free pixels and points between pixels (inf when
+    no pixel borders free space)."""
+    from topo._extract_kernels import wall_distances, wall_distances_reference
+
+    rng = np.random.default_rng(seed)
+    free = np.pad(rng.random((h, w)) < density, 1)
+    points = rng.integers(0, [h + 2, w + 2], (20, 2)).astype(np.float64)
+    points[10:] += rng.uniform(-0.5, 0.5, (10, 2))  # merged node means lie between pixels
+    np.testing.assert_array_equal(wall_distances(free, points),
+                                  wall_distances_reference(free, points))
+    assert np.isinf(wall_distances(np.zeros((4, 4), bool), points[:3])).all()
+
+
+def _peaks_reference(turn, candidate, group):
+    """The numpy form of the corner peaks (as extract_topomap had it): each run of consecutive
+    candidates within a group, its sharpest point, the middle one of equally sharp ones."""
+    idx = np.flatnonzero(candidate)
+    if len(idx) == 0:
+        return idx
+    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(group[idx]) != 0)) + 1
+    out = []
+    for run in np.split(idx, breaks):
+        t = turn[run]
+        best = run[np.flatnonzero(t >= t.max() - 1e-9)]
+        out.append(int(best[len(best) // 2]))
+    return np.asarray(out, dtype=np.int64)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.sampled_from([0.3, 0.6, 0.9]))
+def test_corner_peaks_kernel_is_the_numpy_form(seed, n, density):
+    """Ties (quantised turns, and turns within 1e-9), runs across group boundaries, empty
+    input."""
+    from topo._extract_kernels import peaks
+
+    rng = np.random.default_rng(seed)
+    turn = np.round(rng.uniform(0, 3, n), int(rng.integers(0, 3)))
+    turn[rng.random(n) < 0.1] += 5e-10
+    candidate = rng.random(n) < density
+    group = np.sort(rng.integers(0, max(n // 10, 1), n))
+    np.testing.assert_array_equal(peaks(turn, candidate, group),
+                                  _peaks_reference(turn, candidate, group))

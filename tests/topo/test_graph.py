@@ -145,3 +145,24 @@ def test_from_networkx_needs_positions():
         TopoMap.from_networkx(g)
     with pytest.raises(ValueError, match="undirected"):
         TopoMap.from_networkx(nx.DiGraph())
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.integers(0, 15))
+def test_from_valid_arrays_is_from_arrays_without_the_checks(seed, n, n_edges):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-5, 5, (n, 2))
+    pairs = [(u, v) for u, v in rng.integers(0, n, (n_edges, 2)).tolist() if u != v]
+    edges = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    lengths = [float(np.linalg.norm(xy[u] - xy[v])) + rng.uniform(0, 2) for u, v in pairs]
+    paths = [np.stack([xy[u], rng.uniform(-5, 5, 2), xy[v]])[:: 1 if k % 2 else -1]
+             for k, (u, v) in enumerate(pairs)]
+    a = TopoMap.from_arrays(xy, edges, lengths=lengths, paths=paths)
+    b = TopoMap.from_valid_arrays(xy.copy(), edges.copy(), lengths, paths)
+    assert a.to_dict() == b.to_dict()
+    for f in ("xy", "kinds", "edges", "lengths"):
+        x, y = getattr(a, f), getattr(b, f)
+        assert x.dtype == y.dtype and x.shape == y.shape and not y.flags.writeable
+        np.testing.assert_array_equal(x, y)
+    for p, q in zip(a.paths, b.paths, strict=True):
+        assert q.flags.c_contiguous and not q.flags.writeable
+        np.testing.assert_array_equal(p, q)

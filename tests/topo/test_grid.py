@@ -216,3 +216,18 @@ def test_compiled_update_matches_the_slow_reference(x, y, theta, beams, beta):
         reference_update(slow, (x, y, theta), ranges, angles, 5.0, beta)
     np.testing.assert_allclose(fast.log_odds, slow.log_odds, atol=1e-5)
     np.testing.assert_array_equal(fast.states(), slow._classify(slow.log_odds))
+
+
+@given(st.integers(0, 2**32 - 1))
+def test_update_valid_is_update_without_the_checks(seed):
+    rng = np.random.default_rng(seed)
+    a = OccupancyGrid(0.1, (-4.0, -4.0, 4.0, 4.0))
+    b = OccupancyGrid(0.1, (-4.0, -4.0, 4.0, 4.0))
+    angles = np.radians([-90.0, -50, -30, -10, 10, 30, 50, 90])
+    for _ in range(5):
+        pose = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)])
+        ranges = rng.uniform(0.0, 6.0, 8)
+        a.update(pose, ranges, angles, 5.0, math.radians(7.5))
+        b.update_valid(pose, ranges, angles, 5.0, math.radians(7.5))
+    np.testing.assert_array_equal(a.log_odds, b.log_odds)
+    np.testing.assert_array_equal(a.states(), b.states())

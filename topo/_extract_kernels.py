@@ -1,0 +1,572 @@
+"""Compiled pieces of :func:`topo.extract.extract_topomap` (numba, cached on disk), each giving
+bit for bit what the library or numpy code it replaces gives, and each tested against it
+(``tests/topo/test_extract.py`` on hypothesis inputs, ``tests/envs/test_mapping.py`` on every
+extraction of an env episode). On the env's 100–200-cell sonar grids the replaced calls' cost
+was their fixed per-call overhead (scipy sparse matrices, small numpy calls), not the work.
+
+* :func:`clean_free` — step 1's morphology (skimage ``remove_small_holes``, scipy
+  ``binary_erosion`` by a disk, dropping small ``ndimage.label`` components) on horizontal runs
+  of pixels; :func:`clean_free_reference` is the library path.
+* :func:`skeleton_paths` — what skan's ``Skeleton`` traces (``pixel_graph`` with
+  8-connectivity, each junction cluster reduced to scipy's ``minimum_spanning_tree``,
+  ``PathGraph``'s tracing): the same paths in the same order; :func:`skan_paths` is skan itself.
+  :func:`path_nodes` numbers their end pixels as the clean-up expects.
+* :func:`wall_distances` — the distance from pixels to the nearest non-free pixel bordering free
+  space (a search in square rings), what a ``cKDTree`` of those pixels answers
+  (:func:`wall_distances_reference`).
+* :func:`polyline_length` / :func:`path_lengths` — ``np.sqrt((d * d).sum(axis=1)).sum()`` of
+  the steps ``d``, with numpy's pairwise summation (so the same float).
+* :func:`peaks` — the corner step's choice of one sharpest point per run of candidates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# 8-neighbour offsets (row, col) in increasing raveled order: skan's CSR rows list neighbours by
+# increasing pixel index, and its tracing visits them in that order
+_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
+_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):
+    """numpy's pairwise summation of a block ``a[lo:lo + n]``, ``n <= 128``: a plain loop under
+    8 items, else 8 running sums combined as a tree, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo: lo + 8].copy()
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_sum(a, n):
+    """numpy's ``add.reduce`` of a contiguous float64 ``a[:n]``: blocks of up to 128 summed by
+    :func:`_block_sum`, longer runs split in halves (a multiple of 8 first) and the halves'
+    sums added. numpy recurses; this walks the same tree with an explicit stack (numba's disk
+    cache does not support recursion)."""
+    if n <= 128:
+        return _block_sum(a, 0, n)
+    los = np.empty(64, dtype=np.int64)
+    ns = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)
+    left = np.empty(64, dtype=np.float64)
+    sp = 0
+    los[0], ns[0] = 0, n
+    ret = 0.0
+    while sp >= 0:
+        lo, m = los[sp], ns[sp]
+        half = m // 2
+        half -= half % 8
+        if m <= 128:
+            ret = _block_sum(a, lo, m)
+            sp -= 1
+        elif stage[sp] == 0:  # first the left half
+            stage[sp] = 1
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo, half, 0
+        elif stage[sp] == 1:  # left done (in ret): now the right half
+            left[sp] = ret
+            stage[sp] = 2
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo + half, m - half, 0
+        else:
+            ret = left[sp] + ret
+            sp -= 1
+    return ret
+
+
+@njit(cache=True, nogil=True)
+def polyline_length(poly):
+    """Length of the ``(K, 2)`` float64 polyline ``poly`` (0 for fewer than two points)."""
+    n = max(poly.shape[0] - 1, 0)
+    steps = np.empty(n, dtype=np.float64)
+    for i in range(n):
+        dx = poly[i + 1, 0] - poly[i, 0]
+        dy = poly[i + 1, 1] - poly[i, 1]
+        steps[i] = math.sqrt(dx * dx + dy * dy)
+    return 0.0 + _pairwise_sum(steps, n)
+
+
+@njit(cache=True, nogil=True)
+def _row_runs(mask, value):
+    """The horizontal runs of pixels of ``mask`` equal to ``value``: ``(R, 3)`` rows ``row,
+    start, stop`` in raster order, and ``first`` (``H + 1``): row ``r``'s runs are
+    ``first[r]:first[r + 1]``."""
+    h, w = mask.shape
+    runs = np.empty((h * ((w + 1) // 2) + 1, 3), dtype=np.int64)
+    first = np.zeros(h + 1, dtype=np.int64)
+    n = 0
+    for r in range(h):
+        first[r] = n
+        c = 0
+        while c < w:
+            if mask[r, c] != value:
+                c += 1
+                continue
+            start = c
+            while c < w and mask[r, c] == value:
+                c += 1
+            runs[n, 0], runs[n, 1], runs[n, 2] = r, start, c
+            n += 1
+    first[h] = n
+    return runs[:n], first
+
+
+@njit(cache=True, nogil=True)
+def _run_components(mask, value):
+    """4-connected components of the pixels of ``mask`` equal to ``value`` (``ndimage.label``'s
+    default structure), labelled by horizontal runs: ``runs`` ``(R, 3)`` as ``row, start,
+    stop``, each run's component ``root`` (a run index) and ``size``, the pixel count of each
+    root's component (runs of adjacent rows that share a column are joined)."""
+    h = mask.shape[0]
+    runs, first = _row_runs(mask, value)
+    n = len(runs)
+    root = np.arange(n)
+    for r in range(1, h):
+        a, b = first[r - 1], first[r]
+        while a < first[r] and b < first[r + 1]:
+            if runs[a, 2] > runs[b, 1] and runs[b, 2] > runs[a, 1]:  # columns overlap
+                x, y = _find(root, a), _find(root, b)
+                if x != y:
+                    root[max(x, y)] = min(x, y)
+            if runs[a, 2] < runs[b, 2]:
+                a += 1
+            else:
+                b += 1
+    size = np.zeros(n, dtype=np.int64)
+    for k in range(n):
+        root[k] = _find(root, k)
+        size[root[k]] += runs[k, 2] - runs[k, 1]
+    return runs, root, size
+
+
+@njit(cache=True, nogil=True)
+def _erode(mask, footprint):
+    """Binary erosion of ``mask`` by ``footprint`` (centred; outside the array counts as
+    non-free), for footprints whose rows are each one centred run (a disk): pixel ``(r, c)``
+    stays iff in every footprint row ``i`` (half width ``a``) the ``2a + 1`` pixels of row
+    ``r + i - centre`` around ``c`` are set, i.e. ``c`` lies in a run ``[s, e)`` of that row
+    shrunk to ``[s + a, e - a)``; the shrunk runs of each row are counted per column."""
+    h, w = mask.shape
+    fh = footprint.shape[0]
+    centre = fh // 2
+    half = np.full(fh, -1, dtype=np.int64)
+    for i in range(fh):
+        for j in range(footprint.shape[1]):
+            if footprint[i, j]:
+                half[i] = max(half[i], j - footprint.shape[1] // 2)
+    need = 0
+    for i in range(fh):
+        if half[i] >= 0:
+            need += 1
+    runs, first = _row_runs(mask, True)
+    out = np.zeros((h, w), dtype=np.bool_)
+    count = np.zeros(w + 1, dtype=np.int64)
+    for r in range(h):
+        count[:] = 0
+        inside = True
+        for i in range(fh):
+            a = half[i]
+            if a < 0:
+                continue
+            rr = r + i - centre
+            if rr < 0 or rr >= h:
+                inside = False
+                break
+            for k in range(first[rr], first[rr + 1]):
+                s, e = runs[k, 1] + a, runs[k, 2] - a
+                if s < e:
+                    count[s] += 1
+                    count[e] -= 1
+        if not inside:
+            continue
+        acc = 0
+        for c in range(w):
+            acc += count[c]
+            out[r, c] = acc == need
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _clean_free(given, max_hole, footprint, min_cells):
+    filled = given.copy()
+    if max_hole > 0:
+        runs, root, size = _run_components(given, False)
+        for k in range(len(runs)):
+            if size[root[k]] <= max_hole:
+                filled[runs[k, 0], runs[k, 1]: runs[k, 2]] = True
+    out = filled
+    if footprint.size:
+        out = _erode(filled, footprint)
+    if min_cells > 0:
+        runs, root, size = _run_components(out, True)
+        for k in range(len(runs)):
+            if size[root[k]] < min_cells:
+                out[runs[k, 0], runs[k, 1]: runs[k, 2]] = False
+    return out
+
+
+_NO_FOOTPRINT = np.zeros((0, 0), dtype=np.bool_)
+
+
+def clean_free(given: np.ndarray, max_hole: int, footprint: np.ndarray | None,
+               min_cells: float) -> np.ndarray:
+    """Free space cleaned as in :func:`clean_free_reference`, in a new array."""
+    fp = _NO_FOOTPRINT if footprint is None else np.ascontiguousarray(footprint, dtype=np.bool_)
+    return _clean_free(given, int(max_hole), fp, float(min_cells))
+
+
+def clean_free_reference(given: np.ndarray, max_hole: int, footprint: np.ndarray | None,
+                         min_cells: float) -> np.ndarray:
+    """The library path of :func:`clean_free`: holes of ``given`` (4-connected non-free
+    components) of at most ``max_hole`` cells filled (skimage ``remove_small_holes``; 0 = none),
+    eroded by ``footprint`` (scipy ``binary_erosion``, outside the array non-free; ``None`` =
+    none), 4-connected components of fewer than ``min_cells`` cells dropped (0 = none)."""
+    from scipy import ndimage
+    from skimage.morphology import remove_small_holes
+
+    free = given
+    if max_hole > 0:
+        free = remove_small_holes(free, max_size=max_hole)
+    if footprint is not None:
+        free = ndimage.binary_erosion(free, structure=footprint)
+    if min_cells > 0:
+        labels, n = ndimage.label(free)
+        if n:
+            sizes = np.bincount(labels.ravel(), minlength=n + 1)
+            small = sizes < min_cells
+            small[0] = False
+            free = free & ~small[labels]
+    return free
+
+
+@njit(cache=True, nogil=True)
+def _is_wall(free, r, c):
+    h, w = free.shape
+    if r < 0 or r >= h or c < 0 or c >= w or free[r, c]:
+        return False
+    return ((r > 0 and free[r - 1, c]) or (r + 1 < h and free[r + 1, c])
+            or (c > 0 and free[r, c - 1]) or (c + 1 < w and free[r, c + 1]))
+
+
+@njit(cache=True, nogil=True)
+def _ring_min(free, pr, pc, ir, ic, d, best):
+    """``best`` lowered by the squared distances from ``(pr, pc)`` to the wall pixels at
+    Chebyshev distance ``d`` from pixel ``(ir, ic)``."""
+    for c in range(ic - d, ic + d + 1):
+        for r in (ir - d, ir + d):
+            if _is_wall(free, r, c):
+                best = min(best, (r - pr) * (r - pr) + (c - pc) * (c - pc))
+            if d == 0:
+                break
+    for r in range(ir - d + 1, ir + d):
+        for c in (ic - d, ic + d):
+            if _is_wall(free, r, c):
+                best = min(best, (r - pr) * (r - pr) + (c - pc) * (c - pc))
+    return best
+
+
+@njit(cache=True, nogil=True)
+def _wall_distances(free, points):
+    h, w = free.shape
+    out = np.empty(points.shape[0])
+    for k in range(points.shape[0]):
+        pr, pc = points[k, 0], points[k, 1]
+        ir, ic = int(round(pr)), int(round(pc))
+        best = np.inf
+        d = 0
+        # square rings around the point's pixel (at most half a pixel from the point): a wall
+        # in ring d or beyond is at least d - 0.5 away
+        while best > (d - 0.5) * (d - 0.5) and d <= h + w + abs(ir) + abs(ic):
+            best = _ring_min(free, pr, pc, ir, ic, d, best)
+            d += 1
+        out[k] = math.sqrt(best)
+    return out
+
+
+def wall_distances(free: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (pixels) from each ``(row, col)`` of ``points`` ``(K, 2)`` to the nearest
+    non-free pixel 4-adjacent to a free one: the radius of the largest free disc there (``inf``
+    without such pixels)."""
+    return _wall_distances(free, np.ascontiguousarray(points, dtype=np.float64))
+
+
+def wall_distances_reference(free: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The library path of :func:`wall_distances`: a scipy ``cKDTree`` of the wall pixels."""
+    from scipy.spatial import cKDTree
+
+    near = np.zeros_like(free)
+    near[1:] |= free[:-1]
+    near[:-1] |= free[1:]
+    near[:, 1:] |= free[:, :-1]
+    near[:, :-1] |= free[:, 1:]
+    return cKDTree(np.argwhere(near & ~free)).query(points)[0]
+
+
+@njit(cache=True, nogil=True)
+def path_lengths(points, bounds):
+    """:func:`polyline_length` of each ``points[bounds[k]:bounds[k + 1]]``."""
+    out = np.empty(len(bounds) - 1, dtype=np.float64)
+    for k in range(len(bounds) - 1):
+        out[k] = polyline_length(points[bounds[k]: bounds[k + 1]])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _find(parent, v):
+    root = v
+    while parent[root] != root:
+        root = parent[root]
+    while parent[v] != root:
+        up = parent[v]
+        parent[v] = root
+        v = up
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _pixel_graph(skel, dr, dc):
+    """Pixel ids (raveled order), coordinates ``(N, 2)`` and the CSR neighbour lists
+    (``indptr``, ``indices``; neighbours by increasing id; ``diag``: the step is diagonal) of
+    the 8-connected pixel graph of ``skel``."""
+    h, w = skel.shape
+    ids = np.full((h, w), -1, dtype=np.int64)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if skel[r, c]:
+                ids[r, c] = n
+                n += 1
+    coords = np.empty((n, 2), dtype=np.float64)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    indices = np.empty(8 * n, dtype=np.int64)
+    diag = np.empty(8 * n, dtype=np.bool_)
+    k = 0
+    for r in range(h):
+        for c in range(w):
+            p = ids[r, c]
+            if p < 0:
+                continue
+            coords[p, 0] = r
+            coords[p, 1] = c
+            for j in range(8):
+                rr, cc = r + dr[j], c + dc[j]
+                if 0 <= rr < h and 0 <= cc < w and ids[rr, cc] >= 0:
+                    indices[k] = ids[rr, cc]
+                    diag[k] = dr[j] != 0 and dc[j] != 0
+                    k += 1
+            indptr[p + 1] = k
+    return coords, indptr, indices[:k], diag[:k]
+
+
+@njit(cache=True, nogil=True)
+def _junction_trees(indptr, indices, diag):
+    """Which CSR entries survive when every cluster of junction pixels (degree ≥ 3) keeps only
+    its minimum spanning tree: scipy's Kruskal (edges by weight, stable in CSR order, so the
+    straight steps of weight 1 before the diagonal ones of weight √2)."""
+    n = len(indptr) - 1
+    m = len(indices)
+    deg = indptr[1:] - indptr[:-1]
+    keep = np.ones(m, dtype=np.bool_)
+    inner = np.zeros(m, dtype=np.bool_)
+    for p in range(n):
+        if deg[p] >= 3:
+            for k in range(indptr[p], indptr[p + 1]):
+                inner[k] = deg[indices[k]] >= 3
+    parent = np.arange(n)
+    tree = np.zeros(m, dtype=np.bool_)
+    for want_diag in (False, True):
+        for p in range(n):
+            for k in range(indptr[p], indptr[p + 1]):
+                if inner[k] and diag[k] == want_diag:
+                    a, b = _find(parent, p), _find(parent, indices[k])
+                    if a != b:
+                        parent[b] = a
+                        tree[k] = True
+    for p in range(n):
+        for k in range(indptr[p], indptr[p + 1]):
+            if inner[k] and not tree[k]:
+                q = indices[k]
+                # kept if the tree holds the edge in either direction
+                found = False
+                for kk in range(indptr[q], indptr[q + 1]):
+                    if indices[kk] == p and tree[kk]:
+                        found = True
+                keep[k] = found
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _trace(indptr, indices, keep):
+    """skan's ``_build_paths`` on the kept entries: paths from every end or junction pixel along
+    each unvisited neighbour, then the isolated cycles; returns ``(bounds, pixels)``."""
+    n = len(indptr) - 1
+    m = len(indices)
+    # compact the kept entries
+    kptr = np.zeros(n + 1, dtype=np.int64)
+    kidx = np.empty(m, dtype=np.int64)
+    j = 0
+    for p in range(n):
+        for k in range(indptr[p], indptr[p + 1]):
+            if keep[k]:
+                kidx[j] = indices[k]
+                j += 1
+        kptr[p + 1] = j
+    kidx = kidx[:j]
+    deg = kptr[1:] - kptr[:-1]
+    visited = np.zeros(j, dtype=np.bool_)
+    out = np.empty(j + n + 1, dtype=np.int64)
+    bounds = np.zeros(j + 2, dtype=np.int64)
+    n_paths = 0
+    pos = 0
+    for phase in range(2):
+        for p in range(n):
+            if phase == 0 and not (deg[p] > 2 or deg[p] == 1):
+                continue
+            if phase == 1 and deg[p] == 0:
+                continue
+            last = kptr[p + 1] if phase == 0 else kptr[p] + 1
+            for e in range(kptr[p], last):
+                if visited[e]:
+                    continue
+                start = p
+                node = p
+                nb = kidx[e]
+                ee = e
+                out[pos] = node
+                pos += 1
+                while not visited[ee]:
+                    visited[ee] = True
+                    for back in range(kptr[nb], kptr[nb + 1]):
+                        if kidx[back] == node:
+                            visited[back] = True
+                    out[pos] = nb
+                    pos += 1
+                    if deg[nb] != 2 or nb == start:
+                        break
+                    a0 = kidx[kptr[nb]]
+                    nxt = a0 if a0 != node else kidx[kptr[nb] + 1]
+                    node = nb
+                    nb = nxt
+                    for cand in range(kptr[node], kptr[node + 1]):
+                        if kidx[cand] == nb:
+                            ee = cand
+                n_paths += 1
+                bounds[n_paths] = pos
+    return bounds[: n_paths + 1], out[:pos]
+
+
+@njit(cache=True, nogil=True)
+def _skeleton_paths(skel, dr, dc):
+    coords, indptr, indices, diag = _pixel_graph(skel, dr, dc)
+    keep = _junction_trees(indptr, indices, diag)
+    bounds, pixels = _trace(indptr, indices, keep)
+    return coords, bounds, pixels
+
+
+def skeleton_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel coordinates ``(N, 2)`` (float, raveled order) of the 2-D boolean skeleton ``skel``
+    and its paths as ``bounds`` (``P + 1``) and ``pixels``: path ``k`` is
+    ``pixels[bounds[k]:bounds[k + 1]]``, pixel indices into the coordinates, exactly skan's
+    ``PathGraph`` paths of the junction-tree pixel graph (no paths when no pixel has a
+    neighbour)."""
+    return _skeleton_paths(skel, _DR, _DC)
+
+
+@njit(cache=True, nogil=True)
+def peaks(turn, candidate, group):
+    """Corner step 6 of ``extract_topomap``: one index per run of consecutive ``candidate``
+    points within one ``group`` (polyline), its sharpest point by ``turn``, the middle one if
+    several are as sharp (within 1e-9)."""
+    out = np.empty(len(turn), dtype=np.int64)
+    n = 0
+    i = 0
+    size = len(turn)
+    while i < size:
+        if not candidate[i]:
+            i += 1
+            continue
+        j = i + 1
+        while j < size and candidate[j] and group[j] == group[i]:
+            j += 1
+        top = turn[i]
+        for k in range(i + 1, j):
+            top = max(top, turn[k])
+        sharp = 0
+        for k in range(i, j):
+            if turn[k] >= top - 1e-9:
+                sharp += 1
+        want = sharp // 2
+        for k in range(i, j):
+            if turn[k] >= top - 1e-9:
+                if want == 0:
+                    out[n] = k
+                    n += 1
+                    break
+                want -= 1
+        i = j
+    return out[:n]
+
+
+@njit(cache=True, nogil=True)
+def path_nodes(n_pixels, bounds, pixels):
+    """The graph of traced paths: node pixels in order of first appearance as a path end
+    (start, end, next path...), then the pixels on no path in increasing order (a tiny blob's
+    single pixel); each path's ``(start, end)`` node numbers ``(P, 2)``."""
+    node_of = np.full(n_pixels, -1, dtype=np.int64)
+    order = np.empty(n_pixels, dtype=np.int64)
+    n = 0
+    n_paths = len(bounds) - 1
+    ends = np.empty((n_paths, 2), dtype=np.int64)
+    for k in range(n_paths):
+        for j, p in enumerate((pixels[bounds[k]], pixels[bounds[k + 1] - 1])):
+            if node_of[p] < 0:
+                node_of[p] = n
+                order[n] = p
+                n += 1
+            ends[k, j] = node_of[p]
+    on_path = np.zeros(n_pixels, dtype=np.bool_)
+    for p in pixels:
+        on_path[p] = True
+    for p in range(n_pixels):
+        if not on_path[p]:
+            order[n] = p
+            n += 1
+    return order[:n], ends
+
+
+def skan_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reference of :func:`skeleton_paths`: the same ``(coords, bounds, pixels)`` from
+    ``skan.csr.Skeleton`` itself (slow: skan walks every pixel in Python). Tests only."""
+    from skan.csr import Skeleton
+
+    coords = np.argwhere(skel).astype(np.float64)
+    if len(coords) == 0:
+        return coords, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    h, w = skel.shape
+    padded = np.pad(skel, 1).astype(np.int64)
+    around = sum(padded[1 + dr: 1 + dr + h, 1 + dc: 1 + dc + w]
+                 for dr in (-1, 0, 1) for dc in (-1, 0, 1)) - padded[1:-1, 1:-1]
+    if not around[skel].any():  # isolated pixels only: skan raises, there are no paths
+        return coords, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    ref = Skeleton(skel, keep_images=False)
+    paths = [np.asarray(p, dtype=np.int64) for p in ref.paths_list()]
+    bounds = np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64)
+    return np.asarray(ref.coordinates, dtype=np.float64), bounds, np.concatenate(paths)
