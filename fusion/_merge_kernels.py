@@ -318,12 +318,15 @@ def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
     ``(cx, cy)`` is ``>= min_dist`` away from every hypothesis kept before."""
     kept = np.empty(k, dtype=np.int64)
     n = 0
+    min_dist2 = min_dist * min_dist
     for h in order:
         ok = True
         for m in range(n):
             g = kept[m]
-            d_ang = abs((theta[h] - theta[g] + math.pi) % (2 * math.pi) - math.pi)
-            if d_ang < min_angle and math.hypot(cx[h] - cx[g], cy[h] - cy[g]) < min_dist:
+            dx, dy = cx[h] - cx[g], cy[h] - cy[g]
+            if dx * dx + dy * dy >= min_dist2:  # the cheap test first
+                continue
+            if abs((theta[h] - theta[g] + math.pi) % (2 * math.pi) - math.pi) < min_angle:
                 ok = False
                 break
         if ok:
@@ -674,6 +677,7 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
         ux, uy, wx, wy = seg[k, 0], seg[k, 1], seg[k, 2], seg[k, 3]
         vx, vy = wx - ux, wy - uy
         ll = vx * vx + vy * vy
+        inv_ll = 0.0 if ll == 0.0 else 1.0 / ll
         band = reach * math.sqrt(ll)  # |cross((p - u), v)| <= band: within reach of the line
         bx0, bx1 = min(ux, wx) - reach, max(ux, wx) + reach
         iy0 = max(0, int(math.floor((min(uy, wy) - reach - y0) / cell)))
@@ -689,13 +693,18 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
                 continue
             ix0 = max(0, int(math.floor((lo - x0) / cell - 0.5)))
             ix1 = min(nx, int(math.ceil((hi - x0) / cell - 0.5)) + 1)
+            # along the row, the projection t and the offsets change linearly with x
+            px = x0 + (ix0 + 0.5) * cell
+            t = ((px - ux) * vx + (py - uy) * vy) * inv_ll
+            dt = cell * vx * inv_ll
             for ix in range(ix0, ix1):
-                px = x0 + (ix + 0.5) * cell
-                t = 0.0 if ll == 0.0 else min(1.0, max(0.0, ((px - ux) * vx + (py - uy) * vy) / ll))
-                dx, dy = ux + t * vx - px, uy + t * vy - py
+                tc = min(1.0, max(0.0, t))
+                dx, dy = ux + tc * vx - px, uy + tc * vy - py
                 dd = dx * dx + dy * dy
                 if dd < d2[iy, ix]:
                     d2[iy, ix] = dd
+                px += cell
+                t += dt
     return d2
 
 

@@ -340,7 +340,7 @@ class MergeResult:
 
 
 # --------------------------------------------------------------------------- preparation
-PATH_STEP = 0.8
+PATH_STEP = 1.2
 """Spacing (m) of the points along each map's paths that the path evidence moves."""
 PATH_CELL = 0.4
 """Cell (m) of the distance-to-path raster of each map."""
@@ -379,10 +379,10 @@ def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     margin = np.minimum(0.5, cfg.eps / np.maximum(seg, 1e-12))
     pieces = _segments(m)
     pts, w = K.path_samples(pieces, PATH_STEP)
-    every = np.vstack([xy, pieces[:, :2], pieces[:, 2:]])
-    lo = every.min(axis=0) - PATH_REACH - PATH_CELL
-    nx, ny = (np.ceil((every.max(axis=0) + PATH_REACH + PATH_CELL - lo) / PATH_CELL)
-              .astype(np.int64) + 1).tolist()
+    ends = pieces.reshape(-1, 2) if len(pieces) else xy
+    lo = np.minimum(xy.min(axis=0), ends.min(axis=0)) - PATH_REACH - PATH_CELL
+    hi = np.maximum(xy.max(axis=0), ends.max(axis=0)) + PATH_REACH + PATH_CELL
+    nx, ny = (np.ceil((hi - lo) / PATH_CELL).astype(np.int64) + 1).tolist()
     field = K.path_field(pieces, float(lo[0]), float(lo[1]), PATH_CELL, ny, nx, PATH_REACH)
     return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
                      _branches(xy, edges), pts, w, field, (float(lo[0]), float(lo[1])))
