@@ -775,3 +775,36 @@ def path_samples(seg, step):
             w[i] = length / count[k]
             i += 1
     return pts, w
+
+
+@njit(cache=True, nogil=True)
+def nearest_on_paths(seg, pts, theta, tx, ty, gate):
+    """For the points ``pts`` moved by ``(theta, tx, ty)``, the nearest point of the segments
+    ``seg[k] = (x1, y1, x2, y2)`` within ``gate``: ``(index of each point that has one (K,),
+    its nearest segment point (K, 2))``."""
+    c, s = math.cos(theta), math.sin(theta)
+    idx = np.empty(pts.shape[0], dtype=np.int64)
+    near = np.empty((pts.shape[0], 2))
+    gate2 = gate * gate
+    n = 0
+    for k in range(pts.shape[0]):
+        x = c * pts[k, 0] - s * pts[k, 1] + tx
+        y = s * pts[k, 0] + c * pts[k, 1] + ty
+        best, bx, by = gate2, 0.0, 0.0
+        for e in range(seg.shape[0]):
+            ux, uy, wx, wy = seg[e, 0], seg[e, 1], seg[e, 2], seg[e, 3]
+            if (x < min(ux, wx) - gate or x > max(ux, wx) + gate or y < min(uy, wy) - gate
+                    or y > max(uy, wy) + gate):
+                continue
+            vx, vy = wx - ux, wy - uy
+            ll = vx * vx + vy * vy
+            t = 0.0 if ll == 0.0 else min(1.0, max(0.0, ((x - ux) * vx + (y - uy) * vy) / ll))
+            qx, qy = ux + t * vx, uy + t * vy
+            dd = (qx - x) ** 2 + (qy - y) ** 2
+            if dd < best:
+                best, bx, by = dd, qx, qy
+        if best < gate2:
+            idx[n] = k
+            near[n, 0], near[n, 1] = bx, by
+            n += 1
+    return idx[:n], near[:n]

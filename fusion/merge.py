@@ -51,7 +51,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import best_rotation_angle, degeneracy, icp_svd
+from fusion.icp import degeneracy, icp_svd
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -352,6 +352,8 @@ PATH_TOL = 0.5
 PATH_OFF = 0.9
 """A path point between this and :data:`PATH_REACH` from the other map's paths runs beside
 one: two corridors that close would be the same corridor."""
+PATH_FIT_WEIGHT = 1.0
+"""Weight of a metre of B's paths lying on A's against a matched node in the final fit."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -365,6 +367,7 @@ class _Prepared:
     pair_len: np.ndarray
     margin: np.ndarray  # (E,) fraction of each path within eps of its ends
     branches: np.ndarray  # (n, max degree) direction of each path leaving a node, nan padded
+    segments: np.ndarray  # (S, 4) straight pieces of the paths (_segments)
     path_pts: np.ndarray  # (S, 2) points along the paths, every ~PATH_STEP
     path_w: np.ndarray  # (S,) metres of path each stands for
     field: np.ndarray  # squared distance to the nearest path (K.path_field), PATH_CELL cells
@@ -385,7 +388,7 @@ def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     nx, ny = (np.ceil((hi - lo) / PATH_CELL).astype(np.int64) + 1).tolist()
     field = K.path_field(pieces, float(lo[0]), float(lo[1]), PATH_CELL, ny, nx, PATH_REACH)
     return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(xy, edges), pts, w, field, (float(lo[0]), float(lo[1])))
+                     _branches(xy, edges), pieces, pts, w, field, (float(lo[0]), float(lo[1])))
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -482,19 +485,32 @@ def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
     return _Eval(float(wrap_angle(theta)), np.asarray(t, dtype=np.float64), matches, ev)
 
 
-def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray) -> tuple[float, np.ndarray]:
-    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches)."""
+def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: float,
+                   t: np.ndarray) -> tuple[float, np.ndarray]:
+    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
+    B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
+    paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
     P, Q = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]]
-    theta = best_rotation_angle(P, Q)
-    c, s = math.cos(theta), math.sin(theta)
-    return theta, Q.mean(axis=0) - np.array([[c, -s], [s, c]]) @ P.mean(axis=0)
+    w = np.ones(len(P))
+    if PATH_FIT_WEIGHT > 0.0:
+        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL)
+        P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
+        w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
+    w = w / w.sum()
+    mp, mq = w @ P, w @ Q
+    P0, Q0 = P - mp, Q - mq
+    ang = math.atan2(float(w @ (P0[:, 0] * Q0[:, 1] - P0[:, 1] * Q0[:, 0])),
+                     float(w @ (P0[:, 0] * Q0[:, 0] + P0[:, 1] * Q0[:, 1])))
+    c, s = math.cos(ang), math.sin(ang)
+    return ang, mq - np.array([[c, -s], [s, c]]) @ mp
 
 
 def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Eval:
     """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then least-squares
     fits on mutually nearest nodes of any kinds within ``fit_eps`` (what the oracle does with
     the true matches; a node at the edge of explored space may have another kind in each
-    map)."""
+    map) and on B's path points lying on A's paths (:func:`_least_squares`: long corridors fix
+    the rotation far better than the 3–6 nodes a small overlap shares)."""
     best = start
     if start.evidence.inliers >= 2:
         trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))
@@ -507,7 +523,7 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
         pairs = K.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
         if len(pairs) < 3:
             break
-        theta, t, moved = *_least_squares(pa, pb, pairs), True
+        theta, t, moved = *_least_squares(pa, pb, pairs, theta, t), True
     return _evaluate(pa, pb, theta, t, cfg) if moved else best
 
 
