@@ -778,18 +778,24 @@ def path_samples(seg, step):
 
 
 @njit(cache=True, nogil=True)
-def nearest_on_paths(seg, pts, theta, tx, ty, gate):
+def nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell):
     """For the points ``pts`` moved by ``(theta, tx, ty)``, the nearest point of the segments
     ``seg[k] = (x1, y1, x2, y2)`` within ``gate``: ``(index of each point that has one (K,),
-    its nearest segment point (K, 2))``."""
+    its nearest segment point (K, 2))``. ``field`` (:func:`path_field` of the segments, cells
+    ``cell`` wide from ``(x0, y0)``) skips the points that are surely farther."""
     c, s = math.cos(theta), math.sin(theta)
     idx = np.empty(pts.shape[0], dtype=np.int64)
     near = np.empty((pts.shape[0], 2))
     gate2 = gate * gate
+    skip2 = (gate + cell) ** 2  # a cell centre is within cell / √2 of any point of the cell
+    ny, nx = field.shape
     n = 0
     for k in range(pts.shape[0]):
         x = c * pts[k, 0] - s * pts[k, 1] + tx
         y = s * pts[k, 0] + c * pts[k, 1] + ty
+        ix, iy = int(math.floor((x - x0) / cell)), int(math.floor((y - y0) / cell))
+        if ix < 0 or iy < 0 or ix >= nx or iy >= ny or field[iy, ix] >= skip2:
+            continue
         best, bx, by = gate2, 0.0, 0.0
         for e in range(seg.shape[0]):
             ux, uy, wx, wy = seg[e, 0], seg[e, 1], seg[e, 2], seg[e, 3]

@@ -98,7 +98,8 @@ class MergeConfig:
             path evidence (:attr:`MergeEvidence.path_agree`, ``path_off``) in the coarse score's
             units (a matched node ≈ the ``closeness`` + ``inliers`` weights) before the
             ``candidates`` best are refined (96 rather than 24: at σ = 0.15 m the right
-            alignment is found for 62.5% instead of 59.2% of 20–40% overlap pairs, seed 100).
+            alignment was found for 62.5% instead of 59.2% of 20–40% overlap pairs, seed 100;
+            64 does as well as 96, 48 lost a pair).
         candidates: distinct hypotheses refined (24: the refitted coarse score ranks the right
             one high enough that 48 found no more).
         scored: of those, how many (the most matched after refinement) are fully scored.
@@ -125,7 +126,7 @@ class MergeConfig:
     knn: int = 4
     coarse_tolerance: float = 0.7
     max_hypotheses: int = 1500
-    path_pool: int = 96
+    path_pool: int = 64
     candidates: int = 24
     scored: int = 20
     distinct_angle_deg: float = 10.0
@@ -493,7 +494,8 @@ def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: flo
     P, Q = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]]
     w = np.ones(len(P))
     if PATH_FIT_WEIGHT > 0.0:
-        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL)
+        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL,
+                                       pa.field, *pa.field_origin, PATH_CELL)
         P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
         w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
     w = w / w.sum()
