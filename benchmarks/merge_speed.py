@@ -14,12 +14,21 @@ of ``auto`` (what the merge costs when it has a core to itself). The exhaustive 
 With ``--grids PAIRS_DIR`` (a map-pair dataset that ``python -m agents.dataset generate`` wrote)
 it times the occupancy-grid merges the environment runs instead: ``merge_grids`` and
 ``hybrid_merge`` (with and without ``try_grids``), median and 90th percentile over the pairs.
+
+With ``--reference REV`` (a git revision of this repository) it times ``auto`` against the
+``fusion`` package of that revision instead, in this one process, interleaved pair by pair (wall
+and CPU medians, and the median over pairs of the ratio of their fastest runs): what a change
+costs, fair on a busy machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -58,6 +67,56 @@ def grid_times(pairs_dir: Path) -> None:
               f"{accepted[name]:>7}/{len(pairs)}")
 
 
+def _reference_merge(rev: str, into: Path):
+    """``merge_maps`` of the ``fusion`` package at git revision ``rev``, importable beside the
+    current one (copied into ``into`` as ``fusion_ref``, its own imports renamed)."""
+    root = Path(__file__).resolve().parent.parent
+    names = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", rev, "fusion/"],
+                           check=True, capture_output=True, text=True).stdout.split()
+    package = into / "fusion_ref"
+    package.mkdir()
+    for name in names:
+        if not name.endswith(".py"):
+            continue
+        text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{name}"], check=True,
+                              capture_output=True, text=True).stdout
+        text = text.replace("from fusion ", "from fusion_ref ").replace("from fusion.",
+                                                                        "from fusion_ref.")
+        (package / Path(name).name).write_text(text)
+    sys.path.insert(0, str(into))
+    return importlib.import_module("fusion_ref.merge").merge_maps
+
+
+def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
+                    repeats: int = 3) -> None:
+    """Print ``auto``'s time now and at revision ``rev`` (module doc)."""
+    cfg = SyntheticConfig(noise=0.15)
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {"now": merge_maps, rev: _reference_merge(rev, Path(tmp))}
+        warm = make_pair(np.random.default_rng(0), cfg, overlap=0.5, nodes=(20, 20))
+        for run in runs.values():
+            run(warm.map_a, warm.map_b)
+        print(f"{'n':>5}" + "".join(f"{k + ' ms':>14}{k + ' cpu':>14}" for k in runs)
+              + f"{'ratio':>8}")
+        for n in sizes:
+            pairs = [make_pair(np.random.default_rng([seed, n, i]), cfg, overlap=0.5,
+                               nodes=(n, n)) for i in range(n_pairs)]
+            wall = {k: [[] for _ in pairs] for k in runs}
+            cpu: dict[str, list[float]] = {k: [] for k in runs}
+            for _ in range(repeats):
+                for i, p in enumerate(pairs):
+                    for k, run in runs.items():
+                        t0, c0 = time.perf_counter(), time.process_time()
+                        run(p.map_a, p.map_b)
+                        wall[k][i].append(time.perf_counter() - t0)
+                        cpu[k].append(time.process_time() - c0)
+            ratio = statistics.median(min(a) / min(b) for a, b in zip(*wall.values(),
+                                                                      strict=True))
+            print(f"{n:>5}" + "".join(
+                f"{1000 * statistics.median(x for t in wall[k] for x in t):>14.2f}"
+                f"{1000 * statistics.median(cpu[k]):>14.2f}" for k in runs) + f"{ratio:>8.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="10,20,40,60,80,120,200")
@@ -67,11 +126,16 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--grids", type=Path, default=None, metavar="PAIRS_DIR",
                         help="time the grid merges on a map-pair dataset instead")
+    parser.add_argument("--reference", default=None, metavar="REV",
+                        help="time auto against the fusion package of this git revision")
     args = parser.parse_args()
     if args.grids is not None:
         grid_times(args.grids)
         return
     sizes = [int(s) for s in args.sizes.split(",")]
+    if args.reference is not None:
+        reference_times(args.reference, sizes, args.pairs, args.seed)
+        return
     cfg = SyntheticConfig(noise=0.15)
 
     warm = make_pair(np.random.default_rng(0), cfg, overlap=0.5, nodes=(20, 20))

@@ -318,12 +318,15 @@ def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
     ``(cx, cy)`` is ``>= min_dist`` away from every hypothesis kept before."""
     kept = np.empty(k, dtype=np.int64)
     n = 0
+    min_dist2 = min_dist * min_dist
     for h in order:
         ok = True
         for m in range(n):
             g = kept[m]
-            d_ang = abs((theta[h] - theta[g] + math.pi) % (2 * math.pi) - math.pi)
-            if d_ang < min_angle and math.hypot(cx[h] - cx[g], cy[h] - cy[g]) < min_dist:
+            dx, dy = cx[h] - cx[g], cy[h] - cy[g]
+            if dx * dx + dy * dy >= min_dist2:  # the cheap test first
+                continue
+            if abs((theta[h] - theta[g] + math.pi) % (2 * math.pi) - math.pi) < min_angle:
                 ok = False
                 break
         if ok:
@@ -660,3 +663,154 @@ def components_by_first(n, rows, cols):
         else:
             label[i] = label[r]
     return label, first[:c]
+
+
+@njit(cache=True, nogil=True)
+def path_field(seg, x0, y0, cell, ny, nx, reach):
+    """``(ny, nx)`` raster (cells ``cell`` wide, cell (0, 0) at ``(x0, y0)``) of the squared
+    distance from each cell centre to the nearest segment ``seg[k] = (x1, y1, x2, y2)``, capped
+    at ``reach²``.
+    Each segment visits only the cells of its bounding box (grown by ``reach``) that lie within
+    ``reach`` of its line."""
+    d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
+    for k in range(seg.shape[0]):
+        ux, uy, wx, wy = seg[k, 0], seg[k, 1], seg[k, 2], seg[k, 3]
+        vx, vy = wx - ux, wy - uy
+        ll = vx * vx + vy * vy
+        inv_ll = 0.0 if ll == 0.0 else 1.0 / ll
+        band = reach * math.sqrt(ll)  # |cross((p - u), v)| <= band: within reach of the line
+        bx0, bx1 = min(ux, wx) - reach, max(ux, wx) + reach
+        iy0 = max(0, int(math.floor((min(uy, wy) - reach - y0) / cell)))
+        iy1 = min(ny, int(math.ceil((max(uy, wy) + reach - y0) / cell)) + 1)
+        for iy in range(iy0, iy1):
+            py = y0 + (iy + 0.5) * cell
+            lo, hi = bx0, bx1
+            if vy != 0.0:  # (x - ux) vy - (py - uy) vx within ±band
+                e1 = ux + ((py - uy) * vx - band) / vy
+                e2 = ux + ((py - uy) * vx + band) / vy
+                lo, hi = max(lo, min(e1, e2)), min(hi, max(e1, e2))
+            elif abs(py - uy) > reach:
+                continue
+            ix0 = max(0, int(math.floor((lo - x0) / cell - 0.5)))
+            ix1 = min(nx, int(math.ceil((hi - x0) / cell - 0.5)) + 1)
+            # along the row, the projection t and the offsets change linearly with x
+            px = x0 + (ix0 + 0.5) * cell
+            t = ((px - ux) * vx + (py - uy) * vy) * inv_ll
+            dt = cell * vx * inv_ll
+            for ix in range(ix0, ix1):
+                tc = min(1.0, max(0.0, t))
+                dx, dy = ux + tc * vx - px, uy + tc * vy - py
+                dd = dx * dx + dy * dy
+                if dd < d2[iy, ix]:
+                    d2[iy, ix] = dd
+                px += cell
+                t += dt
+    return d2
+
+
+@njit(cache=True, nogil=True)
+def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap):
+    """Moved by ``p' = R p + t``, the path samples ``pts`` (weights ``w``, metres of path each)
+    read ``field`` (squared distances, :func:`path_field`): ``(Σ w (1 − d²/tol²) over d < tol,
+    Σ w over off <= d < cap)``."""
+    ny, nx = field.shape
+    agree = away = 0.0
+    tol2, off2, cap2 = tol * tol, off * off, cap * cap
+    for k in range(pts.shape[0]):
+        x = c * pts[k, 0] - s * pts[k, 1] + tx
+        y = s * pts[k, 0] + c * pts[k, 1] + ty
+        ix = int(math.floor((x - x0) * inv_cell))
+        iy = int(math.floor((y - y0) * inv_cell))
+        if ix < 0 or iy < 0 or ix >= nx or iy >= ny:
+            continue
+        d2 = field[iy, ix]
+        if d2 < tol2:
+            agree += w[k] * (1.0 - d2 / tol2)
+        elif off2 <= d2 < cap2:
+            away += w[k]
+    return agree, away
+
+
+@njit(cache=True, nogil=True)
+def path_agreement(theta, tx, ty, a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b_field, b_x0,
+                   b_y0, inv_cell, tol, off, cap, both):
+    """Path evidence of each hypothesis ``(theta, tx, ty)`` (B → A): ``(H, 2)`` — metres of path
+    of either map lying on a path of the other (soft, within ``tol``), and metres lying near one
+    (``off`` up to ``cap``, the fields' cap) but not on it. B's samples read A's field moved
+    forward, A's read B's moved back (:func:`path_field`); without ``both``, B's samples alone
+    (twice their sums: the same scale, half the work)."""
+    out = np.zeros((theta.shape[0], 2))
+    for h in range(theta.shape[0]):
+        c, s = math.cos(theta[h]), math.sin(theta[h])
+        g1, w1 = _field_sums(c, s, tx[h], ty[h], b_pts, b_w, a_field, a_x0, a_y0, inv_cell, tol,
+                             off, cap)
+        g2, w2 = g1, w1
+        if both:  # the inverse motion: p_B = R^T (p_A - t)
+            ix, iy = -(c * tx[h] + s * ty[h]), -(-s * tx[h] + c * ty[h])
+            g2, w2 = _field_sums(c, -s, ix, iy, a_pts, a_w, b_field, b_x0, b_y0, inv_cell, tol,
+                                 off, cap)
+        out[h, 0] = g1 + g2
+        out[h, 1] = w1 + w2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def path_samples(seg, step):
+    """Points along the segments ``seg[k] = (x1, y1, x2, y2)``: each cut into
+    ``max(1, ceil(length / step))`` equal pieces, a point at each piece's middle. Returns
+    ``(points (S, 2), metres of path each stands for (S,))``."""
+    count = np.empty(seg.shape[0], dtype=np.int64)
+    for k in range(seg.shape[0]):
+        length = math.hypot(seg[k, 2] - seg[k, 0], seg[k, 3] - seg[k, 1])
+        count[k] = max(1, int(math.ceil(length / step)))
+    pts = np.empty((count.sum(), 2))
+    w = np.empty(count.sum())
+    i = 0
+    for k in range(seg.shape[0]):
+        length = math.hypot(seg[k, 2] - seg[k, 0], seg[k, 3] - seg[k, 1])
+        for m in range(count[k]):
+            f = (m + 0.5) / count[k]
+            pts[i, 0] = seg[k, 0] + f * (seg[k, 2] - seg[k, 0])
+            pts[i, 1] = seg[k, 1] + f * (seg[k, 3] - seg[k, 1])
+            w[i] = length / count[k]
+            i += 1
+    return pts, w
+
+
+@njit(cache=True, nogil=True)
+def nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell):
+    """For the points ``pts`` moved by ``(theta, tx, ty)``, the nearest point of the segments
+    ``seg[k] = (x1, y1, x2, y2)`` within ``gate``: ``(index of each point that has one (K,),
+    its nearest segment point (K, 2))``. ``field`` (:func:`path_field` of the segments, cells
+    ``cell`` wide from ``(x0, y0)``) skips the points that are surely farther."""
+    c, s = math.cos(theta), math.sin(theta)
+    idx = np.empty(pts.shape[0], dtype=np.int64)
+    near = np.empty((pts.shape[0], 2))
+    gate2 = gate * gate
+    skip2 = (gate + cell) ** 2  # a cell centre is within cell / √2 of any point of the cell
+    ny, nx = field.shape
+    n = 0
+    for k in range(pts.shape[0]):
+        x = c * pts[k, 0] - s * pts[k, 1] + tx
+        y = s * pts[k, 0] + c * pts[k, 1] + ty
+        ix, iy = int(math.floor((x - x0) / cell)), int(math.floor((y - y0) / cell))
+        if ix < 0 or iy < 0 or ix >= nx or iy >= ny or field[iy, ix] >= skip2:
+            continue
+        best, bx, by = gate2, 0.0, 0.0
+        for e in range(seg.shape[0]):
+            ux, uy, wx, wy = seg[e, 0], seg[e, 1], seg[e, 2], seg[e, 3]
+            if (x < min(ux, wx) - gate or x > max(ux, wx) + gate or y < min(uy, wy) - gate
+                    or y > max(uy, wy) + gate):
+                continue
+            vx, vy = wx - ux, wy - uy
+            ll = vx * vx + vy * vy
+            t = 0.0 if ll == 0.0 else min(1.0, max(0.0, ((x - ux) * vx + (y - uy) * vy) / ll))
+            qx, qy = ux + t * vx, uy + t * vy
+            dd = (qx - x) ** 2 + (qy - y) ** 2
+            if dd < best:
+                best, bx, by = dd, qx, qy
+        if best < gate2:
+            idx[n] = k
+            near[n, 0], near[n, 1] = bx, by
+            n += 1
+    return idx[:n], near[:n]

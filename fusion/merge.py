@@ -16,17 +16,22 @@ merge built from the maps' structure:
    what finds pairs sharing few nodes: the right hypothesis lands its 3–5 shared nodes tightly,
    while a hard count within the loose coarse tolerance preferred chance alignments of the
    corridor lattice landing 6–8 nodes loosely (thousands of hypotheses cost 1–2 ms).
-4. **Candidates**: the ``candidates`` best *distinct* hypotheses (non-maximum suppression on angle
-   and on where B's centroid lands), each refined by gated nearest-compatible-node SVD fits, and
-   the ``scored`` most matched fully scored (:class:`MergeEvidence`): soft one-to-one matches
+4. **Candidates**: the ``path_pool`` best *distinct* hypotheses (non-maximum suppression on angle
+   and on where B's centroid lands) are re-ranked with their **path evidence** (how many metres of
+   each map's paths lie on the other's, and how many run beside them: rasters of the distance to
+   each map's paths), the ``candidates`` best refined by gated nearest-compatible-node SVD fits,
+   and the ``scored`` most matched fully scored (:class:`MergeEvidence`): soft one-to-one matches
    within ``eps`` (the paper's ω with a tolerance), matched paths, **conflicts** (a junction or
    corner of one map on a path of the other with no node there: the other robot passed and saw
-   no such place), **crossings** (paths crossing without a junction) and the agreement of the
-   paths leaving matched nodes.
+   no such place), **crossings** (paths crossing without a junction), the agreement of the
+   paths leaving matched nodes, and the path evidence.
    The score is the calibrated log-odds that the alignment is right (:data:`CONFIDENCE_WEIGHTS`).
 5. **Refinement** of the best candidate with the paper's ICP-SVD (:func:`fusion.icp_svd`), gated
    at ``eps`` and trimmed (TrICP) to the estimated overlap, then least-squares SVD fits on mutually
-   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences.
+   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences — and on
+   B's path points lying on A's paths (long corridors fix the rotation better than the few nodes
+   of a small overlap: on 5 of the 900 evaluation pairs of seed 0 it succeeds where the oracle
+   fails).
 6. **Accept/reject** (:func:`decide`): enough matches, not collinear, log-odds at least
    ``min_score``, and a margin of ``min_margin`` over the best *distinct* runner-up (a symmetric
    map has several equally good alignments: rejected as ambiguous).
@@ -49,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import best_rotation_angle, degeneracy, icp_svd
+from fusion.icp import degeneracy, icp_svd
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -92,6 +97,12 @@ class MergeConfig:
         coarse_tolerance: hit radius of the coarse hypothesis score.
         max_hypotheses: most hypotheses scored (the longest pairs are kept; 1500 rather than
             1000 finds the right one of a few more low-overlap pairs, 2000 one more in 450).
+        path_pool: distinct hypotheses (the best by coarse score) re-ranked by adding their
+            path evidence (:attr:`MergeEvidence.path_agree`, ``path_off``) in the coarse score's
+            units (a matched node ≈ the ``closeness`` + ``inliers`` weights) before the
+            ``candidates`` best are refined (96 rather than 24: at σ = 0.15 m the right
+            alignment was found for 62.5% instead of 59.2% of 20–40% overlap pairs, seed 100;
+            64 does as well as 96, 48 lost a pair).
         candidates: distinct hypotheses refined (24: the refitted coarse score ranks the right
             one high enough that 48 found no more).
         scored: of those, how many (the most matched after refinement) are fully scored.
@@ -99,9 +110,10 @@ class MergeConfig:
             differ by at least ``distinct_angle_deg`` or they put B's centroid at least
             ``distinct_distance`` apart.
         icp_max_iter: iteration cap of the ICP-SVD refinement.
-        min_inliers: accept only with at least this many matched nodes,
+        min_inliers: accept only with at least this many matched nodes (3, with the path
+            evidence to tell them from chance),
         min_score: ... a :attr:`MergeEvidence.score` (log-odds of being right) at least this
-            (the default: 0.64% false accepts on 4500 no-overlap pairs, 1.4% in the worst
+            (the default: 0.44% false accepts on 4500 no-overlap pairs, 1.2% in the worst
             map size × noise cell; :data:`CONFIDENCE_WEIGHTS`),
         min_margin: ... and the best *distinct* alternative scoring at least this much less
             (log-odds; else the merge is ambiguous: symmetric maps, repeated corridors).
@@ -117,13 +129,14 @@ class MergeConfig:
     knn: int = 4
     coarse_tolerance: float = 0.7
     max_hypotheses: int = 1500
+    path_pool: int = 64
     candidates: int = 24
     scored: int = 20
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
-    min_inliers: int = 4
-    min_score: float = 0.75
+    min_inliers: int = 3
+    min_score: float = -1.0
     min_margin: float = 2.0
     multistart_starts: int = 12
     exhaustive_step_deg: float = 2.0
@@ -136,9 +149,9 @@ class MergeConfig:
         check_real(self.exhaustive_step_deg, "exhaustive_step_deg", low=0.0, high=360.0)
         check_real(self.min_score, "min_score")
         check_real(self.min_margin, "min_margin", low=0.0, low_inclusive=True)
-        for name, low in (("knn", 0), ("max_hypotheses", 1), ("candidates", 1),
-                          ("icp_max_iter", 1), ("scored", 1), ("min_inliers", 3),
-                          ("multistart_starts", 1)):
+        for name, low in (("knn", 0), ("max_hypotheses", 1), ("path_pool", 1),
+                          ("candidates", 1), ("icp_max_iter", 1), ("scored", 1),
+                          ("min_inliers", 3), ("multistart_starts", 1)):
             check_int(getattr(self, name), name, low=low)
 
     @classmethod
@@ -150,10 +163,11 @@ class MergeConfig:
     def for_noise(cls, sigma: float, **overrides) -> MergeConfig:
         """Tolerances for maps whose nodes are off by ``sigma`` metres (per axis, each map):
         the defaults (tuned for σ ≤ 0.15 m) or, for noisier maps, ``eps = 3σ``,
-        ``fit_eps = pair_tolerance = 4σ``, ``coarse_tolerance = 3.3σ`` and ``min_score = 7``
-        (wider tolerances let more chance alignments score: at σ = 0.3 m the best of 400
-        no-overlap pairs scored 6.97). At σ = 0.3 m this lifts ``auto``'s success on ≥ 40%
-        overlap from 18% to 62% (oracle 83%). ``overrides`` replace any field.
+        ``fit_eps = pair_tolerance = 4σ``, ``coarse_tolerance = 3.3σ`` and ``min_score = 2.5``
+        (wider tolerances let more chance alignments score: at σ = 0.3 m the best of 900
+        no-overlap pairs, seed 9100, scored 2.31). At σ = 0.3 m ``auto``'s success on ≥ 40%
+        overlap is then 61.1% on 450 pairs of seed 100 (oracle 81.4%; the defaults: 18%).
+        ``overrides`` replace any field.
 
         Only ``0 <= sigma <= 0.3`` was calibrated; larger values are refused (at σ = 0.5 m the
         scaled tolerances accepted a wrong merge of two sonar maps from the environment)."""
@@ -164,47 +178,59 @@ class MergeConfig:
             scaled = {"eps": 3.0 * sigma, "fit_eps": max(base.fit_eps, 4.0 * sigma),
                       "pair_tolerance": max(base.pair_tolerance, 4.0 * sigma),
                       "coarse_tolerance": max(base.coarse_tolerance, 10.0 * sigma / 3.0),
-                      "min_score": 7.0}
+                      "min_score": 2.5}
         return config_from(cls, {**scaled, **overrides}, "MergeConfig")
 
 
 CONFIDENCE_WEIGHTS: dict[str, float] = {
-    "bias": -7.203,
-    "closeness": 2.837,
-    "inliers": 0.702,
-    "matched_edges": -0.922,
-    "conflicts": -1.087,
-    "crossings": -1.605,
-    "branches_agree": 0.311,
-    "branches_disagree": -0.767,
-    "near_misses": -0.307,
-    "log_pairs": -0.338,
-    "likelihood": 0.15,
+    "bias": -9.382,
+    "closeness": 0.8123,
+    "inliers": 0.717,
+    "matched_edges": -0.3446,
+    "conflicts": -0.9122,
+    "crossings": -0.6341,
+    "branches_agree": 0.1891,
+    "branches_disagree": -0.3845,
+    "near_misses": -0.2835,
+    "log_pairs": -0.0014,
+    "likelihood": 0.2887,
+    "path_agree": 0.0799,
+    "path_off": -0.0509,
 }
 """Weights of :attr:`MergeEvidence.score`, the log-odds that an alignment is right: a logistic
-regression (L2 0.01) fitted on the best alignment ``"auto"`` finds on 1600 synthetic pairs
-(:mod:`fusion.synthetic`, seed 1000 — the evaluation uses other seeds; node noise 0.05 and
-0.15 m; world jitter 0.2 and 0.4 m; half of the pairs without overlap), labelled right when
-within 2° and 0.3 m of the truth (near misses left out).
+regression (L2 10⁻⁴ on standardised features) fitted on the alignments ``"auto"`` weighs — its 24
+refined candidates, its best, and the refined true alignment — on 900 synthetic pairs
+(:mod:`fusion.synthetic`, seed 100, overlap 20–80%, node noise 0.05 and 0.15 m) and 2700
+no-overlap pairs (seed 9100, maps of 5–15, 15–60 and 60–80 nodes, noise 0.05, 0.15 and 0.3 m),
+labelled right when within 2° and 0.3 m of the truth (near misses, within 5° and 1 m, left out).
+The evaluation uses other seeds. Most of those alignments are wrong candidates, so the score is
+the log-odds among the candidates of a search, and the default ``min_score`` is negative.
 
-``likelihood`` (weight 0.15, not refitted: a regression refit of all weights with it gained at
-σ = 0.05 m what it lost at σ = 0.15 m) was added on top: on the same 900 evaluation pairs and
-4500 no-overlap pairs it lifts success at σ = 0.05 m, 20–40% overlap from 81.1 to 83.8% and
-40–60% from 92.1 to 93.4%, with ``min_score`` 0.75 instead of 0.5 keeping σ = 0.15 m within a
-pair of what it was and false accepts at 29 instead of 25.
+``path_agree`` and ``path_off`` (the path evidence, :attr:`MergeEvidence.path_agree`) are what
+the refit added: a metre of path of one map on a path of the other is worth +0.08, a metre
+running beside one −0.05 (a right alignment of a 20–40% overlap pair lays 32–127 m of paths on
+the other map's, 10–90th percentile; the wrong candidates 9–54 m).
 
-The default ``min_score`` of 0.75 (it was 2.5, then 1.0) trades a few chance accepts for the
-right but weakly supported alignments of low-overlap pairs (at σ = 0.15 m half of the failures
-of ``"auto"`` at 20–60% overlap were the right alignment scoring 1.0–2.5). Measured with the
-defaults on 4500 no-overlap pairs (seed 9000, half ``"disjoint"``, half ``"other_world"``):
-29 false accepts (0.64%; 12 with ``min_score`` 1.0, no likelihood and the old coarse score):
-11/1500 for maps of 15–60 nodes, 16/1500 for 5–15 nodes, 2/1500 for 60–80 nodes (noise 0.05,
-0.15 and 0.3 m each; the worst size × noise cell 7/500, 5–15 nodes at σ = 0.15 m). On the
-evaluation pairs whose true alignment is known, most of the pairs ``"auto"`` still misses at
-20–60% overlap are ones where even the true alignment (refined) matches fewer than 4 nodes or
-scores below ``min_score``: too few nodes in common to tell it from chance with these features
-(``python -m fusion.diagnose``); an adaptive gate of the final least-squares fit (3σ of the
-match residual) and a robust (Cauchy-weighted) fit moved successes by ±2 pairs either way."""
+The defaults (``min_inliers`` 3, ``min_score`` −1.0, chosen on the tuning pairs for fewer false
+accepts than before), with the path evidence in the score, the re-ranking (``path_pool``) and the
+final fit (:data:`PATH_FIT_WEIGHT`), measured on the pairs of :mod:`fusion.evaluate` (450 per
+noise level, overlap 20–80%, seed 0; before the path evidence → now), success at σ = 0.05 m,
+20–40/40–60/60–80% overlap: 83.8/93.4/100 → 84.5/93.4/100 (oracle 99.3/98.7/100); σ = 0.15 m:
+56.8/84.9/94.2 → 60.1/86.8/94.9 (oracle 84.5/95.4/98.5); on a fresh seed (7): σ = 0.05 m
+76.8/98.6/99.3 → 79.6/98.6/99.3 (oracle 98.6/100/100), σ = 0.15 m 51.4/86.0/96.0 →
+57.7/88.1/96.7 (oracle 80.3/95.8/100). False accepts on 4500 no-overlap pairs (seed 9000, half
+``"disjoint"``, half ``"other_world"``; maps of 5–15, 15–60 and 60–80 nodes × noise 0.05, 0.15
+and 0.3 m, 500 per cell): 20 (0.44%; were 29): 5/1500 for 5–15 nodes, 10/1500 for 15–60,
+5/1500 for 60–80; the worst cell 6/500 (15–60 nodes, σ = 0.15 m).
+
+What is left: at 20–40% overlap and σ = 0.15 m the right alignment is found for 70% of the
+seed-0 pairs (oracle 84.5%) but a third of those score too low to be told from the best chance
+alignment of a no-overlap pair: their evidence (3–6 shared nodes, 35–55 m of agreeing paths)
+is what the strongest chance alignments of corridor lattices also show, feature by feature.
+Measured and not kept: a regression refit on the bests alone (more false accepts at equal
+success), 3-pair coarse hypotheses (+1.3 points at σ = 0.05 m, −1.4 at σ = 0.15 m), the path
+fit both ways or iterated 6 times, the length of A's paths inside B's hull that B does not
+have (no separation)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,6 +263,13 @@ class MergeEvidence:
             :data:`fusion._merge_kernels.LIKELIHOOD_SIGMAS` of the summed log-ratios (a
             generalised likelihood ratio; it adapts to the maps' noise, so tightly matched nodes
             of low-noise maps count for more than ``closeness`` alone gives them).
+        path_agree: metres of path (polylines, or node-to-node segments for maps without them)
+            of either map lying on a path of the other, soft within :data:`PATH_TOL`
+            (``Σ (1 − d²/tol²)`` per metre): far denser evidence than the few nodes a small
+            overlap shares, and hard for unrelated maps to fake.
+        path_off: metres of path of either map between :data:`PATH_OFF` and
+            :data:`PATH_REACH` from the other's paths (running beside a corridor of the other
+            map: the same corridor, misplaced).
     """
 
     inliers: int
@@ -254,6 +287,8 @@ class MergeEvidence:
     runner_up: float = math.nan
     hypotheses: int = 0
     likelihood: float = 0.0
+    path_agree: float = 0.0
+    path_off: float = 0.0
 
     def features(self) -> dict[str, float]:
         """The inputs of :attr:`score`, by the names of :data:`CONFIDENCE_WEIGHTS`."""
@@ -269,6 +304,8 @@ class MergeEvidence:
             "near_misses": float(self.near_misses),
             "log_pairs": math.log(max(1, self.n_a * self.n_b)),
             "likelihood": self.likelihood,
+            "path_agree": self.path_agree,
+            "path_off": self.path_off,
         }
 
     @property
@@ -312,6 +349,22 @@ class MergeResult:
 
 
 # --------------------------------------------------------------------------- preparation
+PATH_STEP = 1.2
+"""Spacing (m) of the points along each map's paths that the path evidence moves."""
+PATH_CELL = 0.4
+"""Cell (m) of the distance-to-path raster of each map."""
+PATH_REACH = 2.0
+"""The raster's cap (m): a path point farther than this from every path of the other map
+tells nothing (outside what the other robot explored)."""
+PATH_TOL = 0.5
+"""A path point within this of the other map's paths lies on one (soft: ``1 − d²/tol²``)."""
+PATH_OFF = 0.9
+"""A path point between this and :data:`PATH_REACH` from the other map's paths runs beside
+one: two corridors that close would be the same corridor."""
+PATH_FIT_WEIGHT = 1.0
+"""Weight of a metre of B's paths lying on A's against a matched node in the final fit."""
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class _Prepared:
     xy: np.ndarray
@@ -323,6 +376,11 @@ class _Prepared:
     pair_len: np.ndarray
     margin: np.ndarray  # (E,) fraction of each path within eps of its ends
     branches: np.ndarray  # (n, max degree) direction of each path leaving a node, nan padded
+    segments: np.ndarray  # (S, 4) straight pieces of the paths (_segments)
+    path_pts: np.ndarray  # (S, 2) points along the paths, every ~PATH_STEP
+    path_w: np.ndarray  # (S,) metres of path each stands for
+    field: np.ndarray  # squared distance to the nearest path (K.path_field), PATH_CELL cells
+    field_origin: tuple[float, float]
 
 
 def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
@@ -331,8 +389,24 @@ def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     near, i, j, length = K.node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
     seg = np.linalg.norm(xy[edges[:, 0]] - xy[edges[:, 1]], axis=1)
     margin = np.minimum(0.5, cfg.eps / np.maximum(seg, 1e-12))
+    pieces = _segments(m)
+    pts, w = K.path_samples(pieces, PATH_STEP)
+    ends = pieces.reshape(-1, 2) if len(pieces) else xy
+    lo = np.minimum(xy.min(axis=0), ends.min(axis=0)) - PATH_REACH - PATH_CELL
+    hi = np.maximum(xy.max(axis=0), ends.max(axis=0)) + PATH_REACH + PATH_CELL
+    nx, ny = (np.ceil((hi - lo) / PATH_CELL).astype(np.int64) + 1).tolist()
+    field = K.path_field(pieces, float(lo[0]), float(lo[1]), PATH_CELL, ny, nx, PATH_REACH)
     return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(xy, edges))
+                     _branches(xy, edges), pieces, pts, w, field, (float(lo[0]), float(lo[1])))
+
+
+def _segments(m: TopoMap) -> np.ndarray:
+    """``(S, 4)`` straight pieces ``(x1, y1, x2, y2)`` of the map's paths: its polylines, or the
+    straight node-to-node segments of a map without them."""
+    if m.paths is not None and len(m.paths):
+        return np.concatenate([np.hstack([p[:-1], p[1:]]) for p in m.paths]).astype(np.float64)
+    return np.hstack([m.xy[m.edges[:, 0]], m.xy[m.edges[:, 1]]]).reshape(-1, 4).astype(
+        np.float64)
 
 
 def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -380,13 +454,24 @@ def _evidence_args(pa: _Prepared, pb: _Prepared) -> tuple:
             pb.edges, pb.margin, pb.branches)
 
 
-def _scores(features: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
-    """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features."""
+def _path_evidence(pa: _Prepared, pb: _Prepared, theta: np.ndarray, tx: np.ndarray,
+                   ty: np.ndarray, both: bool = True) -> np.ndarray:
+    """``(H, 2)`` :attr:`MergeEvidence.path_agree` and ``path_off`` of each hypothesis (without
+    ``both``, twice what B's paths alone give: the quick estimate the re-ranking uses)."""
+    return K.path_agreement(theta, tx, ty, pa.path_pts, pa.path_w, pa.field, *pa.field_origin,
+                            pb.path_pts, pb.path_w, pb.field, *pb.field_origin, 1.0 / PATH_CELL,
+                            PATH_TOL, PATH_OFF, PATH_REACH, both)
+
+
+def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
+    """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features
+    and of :func:`_path_evidence`."""
     cols = list(_FEATURE_COLUMNS.values())
     w = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
     return (features[:, cols] @ w + const
-            + CONFIDENCE_WEIGHTS["likelihood"] * features[:, _LIKELIHOOD].max(axis=1))
+            + CONFIDENCE_WEIGHTS["likelihood"] * features[:, _LIKELIHOOD].max(axis=1)
+            + paths @ np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["path_off"]]))
 
 
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
@@ -400,25 +485,42 @@ def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
     matches = np.column_stack([match_b[b_idx], b_idx]).astype(np.int64)
     n = len(b_idx)
     collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
+    agree, off = _path_evidence(pa, pb, np.array([float(theta)]), np.array([float(t[0])]),
+                                np.array([float(t[1])]))[0]
     ev = MergeEvidence(n, float(f[0]), int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
                        int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
-                       len(pb.xy), likelihood=float(f[_LIKELIHOOD].max()))
+                       len(pb.xy), likelihood=float(f[_LIKELIHOOD].max()),
+                       path_agree=float(agree), path_off=float(off))
     return _Eval(float(wrap_angle(theta)), np.asarray(t, dtype=np.float64), matches, ev)
 
 
-def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray) -> tuple[float, np.ndarray]:
-    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches)."""
+def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: float,
+                   t: np.ndarray) -> tuple[float, np.ndarray]:
+    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
+    B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
+    paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
     P, Q = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]]
-    theta = best_rotation_angle(P, Q)
-    c, s = math.cos(theta), math.sin(theta)
-    return theta, Q.mean(axis=0) - np.array([[c, -s], [s, c]]) @ P.mean(axis=0)
+    w = np.ones(len(P))
+    if PATH_FIT_WEIGHT > 0.0:
+        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL,
+                                       pa.field, *pa.field_origin, PATH_CELL)
+        P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
+        w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
+    w = w / w.sum()
+    mp, mq = w @ P, w @ Q
+    P0, Q0 = P - mp, Q - mq
+    ang = math.atan2(float(w @ (P0[:, 0] * Q0[:, 1] - P0[:, 1] * Q0[:, 0])),
+                     float(w @ (P0[:, 0] * Q0[:, 0] + P0[:, 1] * Q0[:, 1])))
+    c, s = math.cos(ang), math.sin(ang)
+    return ang, mq - np.array([[c, -s], [s, c]]) @ mp
 
 
 def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Eval:
     """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then least-squares
     fits on mutually nearest nodes of any kinds within ``fit_eps`` (what the oracle does with
     the true matches; a node at the edge of explored space may have another kind in each
-    map)."""
+    map) and on B's path points lying on A's paths (:func:`_least_squares`: long corridors fix
+    the rotation far better than the 3–6 nodes a small overlap shares)."""
     best = start
     if start.evidence.inliers >= 2:
         trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))
@@ -431,7 +533,7 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
         pairs = K.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
         if len(pairs) < 3:
             break
-        theta, t, moved = *_least_squares(pa, pb, pairs), True
+        theta, t, moved = *_least_squares(pa, pb, pairs, theta, t), True
     return _evaluate(pa, pb, theta, t, cfg) if moved else best
 
 
@@ -491,6 +593,12 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
     return table, float(lo[0]), float(lo[1]), 1.0 / cell
 
 
+_COARSE_MIN_PAIRS = 4
+"""The coarse score refits and scores only hypotheses landing at least this many B nodes on A
+nodes (3, like ``min_inliers``: +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4 at σ = 0.15 m,
+40–60%, seed 100, and 7% more time)."""
+
+
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     b_i = np.concatenate([pb.pair_i, pb.pair_j])
     b_j = np.concatenate([pb.pair_j, pb.pair_i])
@@ -509,12 +617,19 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
         theta, tx, ty = theta.copy(), tx.copy(), ty.copy()  # refitted in place
     table, x0, y0, inv_cell = _hit_grid(pa, cfg.coarse_tolerance, cfg.eps)
     coarse = K.refined_scores(theta, tx, ty, pa.xy, pb.xy, pb.kinds, table, x0, y0, inv_cell,
-                              cfg.eps, int(NodeKind.DEAD_END), cfg.min_inliers)
+                              cfg.eps, int(NodeKind.DEAD_END),
+                              max(cfg.min_inliers, _COARSE_MIN_PAIRS))
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
     ranked = np.argsort(-coarse, kind="stable")
     chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
-                               cfg.distinct_distance, cfg.candidates)
+                               cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
+    if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
+        w = CONFIDENCE_WEIGHTS
+        paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
+        gain = coarse[chosen] + (paths @ np.array([w["path_agree"], w["path_off"]])
+                                 / (w["closeness"] + w["inliers"]))
+        chosen = chosen[np.sort(np.argsort(-gain, kind="stable")[:cfg.candidates])]
     th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
     gates = np.array([cfg.coarse_tolerance, cfg.eps])
     counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,
@@ -524,7 +639,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
                                 int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
-    scores = _scores(features, len(pa.xy), len(pb.xy))
+    scores = _scores(features, _path_evidence(pa, pb, th, txc, tyc), len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
     best = _polish(pa, pb, _evaluate(pa, pb, th[k], np.array([txc[k], tyc[k]]), cfg), cfg)
     runner = _runner_up(best, th, txc, tyc, scores, pb.xy, cfg)

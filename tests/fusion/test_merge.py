@@ -310,3 +310,91 @@ def test_likelihood_rewards_tight_matches(pair):
     off = _evaluate(pa, pb, truth.theta, truth.T + np.array([0.3, 0.0]), cfg).evidence
     assert off.likelihood < 0.5 * exact.likelihood
     assert off.score < exact.score
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_path_field_is_the_distance_to_the_nearest_segment(seed):
+    """fusion._merge_kernels.path_field against the obvious computation: every cell centre's
+    squared distance to every segment (horizontal, vertical and zero-length ones included),
+    capped at reach²."""
+    from fusion import _merge_kernels as K
+
+    rng = np.random.default_rng(seed)
+    seg = rng.uniform(0.0, 12.0, (9, 4))
+    seg[0, 2] = seg[0, 0]  # vertical
+    seg[1, 3] = seg[1, 1]  # horizontal
+    seg[2, 2:] = seg[2, :2]  # a point
+    x0, y0, cell, ny, nx, reach = -2.5, -2.0, 0.3, 55, 52, 2.0
+    field = K.path_field(seg, x0, y0, cell, ny, nx, reach)
+    cx, cy = np.meshgrid(x0 + (np.arange(nx) + 0.5) * cell, y0 + (np.arange(ny) + 0.5) * cell)
+    p = np.stack([cx.ravel(), cy.ravel()], axis=1)[:, None, :]
+    u, v = seg[:, :2], seg[:, 2:] - seg[:, :2]
+    ll = (v * v).sum(axis=1)
+    t = np.clip(((p - u) * v).sum(axis=-1) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
+    d2 = ((u + t[..., None] * v - p) ** 2).sum(axis=-1).min(axis=1)
+    assert field == pytest.approx(np.minimum(d2, reach**2).reshape(ny, nx), abs=1e-5)
+
+
+def _corridors(shift: float = 0.0) -> TopoMap:
+    """A comb of corridors (a 12 m spine, three 4 m branches), moved up by ``shift``."""
+    xy = np.array([[0, 0], [4, 0], [8, 0], [12, 0], [4, 4], [8, 4], [12, 4]], dtype=float)
+    return TopoMap.from_arrays(xy + [0.0, shift], [[0, 1], [1, 2], [2, 3], [1, 4], [2, 5],
+                                                   [3, 6]])
+
+
+def test_path_evidence_counts_paths_on_and_beside_the_other_maps():
+    """MergeEvidence.path_agree: aligned copies lay all their paths (24 m each, both ways) on
+    each other's (the raster's cells, PATH_CELL wide, cost a few tenths of the soft weight);
+    moved 1.2 m aside the corridors run beside each other (path_off), and only the branches
+    that still overlap agree."""
+    from fusion.merge import _evaluate, _prepare
+
+    cfg = MergeConfig()
+    a = _prepare(_corridors(), cfg)
+    same = _evaluate(a, _prepare(_corridors(), cfg), 0.0, np.zeros(2), cfg).evidence
+    assert 0.8 * 48.0 < same.path_agree <= 48.0 and same.path_off == 0.0
+    aside = _evaluate(a, _prepare(_corridors(1.2), cfg), 0.0, np.zeros(2), cfg).evidence
+    assert aside.path_off > 12.0 and aside.path_agree < 0.6 * same.path_agree  # the 2 × 12 m spines
+
+
+def test_path_evidence_follows_polylines():
+    """A path's polyline, not the straight line between its nodes, is what lies on the other
+    map: a path bowed 1.5 m out does not agree with a straight one; the same bow does."""
+    from fusion.merge import _evaluate, _prepare
+
+    cfg = MergeConfig()
+    xy = [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]]
+    bow = [np.array([[0.0, 0.0], [5.0, 1.5], [10.0, 0.0]]), np.array([[10.0, 0.0], [10.0, 5.0]])]
+    straight = _prepare(TopoMap.from_arrays(xy, [[0, 1], [1, 2]]), cfg)
+    bowed = _prepare(TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=bow), cfg)
+    ev_bow = _evaluate(bowed, bowed, 0.0, np.zeros(2), cfg).evidence
+    ev_mixed = _evaluate(straight, bowed, 0.0, np.zeros(2), cfg).evidence
+    assert ev_mixed.path_agree < ev_bow.path_agree - 10.0
+    assert ev_mixed.path_off > 5.0 and ev_bow.path_off == 0.0
+
+
+def test_path_pool_must_be_a_positive_integer():
+    with pytest.raises(ValueError, match="path_pool must be >= 1, got 0"):
+        MergeConfig(path_pool=0)
+
+
+def test_final_fit_uses_the_paths(monkeypatch):
+    """The final least-squares fit pairs B's path points with A's paths: B's nodes off by noise
+    but its polylines where the corridors are pull the fit onto the truth (identity here) closer
+    than the nodes alone."""
+    import fusion.merge as merge
+
+    cfg = MergeConfig()
+    a = _corridors()
+    rng = np.random.default_rng(4)
+    xy = a.xy + rng.normal(0.0, 0.15, a.xy.shape)
+    exact = [np.array([a.xy[u], a.xy[v]]) for u, v in a.edges]
+    pa = merge._prepare(a, cfg)
+    pb = merge._prepare(TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
+    matches = np.column_stack([np.arange(a.n_nodes), np.arange(a.n_nodes)])
+    theta, t = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    monkeypatch.setattr(merge, "PATH_FIT_WEIGHT", 0.0)
+    theta0, t0 = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    assert abs(theta) < 0.5 * abs(theta0)
+    assert np.linalg.norm(t) < np.linalg.norm(t0)
