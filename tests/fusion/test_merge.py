@@ -398,3 +398,28 @@ def test_final_fit_uses_the_paths(monkeypatch):
     theta0, t0 = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
     assert abs(theta) < 0.5 * abs(theta0)
     assert np.linalg.norm(t) < np.linalg.norm(t0)
+
+
+def test_pixel_fine_polylines_are_read_as_chords():
+    """Extracted maps carry a polyline point per grid cell; the path evidence reads them as
+    chords about PATH_CHORD long that keep each polyline's ends and stay on its pixels, so a
+    pixel-fine map scores like the same map drawn with straight pieces."""
+    from fusion.merge import PATH_CHORD, _evaluate, _prepare, _segments
+
+    cfg = MergeConfig()
+    xy = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
+    fine = [np.stack([np.arange(0.0, 6.05, 0.1), np.zeros(61)], 1),
+            np.stack([np.full(41, 6.0), np.arange(0.0, 4.05, 0.1)], 1)]
+    m = TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=fine)
+    chords = _segments(m)
+    lengths = np.hypot(chords[:, 2] - chords[:, 0], chords[:, 3] - chords[:, 1])
+    assert 25 <= len(chords) <= 27 and lengths.max() <= PATH_CHORD + 0.1 + 1e-9  # 15 + 10
+    assert lengths.sum() == pytest.approx(10.0)
+    starts, ends = chords[:, :2].tolist(), chords[:, 2:].tolist()
+    assert [0.0, 0.0] in starts and [6.0, 0.0] in ends and [6.0, 0.0] in starts
+    assert [6.0, 4.0] in ends
+    plain = TopoMap.from_arrays(xy, [[0, 1], [1, 2]])
+    ev_fine = _evaluate(_prepare(m, cfg), _prepare(m, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_plain = _evaluate(_prepare(plain, cfg), _prepare(plain, cfg), 0.0, np.zeros(2),
+                         cfg).evidence
+    assert ev_fine.path_agree == pytest.approx(ev_plain.path_agree, rel=0.05)
