@@ -38,8 +38,8 @@ demo: $(VENV)/.deps-base
 	$(PY) train.py --total-timesteps $(DEMO_STEPS) --runs-dir out/runs --run-name demo \
 		--eval-every 0 --eval-episodes 3 --checkpoint-every 0
 	rm -rf out/pairs_demo
-	$(PY) -m agents.dataset generate --explorer sb3:out/runs/demo/model.zip --pairs 6 \
-		--snapshots 3 --max-cycles 400 --world-size 16 16 --out out/pairs_demo
+	$(PY) -m agents.dataset generate --explorer sb3:out/runs/demo/model.zip --pairs 9 \
+		--snapshots 3 --max-cycles 800 --world-size 16 16 --out out/pairs_demo
 	$(PY) -m fusion.evaluate out/pairs_demo --methods hybrid,grid,auto,paper_icp \
 		--out out/fusion_demo
 	@echo "figures: out/paper_fig8_merged.png out/demo.png out/runs/demo/eval_coverage.png out/fusion_demo/"
