@@ -17,6 +17,9 @@ was their fixed per-call overhead (scipy sparse matrices, small numpy calls), no
 * :func:`polyline_length` / :func:`path_lengths` — ``np.sqrt((d * d).sum(axis=1)).sum()`` of
   the steps ``d``, with numpy's pairwise summation (so the same float).
 * :func:`peaks` — the corner step's choice of one sharpest point per run of candidates.
+* :func:`metre_paths` — the output's polylines in metres, ends on their nodes, turned to run
+  from the lower-numbered node, and their lengths (``topo.extract._to_topomap_loop``'s numpy
+  arithmetic, edge by edge).
 """
 
 from __future__ import annotations
@@ -570,3 +573,30 @@ def skan_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     paths = [np.asarray(p, dtype=np.int64) for p in ref.paths_list()]
     bounds = np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64)
     return np.asarray(ref.coordinates, dtype=np.float64), bounds, np.concatenate(paths)
+
+
+@njit(cache=True, nogil=True)
+def metre_paths(cells, sizes, ends, xy, res, ox, oy):
+    """The output polylines of ``extract_topomap``: the concatenated pixel polylines ``cells``
+    (``sizes`` points each, ``(row, col)``) in metres (``o + (col|row + 0.5) · res``), each
+    with its first and last point moved onto its end nodes ``xy[ends[k]]`` and, when
+    ``ends[k, 0] > ends[k, 1]``, turned round; returns them concatenated and
+    :func:`polyline_length` of each (what ``topo.extract._to_topomap_loop`` computes edge by
+    edge)."""
+    out = np.empty_like(cells)
+    lengths = np.empty(len(sizes), dtype=np.float64)
+    start = 0
+    for k in range(len(sizes)):
+        n = sizes[k]
+        stop = start + n
+        flip = ends[k, 0] > ends[k, 1]
+        for i in range(n):
+            j = stop - 1 - i if flip else start + i
+            out[j, 0] = ox + (cells[start + i, 1] + 0.5) * res
+            out[j, 1] = oy + (cells[start + i, 0] + 0.5) * res
+        a, b = (stop - 1, start) if flip else (start, stop - 1)
+        out[a, 0], out[a, 1] = xy[ends[k, 0], 0], xy[ends[k, 0], 1]
+        out[b, 0], out[b, 1] = xy[ends[k, 1], 0], xy[ends[k, 1], 1]
+        lengths[k] = polyline_length(out[start:stop])
+        start = stop
+    return out, lengths

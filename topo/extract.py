@@ -36,8 +36,8 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
 
-Steps 1 and 3, the free-disc radii of step 4, polyline lengths and step 6's choice of peaks run
-as compiled kernels (:mod:`topo._extract_kernels`, each tested to give exactly the library's or
+Steps 1 and 3, the free-disc radii of step 4, polyline lengths, step 6's choice of peaks and the
+output's polylines in metres run as compiled kernels (:mod:`topo._extract_kernels`, each tested to give exactly the library's or
 numpy's result, on random masks and on every extraction of an env episode); step 2 is
 skimage's ``skeletonize`` itself.
 
@@ -75,6 +75,7 @@ from skimage.morphology import disk, skeletonize
 from topo._checks import check_real
 from topo._extract_kernels import (
     clean_free,
+    metre_paths,
     path_lengths,
     path_nodes,
     peaks,
@@ -533,15 +534,50 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     return _to_topomap(g, res, (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
 
 
-def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
-    if not g.pos:
-        return TopoMap.empty()
+def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
+    """Node positions in metres in output order (by ``y``, then ``x``) and each graph node's
+    output index."""
     ids = list(g.pos)
     rc = np.array([g.pos[n] for n in ids])
     xy = np.stack([origin[0] + (rc[:, 1] + 0.5) * res, origin[1] + (rc[:, 0] + 0.5) * res], 1)
     order = np.lexsort((xy[:, 0], xy[:, 1]))
     index = {ids[k]: i for i, k in enumerate(order.tolist())}
-    xy = xy[order]
+    return xy[order], index
+
+
+def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
+    """The :class:`TopoMap` in metres: nodes ordered by :func:`_node_order`, edges by their
+    ends' indices, each polyline from its lower- to its higher-numbered node with its ends on
+    the nodes; all polylines converted, re-pointed, turned and measured by one compiled kernel
+    (:func:`topo._extract_kernels.metre_paths`): the same floats as :func:`_to_topomap_loop`,
+    one edge at a time, which ``tests/topo`` and ``tests/envs`` compare (on the env's ~10-edge
+    maps that loop's small numpy calls were most of this step's cost)."""
+    if not g.pos:
+        return TopoMap.empty()
+    xy, index = _node_order(g, res, origin)
+    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
+    if not edges:
+        return TopoMap.from_valid_arrays(xy, np.empty((0, 2), dtype=np.int64), [], [])
+    ends = np.array([(index[edge.u], index[edge.v]) for edge in edges], dtype=np.int64)
+    sizes = [len(edge.poly) for edge in edges]
+    metres, plen = metre_paths(np.concatenate([edge.poly for edge in edges]),
+                               np.array(sizes, dtype=np.int64), ends, xy, res, *origin)
+    pairs = np.sort(ends, axis=1)
+    # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
+    chord = [math.sqrt(c.dot(c)) for c in xy[pairs[:, 0]] - xy[pairs[:, 1]]]
+    lengths = np.maximum(plen, chord)
+    paths, start = [], 0
+    for n in sizes:
+        paths.append(metres[start: start + n])
+        start += n
+    return TopoMap.from_valid_arrays(xy, pairs, lengths, paths)
+
+
+def _to_topomap_loop(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
+    """:func:`_to_topomap` one edge at a time (its reference in ``tests/topo``)."""
+    if not g.pos:
+        return TopoMap.empty()
+    xy, index = _node_order(g, res, origin)
     edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
     pairs, paths, lengths = [], [], []
     if edges:
