@@ -8,7 +8,9 @@ Pipeline (all parameters in :class:`ExtractConfig`):
    components smaller than ``min_component_area`` are dropped: skimage's ``remove_small_holes``,
    scipy's ``binary_erosion`` by a ``disk`` and ``ndimage.label``, computed in one compiled pass
    each (:func:`topo._extract_kernels.clean_free`, tested to give the libraries' mask).
-2. **Skeleton** — ``skimage.morphology.skeletonize``.
+2. **Skeleton** — ``skimage.morphology.skeletonize`` (Zhang–Suen thinning), bit for bit, by the
+   compiled :func:`topo._extract_kernels.skeletonize` (skimage's lookup table; it re-examines
+   only pixels beside removed ones instead of rescanning the image every subpass).
 3. **Graph** — the skeleton is traced into paths between junction and end pixels exactly as
    ``skan.csr.Skeleton`` does (``pixel_graph``, each cluster of junction pixels reduced to
    scipy's minimum spanning tree, ``PathGraph``): the same paths, pixel for pixel and in the
@@ -36,10 +38,10 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
 
-Steps 1 and 3, the free-disc radii of step 4, polyline lengths, step 6's choice of peaks and the
-output's polylines in metres run as compiled kernels (:mod:`topo._extract_kernels`, each tested to give exactly the library's or
-numpy's result, on random masks and on every extraction of an env episode); step 2 is
-skimage's ``skeletonize`` itself.
+Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6's choice of peaks and the
+output's polylines in metres run as compiled kernels (:mod:`topo._extract_kernels`), each tested
+to give exactly the library's or numpy's result, on random masks and on every extraction of an
+env episode.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -70,7 +72,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from skimage.morphology import disk, skeletonize
+from skimage.morphology import disk
 
 from topo._checks import check_real
 from topo._extract_kernels import (
@@ -81,6 +83,7 @@ from topo._extract_kernels import (
     peaks,
     polyline_length,
     skeleton_paths,
+    skeletonize,
     wall_distances,
 )
 from topo.graph import TopoMap

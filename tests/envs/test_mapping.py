@@ -109,9 +109,9 @@ def _assert_same_maps(a, b):
 
 def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     """On the env's own sonar grids (every extraction of a short episode), the compiled
-    free-space clean-up gives the skimage/scipy mask, the compiled tracing skan's paths and the
-    compiled free-disc radii the cKDTree's, and the compiled TopoMap output the edge-by-edge
-    form's, exactly."""
+    free-space clean-up gives the skimage/scipy mask, the compiled thinning skimage's skeleton,
+    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's and the
+    compiled TopoMap output the edge-by-edge form's, exactly."""
     from envs import two_robot_explore_v0
     from topo import extract
     from topo._extract_kernels import (
@@ -142,7 +142,14 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         np.testing.assert_array_equal(got, wall_distances_reference(free, points))
         return got
 
-    to_topomap = extract._to_topomap
+    to_topomap, thin = extract._to_topomap, extract.skeletonize
+
+    def skeleton_both(free):
+        from skimage.morphology import skeletonize
+
+        got = thin(free)
+        np.testing.assert_array_equal(got, skeletonize(free))
+        return got
 
     def topomap_both(g, res, origin):
         got = to_topomap(g, res, origin)
@@ -153,6 +160,7 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     monkeypatch.setattr(extract, "skeleton_paths", paths_both)
     monkeypatch.setattr(extract, "clean_free", clean_both)
     monkeypatch.setattr(extract, "_to_topomap", topomap_both)
+    monkeypatch.setattr(extract, "skeletonize", skeleton_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
     par.reset(seed=3)
     rng = np.random.default_rng(3)

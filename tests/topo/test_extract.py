@@ -375,3 +375,51 @@ def test_topomap_output_kernel_is_the_loop(seed, density, h, w, res, sonar):
         extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
                         config=cfg)
     assert len(seen) == int(mask.any())
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.2, 0.9), st.integers(1, 70), st.integers(1, 70),
+       st.integers(0, 3))
+def test_skeletonize_is_skimages(seed, density, h, w, opening):
+    """The compiled Zhang–Suen thinning gives exactly ``skimage.morphology.skeletonize``, on
+    noise and on opened blobs (thick regions, holes, touching borders)."""
+    from skimage.morphology import skeletonize as skimage_skeletonize
+
+    from topo._extract_kernels import skeletonize
+
+    rng = np.random.default_rng(seed)
+    mask = rng.random((h, w)) < density
+    if opening:
+        mask = ndimage.binary_opening(mask, iterations=opening)
+    got = skeletonize(mask)
+    assert got.dtype == bool and got.shape == mask.shape
+    np.testing.assert_array_equal(got, skimage_skeletonize(mask))
+
+
+def test_skeletonize_on_every_small_image():
+    """Every image up to 4×4 (the images that fix most of the lookup table,
+    ``tests/topo/zhang_lut_derivation.py``), and empty and full ones."""
+    from skimage.morphology import skeletonize as skimage_skeletonize
+
+    from topo._extract_kernels import skeletonize
+
+    for h, w in ((1, 1), (2, 3), (3, 3), (4, 4), (3, 5), (5, 3)):
+        bits = (np.arange(1 << (h * w))[:, None] >> np.arange(h * w)) & 1
+        for row in bits.astype(bool):
+            mask = row.reshape(h, w)
+            np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+    for mask in (np.zeros((6, 9), bool), np.ones((6, 9), bool), np.ones((40, 3), bool)):
+        np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+
+
+def test_skeletonize_table_code_10_timing_is_invisible():
+    """The one table entry skimage's outputs leave open (in which subpass code 10 goes) cannot
+    change an output (``zhang_lut_derivation.code_10_timing_is_invisible``, restated)."""
+    from topo._extract_kernels import _ZHANG_LUT
+
+    nw, n, ne, e, se, s, sw, w = (1 << i for i in range(8))
+    north = [s | se | a | b | c for a in (0, nw) for b in (0, n) for c in (0, ne)]
+    east = [nw | w | a | b | c for a in (0, ne) for b in (0, e) for c in (0, se)]
+    assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~s] == 0 for m in north)
+    assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~w] == 0 for m in east)
+    assert _ZHANG_LUT[10] == _ZHANG_LUT[40] == _ZHANG_LUT[160] == _ZHANG_LUT[130] == 3
