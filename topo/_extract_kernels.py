@@ -644,52 +644,45 @@ def _zhang(image, lut):
             if image[r, c]:
                 sk[(r + 1) * wp + c + 1] = 1
     offsets = np.array([-wp - 1, -wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1], dtype=np.int64)
-    # candidates of the first and second subpass: pixels whose decision may have changed since
-    # they were last examined in that subpass (at first every pixel with a background
-    # neighbour: an interior pixel, code 255, has value 0)
-    cand0 = np.empty(total, dtype=np.int64)
-    cand1 = np.empty(total, dtype=np.int64)
-    listed0 = np.zeros(total, dtype=np.bool_)
-    listed1 = np.zeros(total, dtype=np.bool_)
-    n0 = n1 = 0
+    # the candidates: pixels whose decision may have changed since they were last examined,
+    # with bit p + 1 of ``due`` set while subpass p has yet to examine them (at first every
+    # pixel with a background neighbour: an interior pixel, code 255, has value 0)
+    cand = np.empty(total, dtype=np.int64)
+    due = np.zeros(total, dtype=np.uint8)
+    n = 0
     for k in range(wp, total - wp):
         if sk[k] and _code(sk, k, wp) != 255:
-            cand0[n0] = k
-            cand1[n1] = k
-            n0 += 1
-            n1 += 1
-            listed0[k] = listed1[k] = True
+            cand[n] = k
+            n += 1
+            due[k] = 3
     gone = np.empty(total, dtype=np.int64)
     removed_any = False
     p = 0
     while True:
-        cand, listed = (cand0, listed0) if p == 0 else (cand1, listed1)
-        n = n0 if p == 0 else n1
-        if p == 0:
-            n0 = 0
-        else:
-            n1 = 0
+        bit = p + 1
         ngone = 0
+        kept = 0
         for i in range(n):  # decisions on the state at the subpass's start
             k = cand[i]
-            listed[k] = False
-            if sk[k] and lut[_code(sk, k, wp)] & (p + 1):
-                gone[ngone] = k
-                ngone += 1
+            if due[k] & bit:
+                due[k] &= ~bit
+                if sk[k] and lut[_code(sk, k, wp)] & bit:
+                    gone[ngone] = k
+                    ngone += 1
+            if due[k]:
+                cand[kept] = k
+                kept += 1
+        n = kept
         for i in range(ngone):
             sk[gone[i]] = 0
         for i in range(ngone):  # only pixels beside a removed one can change their decision
             for o in offsets:
                 j = gone[i] + o
                 if sk[j]:
-                    if not listed0[j]:
-                        listed0[j] = True
-                        cand0[n0] = j
-                        n0 += 1
-                    if not listed1[j]:
-                        listed1[j] = True
-                        cand1[n1] = j
-                        n1 += 1
+                    if due[j] == 0:
+                        cand[n] = j
+                        n += 1
+                    due[j] = 3
         removed_any |= ngone > 0
         if p == 1:
             if not removed_any:
