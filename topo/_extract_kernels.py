@@ -19,6 +19,9 @@ was their fixed per-call overhead (scipy sparse matrices, small numpy calls), no
 * :func:`polyline_length` / :func:`path_lengths` — ``np.sqrt((d * d).sum(axis=1)).sum()`` of
   the steps ``d``, with numpy's pairwise summation (so the same float).
 * :func:`peaks` — the corner step's choice of one sharpest point per run of candidates.
+* :func:`corner_arms` / :func:`corner_cuts` — the corner step on open paths around numpy's
+  ``arctan2``: arc lengths and chord products, then candidates, peaks and cut indices
+  (``topo.extract._open_corners_numpy``).
 * :func:`metre_paths` — the output's polylines in metres, ends on their nodes, turned to run
   from the lower-numbered node, and their lengths (``topo.extract._to_topomap_loop``'s numpy
   arithmetic, edge by edge).
@@ -706,3 +709,90 @@ def skeletonize(mask: np.ndarray) -> np.ndarray:
     (hypothesis masks, every image up to 4×4) and ``tests/envs`` (every extraction of an env
     episode)."""
     return _zhang(np.ascontiguousarray(mask, dtype=np.bool_), _ZHANG_LUT)
+
+
+@njit(cache=True, nogil=True)
+def _search(a, v, right):
+    """``np.searchsorted(a, v, side="right" if right else "left")`` on a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < v or (right and a[mid] == v):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def corner_arms(points, lens, arm):
+    """Corner step 6 of ``extract_topomap`` on the open polylines ``points`` (concatenated,
+    ``lens`` points each), up to the turn's ``arctan2`` (numpy's, applied by the caller):
+    the arc length ``arc`` (a gap of ``2·arm + 1`` between polylines) and at each point the
+    cross and dot products of the chords from the point ``arm`` before it to it and from it
+    to the point ``arm`` after it (clipped to its polyline): the arithmetic of
+    ``topo.extract._open_corners_numpy``."""
+    n = len(points)
+    arc = np.empty(n, dtype=np.float64)
+    lo = np.empty(n, dtype=np.int64)
+    hi = np.empty(n, dtype=np.int64)
+    start = 0
+    total = 0.0
+    for k in range(len(lens)):
+        for i in range(start, start + lens[k]):
+            if i == 0:
+                step = 0.0
+            elif i == start:
+                step = 2.0 * arm + 1.0
+            else:
+                dx = points[i, 0] - points[i - 1, 0]
+                dy = points[i, 1] - points[i - 1, 1]
+                step = math.sqrt(dx * dx + dy * dy)
+            total += step
+            arc[i] = total
+            lo[i], hi[i] = start, start + lens[k] - 1
+        start += lens[k]
+    cross = np.empty(n, dtype=np.float64)
+    dot = np.empty(n, dtype=np.float64)
+    for i in range(n):
+        back = max(_search(arc, arc[i] - arm, True) - 1, lo[i])
+        ahead = min(_search(arc, arc[i] + arm, False), hi[i])
+        a0 = points[i, 0] - points[back, 0]
+        a1 = points[i, 1] - points[back, 1]
+        b0 = points[ahead, 0] - points[i, 0]
+        b1 = points[ahead, 1] - points[i, 1]
+        cross[i] = a0 * b1 - a1 * b0
+        dot[i] = (0.0 + a0 * b0) + a1 * b1  # numpy's sum over a row starts from +0.0
+    return arc, cross, dot
+
+
+@njit(cache=True, nogil=True)
+def corner_cuts(turn, arc, lens, min_turn, margin):
+    """The corner pixels of each open polyline from :func:`corner_arms`' ``arc`` and the turns:
+    :func:`peaks` of the points turning by more than ``min_turn`` at least ``margin`` from
+    their polyline's ends, as indices into their own polyline (ascending) and the count per
+    polyline."""
+    n = len(turn)
+    group = np.empty(n, dtype=np.int64)
+    candidate = np.empty(n, dtype=np.bool_)
+    start = 0
+    for k in range(len(lens)):
+        stop = start + lens[k]
+        for i in range(start, stop):
+            group[i] = k
+            candidate[i] = (turn[i] > min_turn and arc[i] - arc[start] >= margin
+                            and arc[stop - 1] - arc[i] >= margin)
+        start = stop
+    at = peaks(turn, candidate, group)
+    first = np.empty(len(lens), dtype=np.int64)
+    start = 0
+    for k in range(len(lens)):
+        first[k] = start
+        start += lens[k]
+    counts = np.zeros(len(lens), dtype=np.int64)
+    cuts = np.empty(len(at), dtype=np.int64)
+    for j in range(len(at)):
+        g = group[at[j]]
+        cuts[j] = at[j] - first[g]
+        counts[g] += 1
+    return cuts, counts

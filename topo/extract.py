@@ -38,10 +38,10 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
 
-Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6's choice of peaks and the
-output's polylines in metres run as compiled kernels (:mod:`topo._extract_kernels`), each tested
-to give exactly the library's or numpy's result, on random masks and on every extraction of an
-env episode.
+Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6 on open paths (all but
+numpy's ``arctan2``) and the output's polylines in metres run as compiled kernels
+(:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
+on random masks and on every extraction of an env episode.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -77,6 +77,8 @@ from skimage.morphology import disk
 from topo._checks import check_real
 from topo._extract_kernels import (
     clean_free,
+    corner_arms,
+    corner_cuts,
     metre_paths,
     path_lengths,
     path_nodes,
@@ -191,7 +193,26 @@ def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 
 def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
                   margin: float) -> list[list[int]]:
-    """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
+    """Corner pixel indices of each open polyline, all polylines at once: the compiled form of
+    :func:`_open_corners_numpy` (the same indices; numpy's ``arctan2`` in between, so the
+    same turns), which ``tests/topo`` and ``tests/envs`` compare."""
+    if not polys:
+        return []
+    lens = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))
+    arc, cross, dot = corner_arms(np.concatenate(polys), lens, arm)
+    cuts, counts = corner_cuts(np.abs(np.arctan2(cross, dot)), arc, lens, min_turn, margin)
+    cuts = cuts.tolist()
+    out, start = [], 0
+    for c in counts.tolist():
+        out.append(cuts[start: start + c])
+        start += c
+    return out
+
+
+def _open_corners_numpy(polys: list[np.ndarray], arm: float, min_turn: float,
+                  margin: float) -> list[list[int]]:
+    """Corner pixel indices of each open polyline, all polylines in one vectorised pass (the
+    reference of :func:`_open_corners`)."""
     if not polys:
         return []
     lens = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))

@@ -110,8 +110,8 @@ def _assert_same_maps(a, b):
 def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     """On the env's own sonar grids (every extraction of a short episode), the compiled
     free-space clean-up gives the skimage/scipy mask, the compiled thinning skimage's skeleton,
-    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's and the
-    compiled TopoMap output the edge-by-edge form's, exactly."""
+    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's, the compiled
+    corner step and TopoMap output the numpy forms', exactly."""
     from envs import two_robot_explore_v0
     from topo import extract
     from topo._extract_kernels import (
@@ -142,7 +142,12 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         np.testing.assert_array_equal(got, wall_distances_reference(free, points))
         return got
 
-    to_topomap, thin = extract._to_topomap, extract.skeletonize
+    to_topomap, thin, corners = extract._to_topomap, extract.skeletonize, extract._open_corners
+
+    def corners_both(*args):
+        got = corners(*args)
+        assert got == extract._open_corners_numpy(*args)
+        return got
 
     def skeleton_both(free):
         from skimage.morphology import skeletonize
@@ -161,6 +166,7 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     monkeypatch.setattr(extract, "clean_free", clean_both)
     monkeypatch.setattr(extract, "_to_topomap", topomap_both)
     monkeypatch.setattr(extract, "skeletonize", skeleton_both)
+    monkeypatch.setattr(extract, "_open_corners", corners_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
     par.reset(seed=3)
     rng = np.random.default_rng(3)

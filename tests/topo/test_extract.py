@@ -423,3 +423,47 @@ def test_skeletonize_table_code_10_timing_is_invisible():
     assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~s] == 0 for m in north)
     assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~w] == 0 for m in east)
     assert _ZHANG_LUT[10] == _ZHANG_LUT[40] == _ZHANG_LUT[160] == _ZHANG_LUT[130] == 3
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.floats(0.5, 12.0),
+       st.floats(0.1, 2.5), st.floats(0.0, 6.0))
+def test_open_corners_kernels_are_the_numpy_form(seed, n_polys, arm, min_turn, margin):
+    """The compiled corner step (arc lengths, chord products, candidates, peaks) gives the
+    numpy form's corner indices, and its arc lengths and chord products are numpy's floats,
+    on random 8-connected pixel walks (repeated points, straight runs, sharp turns)."""
+    from topo import extract
+    from topo._extract_kernels import corner_arms
+
+    rng = np.random.default_rng(seed)
+    moves = np.array([[-1, -1], [-1, 0], [-1, 1], [0, 1], [1, 1], [1, 0], [1, -1], [0, -1],
+                      [0, 0]], dtype=np.float64)
+    polys = []
+    for _ in range(n_polys):
+        k = int(rng.integers(2, 60))
+        heading = rng.integers(0, 8, size=k)
+        heading[rng.random(k) < 0.6] = heading[0]  # long straight runs, then turns
+        if rng.random() < 0.3:
+            heading[rng.integers(0, k)] = 8  # a repeated point
+        start = rng.integers(0, 50, size=2).astype(np.float64)
+        polys.append(np.concatenate([start[None], start + np.cumsum(moves[heading], axis=0)]))
+    assert extract._open_corners(polys, arm, min_turn, margin) == \
+        extract._open_corners_numpy(polys, arm, min_turn, margin)
+    points = np.concatenate(polys)
+    lens = np.array([len(p) for p in polys], dtype=np.int64)
+    arc, cross, dot = corner_arms(points, lens, arm)
+    first = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    step = np.zeros(len(points))
+    d = np.diff(points, axis=0)
+    step[1:] = np.sqrt((d * d).sum(axis=1))
+    step[first] = 2.0 * arm + 1.0
+    step[0] = 0.0
+    want_arc = np.cumsum(step)
+    assert arc.tobytes() == want_arc.tobytes()
+    group = np.repeat(np.arange(len(polys)), lens)
+    lo, hi = first[group], (first + lens - 1)[group]
+    back = np.maximum(np.searchsorted(want_arc, want_arc - arm, side="right") - 1, lo)
+    ahead = np.minimum(np.searchsorted(want_arc, want_arc + arm, side="left"), hi)
+    a, b = points - points[back], points[ahead] - points
+    assert cross.tobytes() == (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).tobytes()
+    assert dot.tobytes() == (a * b).sum(axis=1).tobytes()
