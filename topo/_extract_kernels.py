@@ -7,6 +7,8 @@ was their fixed per-call overhead (scipy sparse matrices, small numpy calls), no
 * :func:`clean_free` — step 1's morphology (skimage ``remove_small_holes``, scipy
   ``binary_erosion`` by a disk, dropping small ``ndimage.label`` components) on horizontal runs
   of pixels; :func:`clean_free_reference` is the library path.
+* :func:`skeletonize` — ``skimage.morphology.skeletonize`` (Zhang–Suen, skimage's lookup
+  table, BSD-3-Clause), examining only pixels beside removed ones.
 * :func:`skeleton_paths` — what skan's ``Skeleton`` traces (``pixel_graph`` with
   8-connectivity, each junction cluster reduced to scipy's ``minimum_spanning_tree``,
   ``PathGraph``'s tracing): the same paths in the same order; :func:`skan_paths` is skan itself.
@@ -17,6 +19,12 @@ was their fixed per-call overhead (scipy sparse matrices, small numpy calls), no
 * :func:`polyline_length` / :func:`path_lengths` — ``np.sqrt((d * d).sum(axis=1)).sum()`` of
   the steps ``d``, with numpy's pairwise summation (so the same float).
 * :func:`peaks` — the corner step's choice of one sharpest point per run of candidates.
+* :func:`corner_arms` / :func:`corner_cuts` — the corner step on open paths around numpy's
+  ``arctan2``: arc lengths and chord products, then candidates, peaks and cut indices
+  (``topo.extract._open_corners_numpy``).
+* :func:`metre_paths` — the output's polylines in metres, ends on their nodes, turned to run
+  from the lower-numbered node, and their lengths (``topo.extract._to_topomap_loop``'s numpy
+  arithmetic, edge by edge).
 """
 
 from __future__ import annotations
@@ -570,3 +578,221 @@ def skan_paths(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     paths = [np.asarray(p, dtype=np.int64) for p in ref.paths_list()]
     bounds = np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64)
     return np.asarray(ref.coordinates, dtype=np.float64), bounds, np.concatenate(paths)
+
+
+@njit(cache=True, nogil=True)
+def metre_paths(cells, sizes, ends, xy, res, ox, oy):
+    """The output polylines of ``extract_topomap``: the concatenated pixel polylines ``cells``
+    (``sizes`` points each, ``(row, col)``) in metres (``o + (col|row + 0.5) · res``), each
+    with its first and last point moved onto its end nodes ``xy[ends[k]]`` and, when
+    ``ends[k, 0] > ends[k, 1]``, turned round; returns them concatenated and
+    :func:`polyline_length` of each (what ``topo.extract._to_topomap_loop`` computes edge by
+    edge)."""
+    out = np.empty_like(cells)
+    lengths = np.empty(len(sizes), dtype=np.float64)
+    start = 0
+    for k in range(len(sizes)):
+        n = sizes[k]
+        stop = start + n
+        flip = ends[k, 0] > ends[k, 1]
+        for i in range(n):
+            j = stop - 1 - i if flip else start + i
+            out[j, 0] = ox + (cells[start + i, 1] + 0.5) * res
+            out[j, 1] = oy + (cells[start + i, 0] + 0.5) * res
+        a, b = (stop - 1, start) if flip else (start, stop - 1)
+        out[a, 0], out[a, 1] = xy[ends[k, 0], 0], xy[ends[k, 0], 1]
+        out[b, 0], out[b, 1] = xy[ends[k, 1], 0], xy[ends[k, 1], 1]
+        lengths[k] = polyline_length(out[start:stop])
+        start = stop
+    return out, lengths
+
+
+# Zhang–Suen thinning as ``skimage.morphology.skeletonize`` (2-D, method "zhang") does it.
+# Lookup table from scikit-image, BSD-3-Clause (Copyright (C) 2011, the scikit-image team):
+# entry ``n`` is a pixel's value for the 8-neighbour code ``n`` (bits 1 NW, 2 N, 4 NE, 8 E,
+# 16 SE, 32 S, 64 SW, 128 W, row 0 on top); value 1 is removed in the first subpass of an
+# iteration, 2 in the second, 3 in both, 0 never. skimage keeps this table only in its compiled
+# module, so it was derived from skimage's own outputs (``tests/topo/zhang_lut_derivation.py``:
+# every image up to 4×4 and random images around each remaining pattern, each entry fixed only
+# when every assignment of the unknown entries consistent with skimage's output agrees on it;
+# entry 10 is not fixed that way, and that script shows the output is the same for each of its
+# removable values 1, 2 and 3; 3 is its rotations' value).
+_ZHANG_LUT = np.array([
+    0, 0, 0, 1, 0, 0, 1, 3, 0, 0, 3, 1, 1, 0, 1, 3, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 3, 0, 3, 3,
+    0, 0, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0, 3, 0, 2, 2,
+    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    2, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0, 3, 0, 2, 0,
+    0, 0, 3, 1, 0, 0, 1, 3, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1,
+    3, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    2, 3, 1, 3, 0, 0, 1, 3, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    2, 3, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 3, 3, 0, 1, 0, 0, 0, 0, 2, 2, 0, 0, 2, 0, 0, 0,
+], dtype=np.uint8)
+
+
+@njit(cache=True, nogil=True)
+def _code(sk, k, wp):
+    """The 8-neighbour code of flat pixel ``k`` of the padded image ``sk`` (row length ``wp``)."""
+    return (sk[k - wp - 1] + 2 * sk[k - wp] + 4 * sk[k - wp + 1] + 8 * sk[k + 1]
+            + 16 * sk[k + wp + 1] + 32 * sk[k + wp] + 64 * sk[k + wp - 1] + 128 * sk[k - 1])
+
+
+@njit(cache=True, nogil=True)
+def _zhang(image, lut):
+    h, w = image.shape
+    wp = w + 2
+    total = (h + 2) * wp
+    sk = np.zeros(total, dtype=np.uint8)
+    for r in range(h):
+        for c in range(w):
+            if image[r, c]:
+                sk[(r + 1) * wp + c + 1] = 1
+    offsets = np.array([-wp - 1, -wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1], dtype=np.int64)
+    # the candidates: pixels whose decision may have changed since they were last examined,
+    # with bit p + 1 of ``due`` set while subpass p has yet to examine them (at first every
+    # pixel with a background neighbour: an interior pixel, code 255, has value 0)
+    cand = np.empty(total, dtype=np.int64)
+    due = np.zeros(total, dtype=np.uint8)
+    n = 0
+    for k in range(wp, total - wp):
+        if sk[k] and _code(sk, k, wp) != 255:
+            cand[n] = k
+            n += 1
+            due[k] = 3
+    gone = np.empty(total, dtype=np.int64)
+    removed_any = False
+    p = 0
+    while True:
+        bit = p + 1
+        ngone = 0
+        kept = 0
+        for i in range(n):  # decisions on the state at the subpass's start
+            k = cand[i]
+            if due[k] & bit:
+                due[k] &= ~bit
+                if sk[k] and lut[_code(sk, k, wp)] & bit:
+                    gone[ngone] = k
+                    ngone += 1
+            if due[k]:
+                cand[kept] = k
+                kept += 1
+        n = kept
+        for i in range(ngone):
+            sk[gone[i]] = 0
+        for i in range(ngone):  # only pixels beside a removed one can change their decision
+            for o in offsets:
+                j = gone[i] + o
+                if sk[j]:
+                    if due[j] == 0:
+                        cand[n] = j
+                        n += 1
+                    due[j] = 3
+        removed_any |= ngone > 0
+        if p == 1:
+            if not removed_any:
+                break
+            removed_any = False
+        p = 1 - p
+    out = np.empty((h, w), dtype=np.bool_)
+    for r in range(h):
+        for c in range(w):
+            out[r, c] = sk[(r + 1) * wp + c + 1] != 0
+    return out
+
+
+def skeletonize(mask: np.ndarray) -> np.ndarray:
+    """``skimage.morphology.skeletonize(mask)`` of a 2-D boolean mask (Zhang–Suen thinning,
+    skimage's default for 2-D), bit for bit, with the lookup table from scikit-image
+    (BSD-3-Clause; see ``_ZHANG_LUT``). skimage rescans the whole image in every subpass; this
+    re-examines only pixels beside one removed in the previous subpasses (a kept pixel whose
+    neighbourhood did not change keeps its decision), so thin free space costs about its
+    border, not its area times the iterations. Tested against skimage itself in ``tests/topo``
+    (hypothesis masks, every image up to 4×4) and ``tests/envs`` (every extraction of an env
+    episode)."""
+    return _zhang(np.ascontiguousarray(mask, dtype=np.bool_), _ZHANG_LUT)
+
+
+@njit(cache=True, nogil=True)
+def _search(a, v, right):
+    """``np.searchsorted(a, v, side="right" if right else "left")`` on a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < v or (right and a[mid] == v):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def corner_arms(points, lens, arm):
+    """Corner step 6 of ``extract_topomap`` on the open polylines ``points`` (concatenated,
+    ``lens`` points each), up to the turn's ``arctan2`` (numpy's, applied by the caller):
+    the arc length ``arc`` (a gap of ``2·arm + 1`` between polylines) and at each point the
+    cross and dot products of the chords from the point ``arm`` before it to it and from it
+    to the point ``arm`` after it (clipped to its polyline): the arithmetic of
+    ``topo.extract._open_corners_numpy``."""
+    n = len(points)
+    arc = np.empty(n, dtype=np.float64)
+    lo = np.empty(n, dtype=np.int64)
+    hi = np.empty(n, dtype=np.int64)
+    start = 0
+    total = 0.0
+    for k in range(len(lens)):
+        for i in range(start, start + lens[k]):
+            if i == 0:
+                step = 0.0
+            elif i == start:
+                step = 2.0 * arm + 1.0
+            else:
+                dx = points[i, 0] - points[i - 1, 0]
+                dy = points[i, 1] - points[i - 1, 1]
+                step = math.sqrt(dx * dx + dy * dy)
+            total += step
+            arc[i] = total
+            lo[i], hi[i] = start, start + lens[k] - 1
+        start += lens[k]
+    cross = np.empty(n, dtype=np.float64)
+    dot = np.empty(n, dtype=np.float64)
+    for i in range(n):
+        back = max(_search(arc, arc[i] - arm, True) - 1, lo[i])
+        ahead = min(_search(arc, arc[i] + arm, False), hi[i])
+        a0 = points[i, 0] - points[back, 0]
+        a1 = points[i, 1] - points[back, 1]
+        b0 = points[ahead, 0] - points[i, 0]
+        b1 = points[ahead, 1] - points[i, 1]
+        cross[i] = a0 * b1 - a1 * b0
+        dot[i] = (0.0 + a0 * b0) + a1 * b1  # numpy's sum over a row starts from +0.0
+    return arc, cross, dot
+
+
+@njit(cache=True, nogil=True)
+def corner_cuts(turn, arc, lens, min_turn, margin):
+    """The corner pixels of each open polyline from :func:`corner_arms`' ``arc`` and the turns:
+    :func:`peaks` of the points turning by more than ``min_turn`` at least ``margin`` from
+    their polyline's ends, as indices into their own polyline (ascending) and the count per
+    polyline."""
+    n = len(turn)
+    group = np.empty(n, dtype=np.int64)
+    candidate = np.empty(n, dtype=np.bool_)
+    start = 0
+    for k in range(len(lens)):
+        stop = start + lens[k]
+        for i in range(start, stop):
+            group[i] = k
+            candidate[i] = (turn[i] > min_turn and arc[i] - arc[start] >= margin
+                            and arc[stop - 1] - arc[i] >= margin)
+        start = stop
+    at = peaks(turn, candidate, group)
+    first = np.empty(len(lens), dtype=np.int64)
+    start = 0
+    for k in range(len(lens)):
+        first[k] = start
+        start += lens[k]
+    counts = np.zeros(len(lens), dtype=np.int64)
+    cuts = np.empty(len(at), dtype=np.int64)
+    for j in range(len(at)):
+        g = group[at[j]]
+        cuts[j] = at[j] - first[g]
+        counts[g] += 1
+    return cuts, counts

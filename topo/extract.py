@@ -8,7 +8,9 @@ Pipeline (all parameters in :class:`ExtractConfig`):
    components smaller than ``min_component_area`` are dropped: skimage's ``remove_small_holes``,
    scipy's ``binary_erosion`` by a ``disk`` and ``ndimage.label``, computed in one compiled pass
    each (:func:`topo._extract_kernels.clean_free`, tested to give the libraries' mask).
-2. **Skeleton** — ``skimage.morphology.skeletonize``.
+2. **Skeleton** — ``skimage.morphology.skeletonize`` (Zhang–Suen thinning), bit for bit, by the
+   compiled :func:`topo._extract_kernels.skeletonize` (skimage's lookup table; it re-examines
+   only pixels beside removed ones instead of rescanning the image every subpass).
 3. **Graph** — the skeleton is traced into paths between junction and end pixels exactly as
    ``skan.csr.Skeleton`` does (``pixel_graph``, each cluster of junction pixels reduced to
    scipy's minimum spanning tree, ``PathGraph``): the same paths, pixel for pixel and in the
@@ -36,10 +38,10 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 7. **Kinds** from degree: 1 → dead end, 2 → corner, ≥ 3 → junction (an isolated free blob
    with no path is one dead-end node). Edges keep their polyline and its length.
 
-Steps 1 and 3, the free-disc radii of step 4, polyline lengths and step 6's choice of peaks run
-as compiled kernels (:mod:`topo._extract_kernels`, each tested to give exactly the library's or
-numpy's result, on random masks and on every extraction of an env episode); step 2 is
-skimage's ``skeletonize`` itself.
+Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6 on open paths (all but
+numpy's ``arctan2``) and the output's polylines in metres run as compiled kernels
+(:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
+on random masks and on every extraction of an env episode.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -70,16 +72,20 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from skimage.morphology import disk, skeletonize
+from skimage.morphology import disk
 
 from topo._checks import check_real
 from topo._extract_kernels import (
     clean_free,
+    corner_arms,
+    corner_cuts,
+    metre_paths,
     path_lengths,
     path_nodes,
     peaks,
     polyline_length,
     skeleton_paths,
+    skeletonize,
     wall_distances,
 )
 from topo.graph import TopoMap
@@ -187,7 +193,26 @@ def _turns(points: np.ndarray, arc: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 
 def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
                   margin: float) -> list[list[int]]:
-    """Corner pixel indices of each open polyline, all polylines in one vectorised pass."""
+    """Corner pixel indices of each open polyline, all polylines at once: the compiled form of
+    :func:`_open_corners_numpy` (the same indices; numpy's ``arctan2`` in between, so the
+    same turns), which ``tests/topo`` and ``tests/envs`` compare."""
+    if not polys:
+        return []
+    lens = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))
+    arc, cross, dot = corner_arms(np.concatenate(polys), lens, arm)
+    cuts, counts = corner_cuts(np.abs(np.arctan2(cross, dot)), arc, lens, min_turn, margin)
+    cuts = cuts.tolist()
+    out, start = [], 0
+    for c in counts.tolist():
+        out.append(cuts[start: start + c])
+        start += c
+    return out
+
+
+def _open_corners_numpy(polys: list[np.ndarray], arm: float, min_turn: float,
+                  margin: float) -> list[list[int]]:
+    """Corner pixel indices of each open polyline, all polylines in one vectorised pass (the
+    reference of :func:`_open_corners`)."""
     if not polys:
         return []
     lens = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))
@@ -533,15 +558,50 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     return _to_topomap(g, res, (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
 
 
-def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
-    if not g.pos:
-        return TopoMap.empty()
+def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
+    """Node positions in metres in output order (by ``y``, then ``x``) and each graph node's
+    output index."""
     ids = list(g.pos)
     rc = np.array([g.pos[n] for n in ids])
     xy = np.stack([origin[0] + (rc[:, 1] + 0.5) * res, origin[1] + (rc[:, 0] + 0.5) * res], 1)
     order = np.lexsort((xy[:, 0], xy[:, 1]))
     index = {ids[k]: i for i, k in enumerate(order.tolist())}
-    xy = xy[order]
+    return xy[order], index
+
+
+def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
+    """The :class:`TopoMap` in metres: nodes ordered by :func:`_node_order`, edges by their
+    ends' indices, each polyline from its lower- to its higher-numbered node with its ends on
+    the nodes; all polylines converted, re-pointed, turned and measured by one compiled kernel
+    (:func:`topo._extract_kernels.metre_paths`): the same floats as :func:`_to_topomap_loop`,
+    one edge at a time, which ``tests/topo`` and ``tests/envs`` compare (on the env's ~10-edge
+    maps that loop's small numpy calls were most of this step's cost)."""
+    if not g.pos:
+        return TopoMap.empty()
+    xy, index = _node_order(g, res, origin)
+    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
+    if not edges:
+        return TopoMap.from_valid_arrays(xy, np.empty((0, 2), dtype=np.int64), [], [])
+    ends = np.array([(index[edge.u], index[edge.v]) for edge in edges], dtype=np.int64)
+    sizes = [len(edge.poly) for edge in edges]
+    metres, plen = metre_paths(np.concatenate([edge.poly for edge in edges]),
+                               np.array(sizes, dtype=np.int64), ends, xy, res, *origin)
+    pairs = np.sort(ends, axis=1)
+    # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
+    chord = [math.sqrt(c.dot(c)) for c in xy[pairs[:, 0]] - xy[pairs[:, 1]]]
+    lengths = np.maximum(plen, chord)
+    paths, start = [], 0
+    for n in sizes:
+        paths.append(metres[start: start + n])
+        start += n
+    return TopoMap.from_valid_arrays(xy, pairs, lengths, paths)
+
+
+def _to_topomap_loop(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
+    """:func:`_to_topomap` one edge at a time (its reference in ``tests/topo``)."""
+    if not g.pos:
+        return TopoMap.empty()
+    xy, index = _node_order(g, res, origin)
     edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
     pairs, paths, lengths = [], [], []
     if edges:

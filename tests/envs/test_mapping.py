@@ -97,10 +97,21 @@ def test_compose_pose_matches_rigid_apply():
     assert -math.pi <= out[2] <= math.pi
 
 
+def _assert_same_maps(a, b):
+    """Two TopoMaps equal bit for bit (arrays, dtypes, polylines)."""
+    for f in ("xy", "kinds", "edges", "lengths"):
+        x, y = getattr(a, f), getattr(b, f)
+        assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), f
+    assert (a.paths is None) == (b.paths is None)
+    for p, q in zip(a.paths or (), b.paths or (), strict=True):
+        assert p.dtype == q.dtype and p.shape == q.shape and p.tobytes() == q.tobytes()
+
+
 def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     """On the env's own sonar grids (every extraction of a short episode), the compiled
-    free-space clean-up gives the skimage/scipy mask, the compiled tracing skan's paths and the
-    compiled free-disc radii the cKDTree's, exactly."""
+    free-space clean-up gives the skimage/scipy mask, the compiled thinning skimage's skeleton,
+    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's, the compiled
+    corner step and TopoMap output the numpy forms', exactly."""
     from envs import two_robot_explore_v0
     from topo import extract
     from topo._extract_kernels import (
@@ -131,9 +142,31 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         np.testing.assert_array_equal(got, wall_distances_reference(free, points))
         return got
 
+    to_topomap, thin, corners = extract._to_topomap, extract.skeletonize, extract._open_corners
+
+    def corners_both(*args):
+        got = corners(*args)
+        assert got == extract._open_corners_numpy(*args)
+        return got
+
+    def skeleton_both(free):
+        from skimage.morphology import skeletonize
+
+        got = thin(free)
+        np.testing.assert_array_equal(got, skeletonize(free))
+        return got
+
+    def topomap_both(g, res, origin):
+        got = to_topomap(g, res, origin)
+        _assert_same_maps(got, extract._to_topomap_loop(g, res, origin))
+        return got
+
     monkeypatch.setattr(extract, "wall_distances", walls_both)
     monkeypatch.setattr(extract, "skeleton_paths", paths_both)
     monkeypatch.setattr(extract, "clean_free", clean_both)
+    monkeypatch.setattr(extract, "_to_topomap", topomap_both)
+    monkeypatch.setattr(extract, "skeletonize", skeleton_both)
+    monkeypatch.setattr(extract, "_open_corners", corners_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
     par.reset(seed=3)
     rng = np.random.default_rng(3)

@@ -335,3 +335,135 @@ def test_corner_peaks_kernel_is_the_numpy_form(seed, n, density):
     group = np.sort(rng.integers(0, max(n // 10, 1), n))
     np.testing.assert_array_equal(peaks(turn, candidate, group),
                                   _peaks_reference(turn, candidate, group))
+
+
+def assert_same_maps(a, b):
+    """Two TopoMaps equal bit for bit (arrays, dtypes, polylines)."""
+    for f in ("xy", "kinds", "edges", "lengths"):
+        x, y = getattr(a, f), getattr(b, f)
+        assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), f
+    assert (a.paths is None) == (b.paths is None)
+    if a.paths is not None:
+        assert len(a.paths) == len(b.paths)
+        for p, q in zip(a.paths, b.paths, strict=True):
+            assert p.dtype == q.dtype and p.shape == q.shape and p.tobytes() == q.tobytes()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.4, 0.8), st.integers(8, 80), st.integers(8, 80),
+       st.sampled_from([1.0, 0.5, 0.25]), st.booleans())
+def test_topomap_output_kernel_is_the_loop(seed, density, h, w, res, sonar):
+    """The compiled conversion of the cleaned-up graph to a TopoMap (metres, turned polylines,
+    lengths) gives exactly the edge-by-edge form's map, on random blobs' graphs (coarse cells,
+    so most have tens of paths: loops, parallel paths, isolated nodes; some are empty)."""
+    from topo import extract
+
+    to_topomap = extract._to_topomap
+    seen = []
+
+    def both(g, res_, origin):
+        got = to_topomap(g, res_, origin)
+        assert_same_maps(got, extract._to_topomap_loop(g, res_, origin))
+        seen.append(got)
+        return got
+
+    rng = np.random.default_rng(seed)
+    mask = ndimage.binary_opening(rng.random((h, w)) < density)
+    cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(extract, "_to_topomap", both)
+        extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
+                        config=cfg)
+    assert len(seen) == int(mask.any())
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.2, 0.9), st.integers(1, 70), st.integers(1, 70),
+       st.integers(0, 3))
+def test_skeletonize_is_skimages(seed, density, h, w, opening):
+    """The compiled Zhang–Suen thinning gives exactly ``skimage.morphology.skeletonize``, on
+    noise and on opened blobs (thick regions, holes, touching borders)."""
+    from skimage.morphology import skeletonize as skimage_skeletonize
+
+    from topo._extract_kernels import skeletonize
+
+    rng = np.random.default_rng(seed)
+    mask = rng.random((h, w)) < density
+    if opening:
+        mask = ndimage.binary_opening(mask, iterations=opening)
+    got = skeletonize(mask)
+    assert got.dtype == bool and got.shape == mask.shape
+    np.testing.assert_array_equal(got, skimage_skeletonize(mask))
+
+
+def test_skeletonize_on_every_small_image():
+    """Every image up to 4×4 (the images that fix most of the lookup table,
+    ``tests/topo/zhang_lut_derivation.py``), and empty and full ones."""
+    from skimage.morphology import skeletonize as skimage_skeletonize
+
+    from topo._extract_kernels import skeletonize
+
+    for h, w in ((1, 1), (2, 3), (3, 3), (4, 4), (3, 5), (5, 3)):
+        bits = (np.arange(1 << (h * w))[:, None] >> np.arange(h * w)) & 1
+        for row in bits.astype(bool):
+            mask = row.reshape(h, w)
+            np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+    for mask in (np.zeros((6, 9), bool), np.ones((6, 9), bool), np.ones((40, 3), bool)):
+        np.testing.assert_array_equal(skeletonize(mask), skimage_skeletonize(mask))
+
+
+def test_skeletonize_table_code_10_timing_is_invisible():
+    """The one table entry skimage's outputs leave open (in which subpass code 10 goes) cannot
+    change an output (``zhang_lut_derivation.code_10_timing_is_invisible``, restated)."""
+    from topo._extract_kernels import _ZHANG_LUT
+
+    nw, n, ne, e, se, s, sw, w = (1 << i for i in range(8))
+    north = [s | se | a | b | c for a in (0, nw) for b in (0, n) for c in (0, ne)]
+    east = [nw | w | a | b | c for a in (0, ne) for b in (0, e) for c in (0, se)]
+    assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~s] == 0 for m in north)
+    assert all(_ZHANG_LUT[m] == 0 and _ZHANG_LUT[m & ~w] == 0 for m in east)
+    assert _ZHANG_LUT[10] == _ZHANG_LUT[40] == _ZHANG_LUT[160] == _ZHANG_LUT[130] == 3
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.floats(0.5, 12.0),
+       st.floats(0.1, 2.5), st.floats(0.0, 6.0))
+def test_open_corners_kernels_are_the_numpy_form(seed, n_polys, arm, min_turn, margin):
+    """The compiled corner step (arc lengths, chord products, candidates, peaks) gives the
+    numpy form's corner indices, and its arc lengths and chord products are numpy's floats,
+    on random 8-connected pixel walks (repeated points, straight runs, sharp turns)."""
+    from topo import extract
+    from topo._extract_kernels import corner_arms
+
+    rng = np.random.default_rng(seed)
+    moves = np.array([[-1, -1], [-1, 0], [-1, 1], [0, 1], [1, 1], [1, 0], [1, -1], [0, -1],
+                      [0, 0]], dtype=np.float64)
+    polys = []
+    for _ in range(n_polys):
+        k = int(rng.integers(2, 60))
+        heading = rng.integers(0, 8, size=k)
+        heading[rng.random(k) < 0.6] = heading[0]  # long straight runs, then turns
+        if rng.random() < 0.3:
+            heading[rng.integers(0, k)] = 8  # a repeated point
+        start = rng.integers(0, 50, size=2).astype(np.float64)
+        polys.append(np.concatenate([start[None], start + np.cumsum(moves[heading], axis=0)]))
+    assert extract._open_corners(polys, arm, min_turn, margin) == \
+        extract._open_corners_numpy(polys, arm, min_turn, margin)
+    points = np.concatenate(polys)
+    lens = np.array([len(p) for p in polys], dtype=np.int64)
+    arc, cross, dot = corner_arms(points, lens, arm)
+    first = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    step = np.zeros(len(points))
+    d = np.diff(points, axis=0)
+    step[1:] = np.sqrt((d * d).sum(axis=1))
+    step[first] = 2.0 * arm + 1.0
+    step[0] = 0.0
+    want_arc = np.cumsum(step)
+    assert arc.tobytes() == want_arc.tobytes()
+    group = np.repeat(np.arange(len(polys)), lens)
+    lo, hi = first[group], (first + lens - 1)[group]
+    back = np.maximum(np.searchsorted(want_arc, want_arc - arm, side="right") - 1, lo)
+    ahead = np.minimum(np.searchsorted(want_arc, want_arc + arm, side="left"), hi)
+    a, b = points - points[back], points[ahead] - points
+    assert cross.tobytes() == (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).tobytes()
+    assert dot.tobytes() == (a * b).sum(axis=1).tobytes()
