@@ -112,7 +112,7 @@ def env_row(steps: int = 1000) -> None:
         if k % 50 == 49:
             for rmap in par.maps:
                 win = rmap.known_window()
-                masks.append((np.ascontiguousarray(rmap.states[win] == CellState.FREE)))
+                masks.append(np.ascontiguousarray(rmap.states[win] == CellState.FREE))
     cfg = ExtractConfig.for_sonar()
     t = interleaved_medians({"ex": lambda: [extract_topomap(m, 0.1, config=cfg) for m in masks],
                              "sk": lambda: [skeletonize(m) for m in masks]}, 5)

@@ -195,8 +195,8 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore._map_kernels import nearest_nodes
+from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LOCAL_MAP_VALUES,
     LocalMapSampler,
