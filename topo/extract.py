@@ -210,7 +210,7 @@ def _open_corners(polys: list[np.ndarray], arm: float, min_turn: float,
 
 
 def _open_corners_numpy(polys: list[np.ndarray], arm: float, min_turn: float,
-                  margin: float) -> list[list[int]]:
+                        margin: float) -> list[list[int]]:
     """Corner pixel indices of each open polyline, all polylines in one vectorised pass (the
     reference of :func:`_open_corners`)."""
     if not polys:
