@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from fusion._config import config_from
-from fusion.icp import best_rotation_angle
+from fusion.icp import rigid_fit
 from fusion.merge import METHODS, MergeConfig, merge_maps
 from fusion.pairs import atomic_write_json
 from fusion.rigid import Rigid2D
@@ -148,10 +148,7 @@ def oracle_transform(pair: EvalPair) -> Rigid2D | None:
     c = pair.correspondences
     if c is None or len(c) < 2:
         return None
-    P, Q = pair.map_b.xy[c[:, 1]], pair.map_a.xy[c[:, 0]]
-    theta = best_rotation_angle(P, Q)
-    R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    return Rigid2D(theta, Q.mean(axis=0) - R @ P.mean(axis=0))
+    return Rigid2D(*rigid_fit(pair.map_b.xy[c[:, 1]], pair.map_a.xy[c[:, 0]]))
 
 
 def transform_errors(estimate: Rigid2D, pair: EvalPair) -> tuple[float, float] | None:

@@ -108,6 +108,24 @@ def best_rotation_angle(P: np.ndarray, Q: np.ndarray) -> float:
     return math.atan2(s, c)
 
 
+def rigid_fit(P: np.ndarray, Q: np.ndarray,
+              weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """``(theta, T)`` of the rigid motion ``q = R(theta) p + T`` best mapping the rows of ``P``
+    onto those of ``Q`` in least squares (:func:`best_rotation_angle` about the centroids), each
+    pair weighted by ``weights`` (non-negative, not all zero; ``None``: equally)."""
+    if weights is None:
+        theta = best_rotation_angle(P, Q)
+        mp, mq = P.mean(axis=0), Q.mean(axis=0)
+    else:
+        w = weights / weights.sum()
+        mp, mq = w @ P, w @ Q
+        P0, Q0 = P - mp, Q - mq
+        theta = math.atan2(float(w @ (P0[:, 0] * Q0[:, 1] - P0[:, 1] * Q0[:, 0])),
+                           float(w @ (P0[:, 0] * Q0[:, 0] + P0[:, 1] * Q0[:, 1])))
+    c, s = math.cos(theta), math.sin(theta)
+    return theta, mq - np.array([[c, -s], [s, c]]) @ mp
+
+
 def degeneracy(points: np.ndarray, name: str, rel: float = 1e-9) -> str | None:
     """``None`` if ``points`` spread in two dimensions; else why a rotation can't be fixed."""
     return _degeneracy(spread(points), name, rel)

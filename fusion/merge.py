@@ -54,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import degeneracy, icp_svd
+from fusion.icp import degeneracy, icp_svd, rigid_fit
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -485,6 +485,10 @@ def _path_evidence(pa: _Prepared, pb: _Prepared, theta: np.ndarray, tx: np.ndarr
                             PATH_TOL, PATH_OFF, PATH_REACH, both)
 
 
+_PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["path_off"]])
+"""Score weights of the columns of :func:`_path_evidence` (``path_agree``, ``path_off``)."""
+
+
 def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
     """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features
     and of :func:`_path_evidence`."""
@@ -493,7 +497,7 @@ def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.n
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
     return (features[:, cols] @ w + const
             + CONFIDENCE_WEIGHTS["likelihood"] * features[:, _LIKELIHOOD].max(axis=1)
-            + paths @ np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["path_off"]]))
+            + paths @ _PATH_WEIGHTS)
 
 
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
@@ -528,13 +532,7 @@ def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: flo
                                        pa.field, *pa.field_origin, PATH_CELL)
         P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
         w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
-    w = w / w.sum()
-    mp, mq = w @ P, w @ Q
-    P0, Q0 = P - mp, Q - mq
-    ang = math.atan2(float(w @ (P0[:, 0] * Q0[:, 1] - P0[:, 1] * Q0[:, 0])),
-                     float(w @ (P0[:, 0] * Q0[:, 0] + P0[:, 1] * Q0[:, 1])))
-    c, s = math.cos(ang), math.sin(ang)
-    return ang, mq - np.array([[c, -s], [s, c]]) @ mp
+    return rigid_fit(P, Q, w)
 
 
 def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Eval:
@@ -617,8 +615,8 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
 
 _COARSE_MIN_PAIRS = 4
 """The coarse score refits and scores only hypotheses landing at least this many B nodes on A
-nodes (3, like ``min_inliers``: +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4 at σ = 0.15 m,
-40–60%, seed 100, and 7% more time)."""
+nodes (3, like ``min_inliers``, measured +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4 at
+σ = 0.15 m, 40–60%, seed 100, and 7% more time: not kept)."""
 
 
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
@@ -649,8 +647,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
         w = CONFIDENCE_WEIGHTS
         paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
-        gain = coarse[chosen] + (paths @ np.array([w["path_agree"], w["path_off"]])
-                                 / (w["closeness"] + w["inliers"]))
+        gain = coarse[chosen] + paths @ _PATH_WEIGHTS / (w["closeness"] + w["inliers"])
         chosen = chosen[np.sort(np.argsort(-gain, kind="stable")[:cfg.candidates])]
     th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
     gates = np.array([cfg.coarse_tolerance, cfg.eps])

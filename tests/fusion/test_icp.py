@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from fusion import Rigid2D, icp_svd, svd_rotation
 from fusion import icp as icp_module
-from fusion.icp import best_rotation_angle
+from fusion.icp import best_rotation_angle, rigid_fit
 
 
 def spread_points(seed: int, n: int) -> np.ndarray:
@@ -135,3 +135,21 @@ def test_bad_input(kwargs, error, match):
     args = {"M": [[0, 0], [1, 0], [0, 1]], "D": [[0, 0], [1, 0], [0, 1]], **kwargs}
     with pytest.raises(error, match=match):
         icp_svd(**args)
+
+
+@given(st.integers(0, 10_000), st.integers(3, 20))
+def test_rigid_fit_recovers_a_motion_and_weights_count_as_repeats(seed, n):
+    rng = np.random.default_rng(seed)
+    P = rng.normal(size=(n, 2)) * 3
+    theta, T = rng.uniform(-math.pi, math.pi), rng.normal(size=2)
+    R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    est, t = rigid_fit(P, P @ R.T + T)
+    assert math.isclose(math.remainder(est - theta, 2 * math.pi), 0.0, abs_tol=1e-9)
+    np.testing.assert_allclose(t, T, atol=1e-9)
+    # noisy pairs: integer weights fit like the pairs repeated that many times
+    Q = P @ R.T + T + rng.normal(0.0, 0.3, P.shape)
+    k = rng.integers(1, 4, n)
+    weighted = rigid_fit(P, Q, k.astype(float))
+    repeated = rigid_fit(np.repeat(P, k, axis=0), np.repeat(Q, k, axis=0))
+    assert weighted[0] == pytest.approx(repeated[0], abs=1e-9)
+    np.testing.assert_allclose(weighted[1], repeated[1], atol=1e-9)
