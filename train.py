@@ -319,6 +319,14 @@ def eval_seeds(args: Args) -> list[int]:
     return [int(s) for s in ss.generate_state(args.eval_episodes)]
 
 
+def eval_worlds(args: Args) -> tuple[dict[str, Any], list[int], dict[str, Any]]:
+    """The evaluation's env config (``eval_max_cycles`` steps), its seeds (:func:`eval_seeds`)
+    and the JSON key that identifies both (for caching results on them)."""
+    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
+    seeds = eval_seeds(args)
+    return config, seeds, {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
+
+
 def run_explorer(team: dict, config: dict[str, Any], seeds: list[int]) -> list[dict]:
     """Metrics of ``team`` on each evaluation seed (:class:`agents.metrics.EpisodeRecorder`)."""
     out = []
@@ -344,10 +352,8 @@ def _summarise(name: str, episodes: list[dict]) -> dict[str, Any]:
 def evaluate(model: PPO, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
     """Evaluate the policy and the baselines on the fixed worlds; write ``eval.json``,
     ``eval.md`` and ``eval_coverage.png`` (atomically) into ``run_dir``."""
-    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
-    seeds = eval_seeds(args)
+    config, seeds, key = eval_worlds(args)
     cache = run_dir / "eval_baselines.json"
-    key = {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
     stored = json.loads(cache.read_text()) if cache.exists() else {}
     baselines: dict[str, list[dict]] = stored["explorers"] if stored.get("key") == key else {}
     for name in args.eval_baselines:

@@ -42,12 +42,11 @@ def run_args(run_dir: Path, episodes: int | None) -> train.Args:
 def rule_row(rule: str, args: train.Args, cache: Path) -> dict:
     """The summary row of :class:`SectorRule` ``rule`` on ``args``' evaluation worlds (cached
     per seed in ``cache``, keyed by the worlds and the env config)."""
-    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
-    key = {"seeds": train.eval_seeds(args), "config": json.loads(json.dumps(config, default=str))}
+    config, seeds, key = train.eval_worlds(args)
     if cache.exists() and (stored := json.loads(cache.read_text()))["key"] == key:
         return stored["row"]
     team = {a: SectorRule(rule, hold=args.hold) for a in ("robot_0", "robot_1")}
-    row = train._summarise(rule, train.run_explorer(team, config, key["seeds"]))
+    row = train._summarise(rule, train.run_explorer(team, config, seeds))
     atomic_write_bytes(cache, json.dumps({"key": key, "row": row}).encode())
     return row
 
