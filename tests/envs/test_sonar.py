@@ -51,6 +51,44 @@ def test_pymunk_rays_agree_with_numpy_reference(scene):
     assert checked > 100
 
 
+def _cast_public(sonar, space, pose, shape_filter):
+    """What ``Sonar.cast`` computes, through pymunk's public ``Space.segment_query_first``."""
+    starts, ends = sonar.ray_segments(pose)
+    dist, cos_inc = [], []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        hit = space.segment_query_first(a, b, 0.0, shape_filter)
+        if hit is None:
+            dist.append(math.inf)
+            cos_inc.append(1.0)
+        else:
+            length = math.dist(a, b)
+            dist.append(hit.alpha * length - sonar.mount_radius)
+            cos_inc.append(abs(hit.normal.x * (b[0] - a[0]) + hit.normal.y * (b[1] - a[1]))
+                           / length)
+    return np.array(dist), np.array(cos_inc)
+
+
+def test_direct_chipmunk_casts_equal_pymunks_public_query(scene):
+    """The casts call chipmunk through pymunk's binding; ``Space.segment_query_first`` must
+    give the same echoes, from inside walls, past the teammate, anywhere."""
+    world, robots, space = scene
+    sonar = Sonar(SonarConfig(rays=3), mount_radius=0.25)
+    rng = np.random.default_rng(11)
+    lo = np.array(world.origin)
+    hi = lo + np.array(world.shape[::-1]) * world.resolution
+    hits = 0
+    for _ in range(300):
+        pose = np.array([*rng.uniform(lo, hi), rng.uniform(-math.pi, math.pi)])
+        for robot in robots:
+            dist, cos_inc = sonar.cast(space, pose, robot.sensor_filter)
+            ref_dist, ref_cos = _cast_public(sonar, space, pose, robot.sensor_filter)
+            np.testing.assert_array_equal(np.isinf(dist), np.isinf(ref_dist))
+            np.testing.assert_allclose(dist, ref_dist, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(cos_inc, ref_cos, rtol=0, atol=1e-12)
+            hits += int(np.isfinite(dist).sum())
+    assert hits > 1000
+
+
 def test_own_disc_is_not_seen_but_teammate_is(scene):
     world, robots, space = scene
     sonar = Sonar(SonarConfig(rays=1, angles=(0.0,)), mount_radius=0.25)
