@@ -121,13 +121,13 @@ def mutual_pairs(A, B, theta, tx, ty, dist):
 
 
 @njit(cache=True, nogil=True)
-def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol, compat):
-    """2-point consensus: every (A pair, B pair) whose lengths agree within ``tol`` and whose end
-    kinds are compatible gives the rigid motion putting the B pair onto the A pair.
+def pair_candidates(a_kind, a_i, a_j, a_len, b_kind, b_i, b_j, b_len, tol, compat):
+    """2-point consensus: every (A pair ``p``, B pair ``q``) whose lengths agree within ``tol``
+    and whose end kinds are compatible, in the order ``p``, then ``q``.
 
     ``b_len`` must be sorted ascending and the B pairs listed in both orientations. Returns
-    ``(theta, tx, ty, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the
-    angle better).
+    ``(p, q, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the angle
+    better). :func:`pair_motions` gives the motions of the ones kept.
     """
     n_out = 0
     lo = np.searchsorted(b_len, a_len - tol)
@@ -136,33 +136,42 @@ def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol,
         for q in range(lo[p], hi[p]):
             if compat[a_kind[a_i[p]], b_kind[b_i[q]]] and compat[a_kind[a_j[p]], b_kind[b_j[q]]]:
                 n_out += 1
-    theta = np.empty(n_out)
-    tx = np.empty(n_out)
-    ty = np.empty(n_out)
+    out_p = np.empty(n_out, dtype=np.int64)
+    out_q = np.empty(n_out, dtype=np.int64)
     weight = np.empty(n_out)
-    ang_b = np.empty(b_i.shape[0])
-    for q in range(b_i.shape[0]):
-        ang_b[q] = math.atan2(B[b_j[q], 1] - B[b_i[q], 1], B[b_j[q], 0] - B[b_i[q], 0])
     k = 0
     for p in range(a_i.shape[0]):
-        ai, aj = a_i[p], a_j[p]
-        ang_a = math.atan2(A[aj, 1] - A[ai, 1], A[aj, 0] - A[ai, 0])
-        mxa = 0.5 * (A[ai, 0] + A[aj, 0])
-        mya = 0.5 * (A[ai, 1] + A[aj, 1])
         for q in range(lo[p], hi[p]):
-            bi, bj = b_i[q], b_j[q]
-            if not (compat[a_kind[ai], b_kind[bi]] and compat[a_kind[aj], b_kind[bj]]):
-                continue
-            ang = ang_a - ang_b[q]
-            c, s = math.cos(ang), math.sin(ang)
-            mxb = 0.5 * (B[bi, 0] + B[bj, 0])
-            myb = 0.5 * (B[bi, 1] + B[bj, 1])
-            theta[k] = ang
-            tx[k] = mxa - (c * mxb - s * myb)
-            ty[k] = mya - (s * mxb + c * myb)
-            weight[k] = min(a_len[p], b_len[q])
-            k += 1
-    return theta, tx, ty, weight
+            if compat[a_kind[a_i[p]], b_kind[b_i[q]]] and compat[a_kind[a_j[p]], b_kind[b_j[q]]]:
+                out_p[k], out_q[k] = p, q
+                weight[k] = min(a_len[p], b_len[q])
+                k += 1
+    return out_p, out_q, weight
+
+
+@njit(cache=True, nogil=True)
+def pair_motions(A, a_i, a_j, B, b_i, b_j, pairs_p, pairs_q):
+    """The rigid motion putting B pair ``pairs_q[k]`` onto A pair ``pairs_p[k]`` (ends on ends,
+    midpoint on midpoint): ``(theta, tx, ty, cos theta, sin theta)`` arrays."""
+    n = pairs_p.shape[0]
+    theta = np.empty(n)
+    tx = np.empty(n)
+    ty = np.empty(n)
+    cos_t = np.empty(n)
+    sin_t = np.empty(n)
+    for k in range(n):
+        ai, aj = a_i[pairs_p[k]], a_j[pairs_p[k]]
+        bi, bj = b_i[pairs_q[k]], b_j[pairs_q[k]]
+        ang = (math.atan2(A[aj, 1] - A[ai, 1], A[aj, 0] - A[ai, 0])
+               - math.atan2(B[bj, 1] - B[bi, 1], B[bj, 0] - B[bi, 0]))
+        c, s = math.cos(ang), math.sin(ang)
+        mxb = 0.5 * (B[bi, 0] + B[bj, 0])
+        myb = 0.5 * (B[bi, 1] + B[bj, 1])
+        theta[k] = ang
+        tx[k] = 0.5 * (A[ai, 0] + A[aj, 0]) - (c * mxb - s * myb)
+        ty[k] = 0.5 * (A[ai, 1] + A[aj, 1]) - (s * mxb + c * myb)
+        cos_t[k], sin_t[k] = c, s
+    return theta, tx, ty, cos_t, sin_t
 
 
 NEAR_ANY_NODE = 3
@@ -215,12 +224,12 @@ def paint_segments(grid, x0, y0, cell, P, edges, radius, bit):
 
 
 @njit(cache=True, nogil=True)
-def paint_nearest(table, best2, x0, y0, cell, points, p_kind, radius, compat):
+def paint_nearest(table, x0, y0, cell, points, p_kind, radius, compat):
     """For each B kind ``k`` and cell, ``table[iy, ix, k]`` becomes the index of the point of a
     kind compatible with ``k`` (``compat[p_kind, k]``) nearest to the cell centre within
     ``radius + cell / 2`` (cells holding ``-1`` where none stay so), and the cells within that
-    reach of any point get bit :data:`NEAR_ANY_NODE` in ``table[iy, ix, -1]``; ``best2``
-    (``table``'s shape, filled with ``inf``) is scratch."""
+    reach of any point get bit :data:`NEAR_ANY_NODE` in ``table[iy, ix, -1]``. The distance
+    of a cell's current point is computed again when another point competes for the cell."""
     ny, nx = table.shape[0], table.shape[1]
     reach2 = (radius + 0.5 * cell) ** 2
     for p in range(points.shape[0]):
@@ -233,15 +242,18 @@ def paint_nearest(table, best2, x0, y0, cell, points, p_kind, radius, compat):
                     continue
                 table[iy, ix, -1] |= 1 << NEAR_ANY_NODE
                 for k in range(compat.shape[1]):
-                    if compat[p_kind[p], k] and d2 < best2[iy, ix, k]:
-                        best2[iy, ix, k] = d2
+                    if not compat[p_kind[p], k]:
+                        continue
+                    q = table[iy, ix, k]
+                    if q < 0 or d2 < _cell_d2(ix, iy, points[q, 0], points[q, 1], x0, y0, cell):
                         table[iy, ix, k] = p
 
 
 @njit(cache=True, nogil=True)
-def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, loose_kind,
-                   min_pairs):
-    """Score each hypothesis after one closed-form fit step, updating it in place.
+def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv_cell, tol,
+                   loose_kind, min_pairs):
+    """Score each hypothesis after one closed-form fit step, updating it in place (``cos_t``,
+    ``sin_t``: the cosine and sine of ``theta``, as :func:`pair_motions` gives them).
 
     ``table[iy, ix]`` is a cell of A's raster: entries ``0..2``, the A node of a kind compatible
     with B kind ``0..2`` nearest to the cell (``-1`` if none, :func:`paint_nearest`); the last,
@@ -264,7 +276,7 @@ def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, lo
     ax, ay = A[:, 0].copy(), A[:, 1].copy()
     out = np.zeros(n_h)
     for h in range(n_h):
-        c, s = math.cos(theta[h]), math.sin(theta[h])
+        c, s = cos_t[h], sin_t[h]
         ox, oy = tx[h] - x0, ty[h] - y0
         n = 0
         spx = spy = sqx = sqy = sc = ss = 0.0

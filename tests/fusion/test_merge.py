@@ -285,8 +285,8 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
     tx = np.array([truth.T[0] + 0.1, truth.T[0]])
     ty = np.array([truth.T[1] - 0.05, truth.T[1]])
-    scores = K.refined_scores(theta, tx, ty, a.xy, b.xy, b.kinds.astype(np.int64), table, x0,
-                              y0, inv_cell, cfg.eps, 1, 4)
+    scores = K.refined_scores(theta, tx, ty, np.cos(theta), np.sin(theta), a.xy, b.xy,
+                              b.kinds.astype(np.int64), table, x0, y0, inv_cell, cfg.eps, 1, 4)
     assert theta[0] == pytest.approx(truth.theta, abs=1e-9)
     assert [tx[0], ty[0]] == pytest.approx(truth.T.tolist(), abs=1e-9)
     assert scores[0] == pytest.approx(a.n_nodes)
