@@ -250,6 +250,20 @@ def paint_nearest(table, x0, y0, cell, points, p_kind, radius, compat):
 
 
 @njit(cache=True, nogil=True)
+def _moved_cells(c, s, ox, oy, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx, my, cell):
+    """The points ``(bx, by)`` moved by ``(c, s, ox, oy)`` into raster coordinates (``mx``,
+    ``my``) and the flat index of their raster cell's first entry (``-1`` outside): a loop
+    without branches or reductions, which the compiler vectorises (scoring a third faster
+    than with the move inside the scoring loop)."""
+    for b in range(bx.shape[0]):
+        x = c * bx[b] - s * by[b] + ox
+        y = s * bx[b] + c * by[b] + oy
+        mx[b], my[b] = x, y
+        inside = (0.0 <= x) & (x < x_hi) & (0.0 <= y) & (y < y_hi)
+        cell[b] = (int(y * inv_cell) * nx + int(x * inv_cell)) * depth if inside else -1
+
+
+@njit(cache=True, nogil=True)
 def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv_cell, tol,
                    loose_kind, min_pairs):
     """Score each hypothesis after one closed-form fit step, updating it in place (``cos_t``,
@@ -274,25 +288,27 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
     tol2 = tol * tol
     bx, by = B[:, 0].copy(), B[:, 1].copy()
     ax, ay = A[:, 0].copy(), A[:, 1].copy()
+    mx, my = np.empty(n_b), np.empty(n_b)
+    cell = np.empty(n_b, dtype=np.int64)
     out = np.zeros(n_h)
     for h in range(n_h):
         c, s = cos_t[h], sin_t[h]
-        ox, oy = tx[h] - x0, ty[h] - y0
+        _moved_cells(c, s, tx[h] - x0, ty[h] - y0, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx,
+                     my, cell)
         n = 0
         spx = spy = sqx = sqy = sc = ss = 0.0
         for b in range(n_b):
-            x = c * bx[b] - s * by[b] + ox
-            y = s * bx[b] + c * by[b] + oy
-            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
-                a = flat[(int(y * inv_cell) * nx + int(x * inv_cell)) * depth + b_kind[b]]
-                if a >= 0:
-                    spx += bx[b]
-                    spy += by[b]
-                    sqx += ax[a]
-                    sqy += ay[a]
-                    sc += bx[b] * ax[a] + by[b] * ay[a]
-                    ss += bx[b] * ay[a] - by[b] * ax[a]
-                    n += 1
+            if cell[b] < 0:
+                continue
+            a = flat[cell[b] + b_kind[b]]
+            if a >= 0:
+                spx += bx[b]
+                spy += by[b]
+                sqx += ax[a]
+                sqy += ay[a]
+                sc += bx[b] * ax[a] + by[b] * ay[a]
+                ss += bx[b] * ay[a] - by[b] * ax[a]
+                n += 1
         if n < min_pairs:
             continue  # scored 0, not refitted
         # centred cross sums from the raw ones
@@ -303,22 +319,21 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
         theta[h] = ang
         tx[h] = (sqx - (c * spx - s * spy)) / n
         ty[h] = (sqy - (s * spx + c * spy)) / n
-        ox, oy = tx[h] - x0, ty[h] - y0
+        _moved_cells(c, s, tx[h] - x0, ty[h] - y0, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx,
+                     my, cell)
         score = 0.0
         for b in range(n_b):
-            x = c * bx[b] - s * by[b] + ox
-            y = s * bx[b] + c * by[b] + oy
-            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
-                cell = (int(y * inv_cell) * nx + int(x * inv_cell)) * depth
-                a = flat[cell + b_kind[b]]
-                if a >= 0:
-                    d2 = (x + x0 - ax[a]) ** 2 + (y + y0 - ay[a]) ** 2
-                    if d2 < tol2:
-                        score += 1.0 - d2 / tol2
-                elif b_kind[b] != loose_kind:
-                    bits = flat[cell + depth - 1]
-                    if not (bits >> NEAR_ANY_NODE) & 1 and (bits >> ON_PATH) & 1:
-                        score -= 1.0
+            if cell[b] < 0:
+                continue
+            a = flat[cell[b] + b_kind[b]]
+            if a >= 0:
+                d2 = (mx[b] + x0 - ax[a]) ** 2 + (my[b] + y0 - ay[a]) ** 2
+                if d2 < tol2:
+                    score += 1.0 - d2 / tol2
+            elif b_kind[b] != loose_kind:
+                bits = flat[cell[b] + depth - 1]
+                if not (bits >> NEAR_ANY_NODE) & 1 and (bits >> ON_PATH) & 1:
+                    score -= 1.0
         out[h] = score
     return out
 
@@ -721,21 +736,33 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
 
 
 @njit(cache=True, nogil=True)
-def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap):
-    """Moved by ``p' = R p + t``, the path samples ``pts`` (weights ``w``, metres of path each)
-    read ``field`` (squared distances, :func:`path_field`): ``(Σ w (1 − d²/tol²) over d < tol,
-    Σ w over off <= d < cap)``."""
-    ny, nx = field.shape
-    agree = away = 0.0
-    tol2, off2, cap2 = tol * tol, off * off, cap * cap
+def _field_cells(c, s, tx, ty, pts, x0, y0, inv_cell, ny, nx, cell):
+    """Flat index into a ``(ny, nx)`` raster (cells ``1 / inv_cell`` wide from ``(x0, y0)``)
+    of each point of ``pts`` moved by ``p' = R p + t`` (``-1`` outside): branch-free, so
+    vectorised (see :func:`_moved_cells`)."""
     for k in range(pts.shape[0]):
         x = c * pts[k, 0] - s * pts[k, 1] + tx
         y = s * pts[k, 0] + c * pts[k, 1] + ty
         ix = int(math.floor((x - x0) * inv_cell))
         iy = int(math.floor((y - y0) * inv_cell))
-        if ix < 0 or iy < 0 or ix >= nx or iy >= ny:
+        inside = (ix >= 0) & (iy >= 0) & (ix < nx) & (iy < ny)
+        cell[k] = iy * nx + ix if inside else -1
+
+
+@njit(cache=True, nogil=True)
+def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap, cell):
+    """Moved by ``p' = R p + t``, the path samples ``pts`` (weights ``w``, metres of path each)
+    read ``field`` (squared distances, :func:`path_field`): ``(Σ w (1 − d²/tol²) over d < tol,
+    Σ w over off <= d < cap)``; ``cell`` (one per sample) is scratch."""
+    ny, nx = field.shape
+    flat = field.ravel()
+    agree = away = 0.0
+    tol2, off2, cap2 = tol * tol, off * off, cap * cap
+    _field_cells(c, s, tx, ty, pts, x0, y0, inv_cell, ny, nx, cell)
+    for k in range(pts.shape[0]):
+        if cell[k] < 0:
             continue
-        d2 = field[iy, ix]
+        d2 = flat[cell[k]]
         if d2 < tol2:
             agree += w[k] * (1.0 - d2 / tol2)
         elif off2 <= d2 < cap2:
@@ -752,15 +779,16 @@ def path_agreement(theta, tx, ty, a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b
     forward, A's read B's moved back (:func:`path_field`); without ``both``, B's samples alone
     (twice their sums: the same scale, half the work)."""
     out = np.zeros((theta.shape[0], 2))
+    cell = np.empty(max(a_pts.shape[0], b_pts.shape[0]), dtype=np.int64)
     for h in range(theta.shape[0]):
         c, s = math.cos(theta[h]), math.sin(theta[h])
         g1, w1 = _field_sums(c, s, tx[h], ty[h], b_pts, b_w, a_field, a_x0, a_y0, inv_cell, tol,
-                             off, cap)
+                             off, cap, cell)
         g2, w2 = g1, w1
         if both:  # the inverse motion: p_B = R^T (p_A - t)
             ix, iy = -(c * tx[h] + s * ty[h]), -(-s * tx[h] + c * ty[h])
             g2, w2 = _field_sums(c, -s, ix, iy, a_pts, a_w, b_field, b_x0, b_y0, inv_cell, tol,
-                                 off, cap)
+                                 off, cap, cell)
         out[h, 0] = g1 + g2
         out[h, 1] = w1 + w2
     return out
