@@ -443,16 +443,33 @@ def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
 
 
 @njit(cache=True, nogil=True)
-def _segment_distance2(x, y, P, edges, limit2):
-    """Squared distance from ``(x, y)`` to the nearest segment, or ``limit2`` if none is nearer."""
-    best = limit2
-    d = math.sqrt(limit2)
+def _segment_boxes(P, edges, grow):
+    """``(E, 4)`` bounding box ``(x0, x1, y0, y1)`` of each segment ``P[u]``–``P[v]``, grown by
+    ``grow``: what :func:`_segment_distance2` tests first."""
+    out = np.empty((edges.shape[0], 4))
     for e in range(edges.shape[0]):
         ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
         wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
-        if (x < min(ux, wx) - d or x > max(ux, wx) + d or y < min(uy, wy) - d
-                or y > max(uy, wy) + d):
+        out[e, 0], out[e, 1] = min(ux, wx) - grow, max(ux, wx) + grow
+        out[e, 2], out[e, 3] = min(uy, wy) - grow, max(uy, wy) + grow
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _segment_distance2(x, y, P, edges, limit2, boxes, hit):
+    """Squared distance from ``(x, y)`` to the nearest segment, or ``limit2`` if none is nearer.
+    ``boxes``: :func:`_segment_boxes` grown by ``√limit2`` (segments whose box misses the point
+    are farther; tested first, in a vectorised pass: coordinates are finite, so ``>=`` is
+    ``not <``); ``hit`` (one per segment) is scratch."""
+    best = limit2
+    for e in range(edges.shape[0]):
+        hit[e] = ((x >= boxes[e, 0]) & (x <= boxes[e, 1]) & (y >= boxes[e, 2])
+                  & (y <= boxes[e, 3]))
+    for e in range(edges.shape[0]):
+        if not hit[e]:
             continue
+        ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
+        wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
         vx, vy = wx - ux, wy - uy
         ll = vx * vx + vy * vy
         t = 0.0 if ll == 0.0 else ((x - ux) * vx + (y - uy) * vy) / ll
@@ -499,21 +516,30 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
         u, v = q_edges[f, 0], q_edges[f, 1]
         q_in[f] = not (max(Q[u, 0], Q[v, 0]) < px0 or min(Q[u, 0], Q[v, 0]) > px1
                        or max(Q[u, 1], Q[v, 1]) < py0 or min(Q[u, 1], Q[v, 1]) > py1)
+    # each Q path's box (from its start and step, as the crossing test reads it)
+    q_box = np.empty((q_edges.shape[0], 4))
+    for f in range(q_edges.shape[0]):
+        bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
+        sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
+        q_box[f, 0], q_box[f, 1] = min(bx, bx + sx), max(bx, bx + sx)
+        q_box[f, 2], q_box[f, 3] = min(by, by + sy), max(by, by + sy)
+    overlap = np.empty(q_edges.shape[0], dtype=np.bool_)
     for e in range(p_edges.shape[0]):
         ax, ay = P[p_edges[e, 0], 0], P[p_edges[e, 0], 1]
         rx, ry = P[p_edges[e, 1], 0] - ax, P[p_edges[e, 1], 1] - ay
         if (max(ax, ax + rx) < qx0 or min(ax, ax + rx) > qx1 or max(ay, ay + ry) < qy0
                 or min(ay, ay + ry) > qy1):
             continue
+        ex0, ex1 = min(ax, ax + rx), max(ax, ax + rx)
+        ey0, ey1 = min(ay, ay + ry), max(ay, ay + ry)
+        for f in range(q_edges.shape[0]):  # the boxes overlap (vectorised)
+            overlap[f] = (q_in[f] & (ex1 >= q_box[f, 0]) & (q_box[f, 1] >= ex0)
+                          & (ey1 >= q_box[f, 2]) & (q_box[f, 3] >= ey0))
         for f in range(q_edges.shape[0]):
-            if not q_in[f]:
+            if not overlap[f]:
                 continue
             bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
             sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
-            if (max(ax, ax + rx) < min(bx, bx + sx) or max(bx, bx + sx) < min(ax, ax + rx)
-                    or max(ay, ay + ry) < min(by, by + sy)
-                    or max(by, by + sy) < min(ay, ay + ry)):
-                continue
             den = rx * sy - ry * sx
             # zero-length paths (coincident end nodes) cross nothing
             if den == 0.0 or abs(den) < min_sin * math.sqrt((rx * rx + ry * ry)
@@ -624,16 +650,19 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
             out[2] += 1.0
     miss2 = near_miss * near_miss
     limit2 = max(eps2, miss2)  # farther paths make neither a conflict nor a near miss
+    hit = np.empty(max(a_edges.shape[0], b_edges.shape[0]), dtype=np.bool_)
+    boxes = _segment_boxes(A, a_edges, math.sqrt(limit2))
     for b in range(B.shape[0]):
         if not far_b[b] and b_kind[b] != loose_kind and not near_b[b]:
-            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, limit2)
+            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, limit2, boxes, hit)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
                 out[8] += 1.0
+    boxes = _segment_boxes(X, b_edges, math.sqrt(limit2))
     for a in range(A.shape[0]):
         if not far_a[a] and a_kind[a] != loose_kind and not near_a[a]:
-            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, limit2)
+            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, limit2, boxes, hit)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
