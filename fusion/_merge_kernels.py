@@ -50,10 +50,10 @@ def node_pairs(xy, edges, knn, min_dist):
                 near[nbr[p], nbr[q]] = True
     for a in range(n):
         near[a, a] = False
-    dist = np.empty((n, n))
-    for a in range(n):
-        for b in range(n):
-            dist[a, b] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
+    dist = np.zeros((n, n))
+    for a in range(n):  # hypot(-u, -v) == hypot(u, v): each pair once
+        for b in range(a + 1, n):
+            dist[a, b] = dist[b, a] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
     cand = near.copy()
     k = min(knn, n - 1)
     taken = np.zeros(n, dtype=np.bool_)
@@ -820,6 +820,52 @@ def path_agreement(theta, tx, ty, a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b
                                  off, cap, cell)
         out[h, 0] = g1 + g2
         out[h, 1] = w1 + w2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def polyline_chords(pts, sizes, chord):
+    """``(S, 4)`` chords ``(x1, y1, x2, y2)`` of the polylines stacked in ``pts`` (``sizes[k]``
+    points each): the first and last point of each, and the first point past each multiple of
+    ``chord`` of arc length along it, joined in order (``math.hypot`` is the C library's, as
+    ``np.hypot``; the arc length sums in order, as ``np.cumsum``)."""
+    n = pts.shape[0]
+    arc = np.empty(n)
+    run = 0.0
+    i = 0
+    for k in range(sizes.shape[0]):  # the running sum over every point, no step between lines
+        for m in range(sizes[k]):
+            if m:
+                run += math.hypot(pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1])
+            else:
+                run += 0.0
+            arc[i] = run
+            i += 1
+    keep = np.zeros(n, dtype=np.bool_)
+    count = 0
+    i = 0
+    for k in range(sizes.shape[0]):
+        start = arc[i]
+        prev = 0.0
+        for m in range(sizes[k]):
+            bucket = math.floor((arc[i] - start) / chord)
+            keep[i] = m == 0 or m == sizes[k] - 1 or bucket != prev
+            prev = bucket
+            count += keep[i] and m > 0
+            i += 1
+    out = np.empty((count, 4))
+    c = 0
+    i = 0
+    for k in range(sizes.shape[0]):
+        last = -1
+        for _ in range(sizes[k]):
+            if keep[i]:
+                if last >= 0:
+                    out[c, 0], out[c, 1] = pts[last, 0], pts[last, 1]
+                    out[c, 2], out[c, 3] = pts[i, 0], pts[i, 1]
+                    c += 1
+                last = i
+            i += 1
     return out
 
 
