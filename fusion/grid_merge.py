@@ -250,11 +250,9 @@ class _Correlator:
         return corner + self.half * self.res - np.array([[c, -s], [s, c]]) @ self.centre
 
 
-def _distinct(theta: float, t: np.ndarray, other_theta: float, other_t: np.ndarray,
-              centre: np.ndarray, cfg: GridMergeConfig) -> bool:
+def _distinct(a: Rigid2D, b: Rigid2D, centre: np.ndarray, cfg: GridMergeConfig) -> bool:
     """Whether two alignments are clearly different (``distinct_deg`` / ``distinct_m`` at B's
     wall centroid)."""
-    a, b = Rigid2D(float(theta), t), Rigid2D(float(other_theta), other_t)
     return (math.degrees(a.rotation_error(b)) > cfg.distinct_deg
             or a.translation_error(b, at=centre) > cfg.distinct_m)
 
@@ -305,16 +303,17 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                        cfg)
     sweep = coarse or fine
     c_scores, c_at, _ = sweep.best(thetas)
-    c_ts: dict[int, np.ndarray] = {}  # translations of the rotations looked at
+    c_alignments: dict[int, Rigid2D] = {}  # of the rotations looked at
 
-    def c_t(i: int) -> np.ndarray:
-        if i not in c_ts:
-            c_ts[i] = sweep.translation(c_at[i], thetas[i], sweep.shape[1])
-        return c_ts[i]
+    def c_alignment(i: int) -> Rigid2D:
+        if i not in c_alignments:
+            c_alignments[i] = Rigid2D(float(thetas[i]),
+                                      sweep.translation(c_at[i], thetas[i], sweep.shape[1]))
+        return c_alignments[i]
 
     picked: list[int] = []  # the best clearly different coarse alignments
     for i in np.argsort(-c_scores, kind="stable"):
-        if all(_distinct(thetas[i], c_t(i), thetas[j], c_t(j), centre, cfg) for j in picked):
+        if all(_distinct(c_alignment(i), c_alignment(j), centre, cfg) for j in picked):
             picked.append(int(i))
             if len(picked) == cfg.refine_top:
                 break
@@ -336,7 +335,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     far = (rr - r_best) ** 2 + (cc - c_best) ** 2 > (cfg.distinct_m / fine_res) ** 2
     rival = float(smap[far].max()) if far.any() else 0.0
     for th, s, tt in zip(cand, f_scores, f_ts, strict=True):
-        if _distinct(th, tt, theta, t, centre, cfg):
+        if _distinct(Rigid2D(float(th), tt), estimate, centre, cfg):
             rival = max(rival, float(s))
 
     # sub-cell refinement on wall points, gated to the wall band
