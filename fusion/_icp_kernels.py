@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from topo._extract_kernels import _pairwise_sum  # numpy's float64 sum, bit for bit
+
 
 @njit(cache=True, nogil=True)
 def match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep):
@@ -108,61 +110,12 @@ def spread(P):
 
 
 @njit(cache=True, nogil=True)
-def _block_sum(a, lo, n):
-    """numpy's sum of a block of at most 128 values: 8 accumulators (below 8 values, in
-    order)."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return res
-    r = a[lo: lo + 8].copy()
-    i = 8
-    while i < n - (n % 8):
-        for j in range(8):
-            r[j] += a[lo + i + j]
-        i += 8
-    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
-@njit(cache=True, nogil=True)
-def pairwise_sum(a, lo, n):
-    """``a[lo: lo + n].sum()`` as numpy computes it for a contiguous float64 array (pairwise:
-    halves cut at a multiple of 8 down to blocks of at most 128, :func:`_block_sum`), so that a
-    compiled loop reproduces a numpy objective bit for bit. Written with explicit stacks (a
-    recursive function does not load from numba's cache)."""
-    f_lo = np.empty(64, dtype=np.int64)  # pending halves: start, size, stage (0, 1, 2)
-    f_n = np.empty(64, dtype=np.int64)
-    f_stage = np.empty(64, dtype=np.int64)
-    vals = np.empty(64)
-    top, nv = 0, 0
-    f_lo[0], f_n[0], f_stage[0] = lo, n, 0
-    while top >= 0:
-        size = f_n[top]
-        if size <= 128:
-            vals[nv] = _block_sum(a, f_lo[top], size)
-            nv += 1
-            top -= 1
-            continue
-        half = size // 2
-        half -= half % 8
-        if f_stage[top] == 0:  # the first half
-            f_stage[top] = 1
-            f_lo[top + 1], f_n[top + 1], f_stage[top + 1] = f_lo[top], half, 0
-            top += 1
-        elif f_stage[top] == 1:  # then the second
-            f_stage[top] = 2
-            f_lo[top + 1], f_n[top + 1], f_stage[top + 1] = f_lo[top] + half, size - half, 0
-            top += 1
-        else:  # both done: their sum
-            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
-            nv -= 1
-            top -= 1
-    return vals[0]
+def stops(prev, f, same, tau, rel_tol):
+    """ICP's stopping rules after an update: the pairs repeat, or the objective changed from
+    ``prev`` to ``f`` by less than ``tau`` or by at most ``rel_tol × prev`` (each rule off when
+    negative)."""
+    change = abs(prev - f)
+    return same or (tau >= 0.0 and change < tau) or (rel_tol >= 0.0 and change <= rel_tol * prev)
 
 
 @njit(cache=True, nogil=True)
@@ -170,7 +123,7 @@ def icp_brute(D, M, theta, tx, ty, max_d2, n_trim, tau, rel_tol, max_iter):
     """The loop of :func:`fusion.icp_svd` with all-pairs nearest neighbours, in one call (the
     Python loop cost more than the arithmetic at the merges' sizes); ``tau`` / ``rel_tol``
     negative when unused. The same steps in the same order: :func:`match_brute`, the TrICP trim
-    (stable sort, the kept distances summed as numpy sums), the stopping rules,
+    (stable sort, the kept distances summed as numpy sums them), :func:`stops`,
     :func:`fit_rigid`.
 
     Returns ``(theta, tx, ty, iterations, errors, converged, idx, keep, short)``: ``short`` the
@@ -195,19 +148,16 @@ def icp_brute(D, M, theta, tx, ty, max_d2, n_trim, tau, rel_tol, max_iter):
                 if keep[i]:
                     kept[m] = d2[i]
                     m += 1
-            f = pairwise_sum(kept, 0, m)
+            f = _pairwise_sum(kept, m)
             same = True
             for i in range(n):
                 if idx[i] != prev_idx[i] or keep[i] != prev_keep[i]:
                     same = False
                     break
         errors[iterations] = f
-        if iterations:
-            change = abs(errors[iterations - 1] - f)
-            if (same or (tau >= 0.0 and change < tau)
-                    or (rel_tol >= 0.0 and change <= rel_tol * errors[iterations - 1])):
-                converged = True
-                break
+        if iterations and stops(errors[iterations - 1], f, same, tau, rel_tol):
+            converged = True
+            break
         if iterations == max_iter:
             break
         new_theta, new_tx, new_ty, n_fit = fit_rigid(D, M, idx, keep)

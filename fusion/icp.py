@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fusion._icp_kernels import fit_rigid, icp_brute, spread
+from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
 from fusion.rigid import Rigid2D
 from topo._checks import as_points, check_int, check_real
 
@@ -239,10 +239,11 @@ def icp_svd(
         theta, t = init.theta, init.T.copy()
     max_d2 = math.inf if max_distance is None else max_distance * max_distance
     n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
+    rule_tau = -1.0 if tau is None else tau  # the stopping rules, off when negative
+    rule_rel = -1.0 if rel_tol is None else rel_tol
     if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS:  # the whole loop compiled
         theta, tx, ty, iterations, errors, converged, idx, keep, short = icp_brute(
-            D, M, theta, t[0], t[1], max_d2, n_trim, -1.0 if tau is None else tau,
-            -1.0 if rel_tol is None else rel_tol, max_iter)
+            D, M, theta, t[0], t[1], max_d2, n_trim, rule_tau, rule_rel, max_iter)
         if short >= 0:
             degenerate = degenerate or (
                 f"only {short} pair(s) within max_distance/trim: transform not updated")
@@ -267,15 +268,9 @@ def icp_svd(
             f = float(d2[keep].sum())
             same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         errors.append(f)
-        if iterations:
-            change = abs(errors[-2] - f)
-            if (
-                same
-                or (tau is not None and change < tau)
-                or (rel_tol is not None and change <= rel_tol * errors[-2])
-            ):
-                converged = True
-                break
+        if iterations and stops(errors[-2], f, same, rule_tau, rule_rel):
+            converged = True
+            break
         if iterations == max_iter:
             break
         new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)
