@@ -129,16 +129,14 @@ def pair_candidates(a_kind, a_i, a_j, a_len, b_kind, b_i, b_j, b_len, tol, compa
     ``(p, q, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the angle
     better). :func:`pair_motions` gives the motions of the ones kept.
     """
-    n_out = 0
     lo = np.searchsorted(b_len, a_len - tol)
     hi = np.searchsorted(b_len, a_len + tol, side="right")
+    n_max = 0  # pairs of matching lengths: room for every compatible one
     for p in range(a_i.shape[0]):
-        for q in range(lo[p], hi[p]):
-            if compat[a_kind[a_i[p]], b_kind[b_i[q]]] and compat[a_kind[a_j[p]], b_kind[b_j[q]]]:
-                n_out += 1
-    out_p = np.empty(n_out, dtype=np.int64)
-    out_q = np.empty(n_out, dtype=np.int64)
-    weight = np.empty(n_out)
+        n_max += hi[p] - lo[p]
+    out_p = np.empty(n_max, dtype=np.int64)
+    out_q = np.empty(n_max, dtype=np.int64)
+    weight = np.empty(n_max)
     k = 0
     for p in range(a_i.shape[0]):
         for q in range(lo[p], hi[p]):
@@ -146,7 +144,7 @@ def pair_candidates(a_kind, a_i, a_j, a_len, b_kind, b_i, b_j, b_len, tol, compa
                 out_p[k], out_q[k] = p, q
                 weight[k] = min(a_len[p], b_len[q])
                 k += 1
-    return out_p, out_q, weight
+    return out_p[:k], out_q[:k], weight[:k]
 
 
 @njit(cache=True, nogil=True)
@@ -159,11 +157,16 @@ def pair_motions(A, a_i, a_j, B, b_i, b_j, pairs_p, pairs_q):
     ty = np.empty(n)
     cos_t = np.empty(n)
     sin_t = np.empty(n)
+    ang_a = np.empty(a_i.shape[0])  # each pair's direction once (pairs recur in hypotheses)
+    for p in range(a_i.shape[0]):
+        ang_a[p] = math.atan2(A[a_j[p], 1] - A[a_i[p], 1], A[a_j[p], 0] - A[a_i[p], 0])
+    ang_b = np.empty(b_i.shape[0])
+    for q in range(b_i.shape[0]):
+        ang_b[q] = math.atan2(B[b_j[q], 1] - B[b_i[q], 1], B[b_j[q], 0] - B[b_i[q], 0])
     for k in range(n):
         ai, aj = a_i[pairs_p[k]], a_j[pairs_p[k]]
         bi, bj = b_i[pairs_q[k]], b_j[pairs_q[k]]
-        ang = (math.atan2(A[aj, 1] - A[ai, 1], A[aj, 0] - A[ai, 0])
-               - math.atan2(B[bj, 1] - B[bi, 1], B[bj, 0] - B[bi, 0]))
+        ang = ang_a[pairs_p[k]] - ang_b[pairs_q[k]]
         c, s = math.cos(ang), math.sin(ang)
         mxb = 0.5 * (B[bi, 0] + B[bj, 0])
         myb = 0.5 * (B[bi, 1] + B[bj, 1])
