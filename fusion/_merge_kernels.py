@@ -827,6 +827,49 @@ def path_agreement(theta, tx, ty, a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b
 
 
 @njit(cache=True, nogil=True)
+def map_numbers(xy, edges, ends, eps, pad, pad2):
+    """What :func:`fusion.merge._prepare` needs besides the kernels' outputs: each path's
+    ``margin`` (``min(0.5, eps / length)``, its length as ``np.linalg.norm`` computes it) and the
+    box ``(x0, y0, x1, y1)`` of the nodes and the points ``ends``, grown by ``pad`` and then by
+    ``pad2`` (two roundings, as numpy's ``lo - pad - pad2``)."""
+    margin = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        dx = xy[edges[e, 0], 0] - xy[edges[e, 1], 0]
+        dy = xy[edges[e, 0], 1] - xy[edges[e, 1], 1]
+        margin[e] = min(0.5, eps / max(math.sqrt(dx * dx + dy * dy), 1e-12))
+    x0, x1, y0, y1 = _bbox(xy)
+    if ends.shape[0]:
+        ex0, ex1, ey0, ey1 = _bbox(ends)
+        x0, x1, y0, y1 = min(x0, ex0), max(x1, ex1), min(y0, ey0), max(y1, ey1)
+    return margin, x0 - pad - pad2, y0 - pad - pad2, x1 + pad + pad2, y1 + pad + pad2
+
+
+@njit(cache=True, nogil=True)
+def branch_slots(xy, edges, n):
+    """The paths leaving each of the ``n`` nodes, in order of node (stable): ``(node, slot, d)``
+    — the node, its path's place among its node's, and the vector to the path's other end
+    (``(2E, 2)``, for ``np.arctan2``) — and the largest degree."""
+    m = 2 * edges.shape[0]
+    ends = np.empty((m, 2), dtype=np.int64)
+    ends[: edges.shape[0]] = edges
+    ends[edges.shape[0]:, 0] = edges[:, 1]
+    ends[edges.shape[0]:, 1] = edges[:, 0]
+    order = np.argsort(ends[:, 0], kind="mergesort")
+    degree = np.zeros(n, dtype=np.int64)
+    node = np.empty(m, dtype=np.int64)
+    slot = np.empty(m, dtype=np.int64)
+    d = np.empty((m, 2))
+    for k in range(m):
+        u, v = ends[order[k], 0], ends[order[k], 1]
+        node[k] = u
+        slot[k] = degree[u]
+        degree[u] += 1
+        d[k, 0] = xy[v, 0] - xy[u, 0]
+        d[k, 1] = xy[v, 1] - xy[u, 1]
+    return node, slot, d, degree.max() if n else 0
+
+
+@njit(cache=True, nogil=True)
 def polyline_chords(pts, sizes, chord):
     """``(S, 4)`` chords ``(x1, y1, x2, y2)`` of the polylines stacked in ``pts`` (``sizes[k]``
     points each): the first and last point of each, and the first point past each multiple of

@@ -395,17 +395,15 @@ def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
     near, i, j, length = K.node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
-    seg = np.linalg.norm(xy[edges[:, 0]] - xy[edges[:, 1]], axis=1)
-    margin = np.minimum(0.5, cfg.eps / np.maximum(seg, 1e-12))
     pieces = _segments(m)
     pts, w = K.path_samples(pieces, PATH_STEP)
-    ends = pieces.reshape(-1, 2) if len(pieces) else xy
-    lo = np.minimum(xy.min(axis=0), ends.min(axis=0)) - PATH_REACH - PATH_CELL
-    hi = np.maximum(xy.max(axis=0), ends.max(axis=0)) + PATH_REACH + PATH_CELL
-    nx, ny = (np.ceil((hi - lo) / PATH_CELL).astype(np.int64) + 1).tolist()
-    field = K.path_field(pieces, float(lo[0]), float(lo[1]), PATH_CELL, ny, nx, PATH_REACH)
+    margin, x0, y0, x1, y1 = K.map_numbers(xy, edges, pieces.reshape(-1, 2), cfg.eps,
+                                           PATH_REACH, PATH_CELL)
+    nx = math.ceil((x1 - x0) / PATH_CELL) + 1
+    ny = math.ceil((y1 - y0) / PATH_CELL) + 1
+    field = K.path_field(pieces, x0, y0, PATH_CELL, ny, nx, PATH_REACH)
     return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(xy, edges), pieces, pts, w, field, (float(lo[0]), float(lo[1])))
+                     _branches(xy, edges), pieces, pts, w, field, (x0, y0))
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -422,16 +420,10 @@ def _segments(m: TopoMap) -> np.ndarray:
 
 def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """``(n, max degree)`` angle of each path leaving each node (toward its other end)."""
-    n = len(xy)
-    ends = np.concatenate([edges, edges[:, ::-1]])
-    order = np.argsort(ends[:, 0], kind="stable")
-    ends = ends[order]
-    degree = np.bincount(ends[:, 0], minlength=n)
-    out = np.full((n, max(1, int(degree.max(initial=0)))), np.nan)
-    if len(ends):
-        slot = np.arange(len(ends)) - np.repeat(np.cumsum(degree) - degree, degree)
-        d = xy[ends[:, 1]] - xy[ends[:, 0]]
-        out[ends[:, 0], slot] = np.arctan2(d[:, 1], d[:, 0])
+    node, slot, d, degree = K.branch_slots(xy, edges, len(xy))
+    out = np.full((len(xy), max(1, degree)), np.nan)
+    if len(node):  # numpy's arctan2 (numba's differs in the last bit), on the same layout
+        out[node, slot] = np.arctan2(d[:, 1], d[:, 0])
     return out
 
 
