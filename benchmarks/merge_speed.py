@@ -18,13 +18,18 @@ it times the occupancy-grid merges the environment runs instead: ``merge_grids``
 With ``--reference REV`` (a git revision of this repository) it times ``auto`` against the
 ``fusion`` package of that revision instead, in this one process, interleaved pair by pair (wall
 and CPU medians, and the median over pairs of the ratio of their fastest runs): what a change
-costs, fair on a busy machine.
+costs, fair on a busy machine. With ``--reference REV --env STEPS`` it times, against REV, the
+merges the environment makes (``merge_maps`` every 25 steps, ``merge_grids`` every 100 while
+unmerged) on the inputs recorded from an env run of seeds 0-2, and counts the results that are
+not identical (run with ``PYTHONPATH=.`` from the checkout).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
+import math
 import statistics
 import subprocess
 import sys
@@ -69,7 +74,8 @@ def grid_times(pairs_dir: Path) -> None:
 
 def _reference_merge(rev: str, into: Path):
     """``merge_maps`` of the ``fusion`` package at git revision ``rev``, importable beside the
-    current one (copied into ``into`` as ``fusion_ref``, its own imports renamed)."""
+    current one (copied into ``into`` as ``fusion_ref``, its own imports renamed; its other
+    modules then import as ``fusion_ref.*``)."""
     root = Path(__file__).resolve().parent.parent
     names = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", rev, "fusion/"],
                            check=True, capture_output=True, text=True).stdout.split()
@@ -117,6 +123,107 @@ def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
                 f"{1000 * statistics.median(cpu[k]):>14.2f}" for k in runs) + f"{ratio:>8.2f}")
 
 
+def _env_merge_calls(steps: int) -> list[dict]:
+    """The arguments of every merge the environment makes (``mapping.run_merge``, default
+    config) in ``steps`` steps of seeds 0, 1, 2 under the actions of ``/work/tools/env_hash.py``
+    (a new random command every 10 steps), the grids copied as they were then."""
+    from envs import two_robot_explore_v0
+    from envs.two_robot_explore import env as env_module
+    from fusion.pairs import GridSnapshot
+
+    calls: list[dict] = []
+    run_merge = env_module.run_merge
+
+    def recording(map_a, map_b, method, grid_a=None, grid_b=None, try_grids=False):
+        grids = [GridSnapshot(np.array(g.states()), float(g.resolution),
+                              tuple(np.asarray(g.origin, dtype=float))) for g in (grid_a, grid_b)]
+        calls.append({"maps": (map_a, map_b), "grids": grids, "try_grids": try_grids})
+        return run_merge(map_a, map_b, method, grid_a, grid_b, try_grids=try_grids)
+
+    env_module.run_merge = recording
+    try:
+        for seed in (0, 1, 2):
+            par = two_robot_explore_v0.parallel_env(max_cycles=steps)
+            par.reset(seed=seed)
+            rng = np.random.default_rng(seed)
+            for k in range(steps):
+                if k % 10 == 0:
+                    acts = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)],
+                                        dtype=np.float32) for a in par.agents}
+                par.step(acts)
+                if not par.agents:
+                    break
+    finally:
+        env_module.run_merge = run_merge
+    return calls
+
+
+def _same(a: object, b: object) -> bool:
+    """Equal results, times aside (dataclasses field by field, arrays exactly, NaN = NaN)."""
+    if dataclasses.is_dataclass(a):
+        return type(a).__name__ == type(b).__name__ and all(
+            _same(getattr(a, f.name), getattr(b, f.name))
+            for f in dataclasses.fields(a) if f.name != "time_s")
+    if hasattr(a, "theta") and hasattr(a, "T"):  # Rigid2D of either package
+        return a.theta == b.theta and np.array_equal(a.T, b.T)
+    if hasattr(a, "xy") and hasattr(a, "edges"):  # TopoMap
+        return all(np.array_equal(getattr(a, n), getattr(b, n))
+                   for n in ("xy", "kinds", "edges", "lengths"))
+    if isinstance(a, np.ndarray):
+        return a.shape == b.shape and np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+    if isinstance(a, float) and math.isnan(a):
+        return isinstance(b, float) and math.isnan(b)
+    return a == b
+
+
+def env_times(rev: str, steps: int, repeats: int = 3) -> None:
+    """Print the environment's merge cost now and at revision ``rev`` on the merges of an env
+    run (:func:`_env_merge_calls`), both in this one process, interleaved call by call (the
+    fastest of ``repeats`` runs of each), and whether every result is identical."""
+    from fusion.grid_merge import hybrid_merge, merge_grids
+
+    calls = _env_merge_calls(steps)
+    with tempfile.TemporaryDirectory() as tmp:
+        _reference_merge(rev, Path(tmp))
+        ref = importlib.import_module("fusion_ref.grid_merge")
+        versions = {"now": (hybrid_merge, merge_grids), rev: (ref.hybrid_merge, ref.merge_grids)}
+        first = calls[0]
+        for hybrid, _ in versions.values():  # compiled kernels load on the first call
+            hybrid(*first["maps"], *first["grids"], try_grids=True)
+        topo = {k: [] for k in versions}
+        grid = {k: [] for k in versions}
+        differ = 0
+        for c in calls:
+            results = {}
+            for _ in range(repeats):
+                for k, (hybrid, grids) in versions.items():
+                    t0 = time.perf_counter()
+                    h = hybrid(*c["maps"], *c["grids"], try_grids=False)
+                    t_topo = time.perf_counter() - t0
+                    g, t_grid = None, 0.0
+                    if c["try_grids"]:
+                        t0 = time.perf_counter()
+                        g = grids(*c["grids"])
+                        t_grid = time.perf_counter() - t0
+                    best = results.get(k)
+                    results[k] = (h, g, min(t_topo, best[2]) if best else t_topo,
+                                  min(t_grid, best[3]) if best else t_grid)
+            (h_now, g_now, *_), (h_ref, g_ref, *_) = results["now"], results[rev]
+            differ += not (_same(h_now, h_ref) and _same(g_now, g_ref))
+            for k, (_, _, t_topo, t_grid) in results.items():
+                topo[k].append(t_topo)
+                if c["try_grids"]:
+                    grid[k].append(t_grid)
+    n_steps = 3 * steps
+    print(f"{len(calls)} merges ({sum(c['try_grids'] for c in calls)} with grids) in "
+          f"{n_steps} env steps; results differing from {rev}: {differ}")
+    print(f"{'':>10}{'merge_maps ms':>15}{'merge_grids ms':>16}{'us per env step':>17}")
+    for k in versions:
+        per_step = 1e6 * (sum(topo[k]) + sum(grid[k])) / n_steps
+        print(f"{k:>10}{1000 * statistics.median(topo[k]):>15.3f}"
+              f"{1000 * statistics.median(grid[k]):>16.2f}{per_step:>17.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="10,20,40,60,80,120,200")
@@ -128,11 +235,19 @@ def main() -> None:
                         help="time the grid merges on a map-pair dataset instead")
     parser.add_argument("--reference", default=None, metavar="REV",
                         help="time auto against the fusion package of this git revision")
+    parser.add_argument("--env", type=int, default=0, metavar="STEPS",
+                        help="with --reference: time the merges of STEPS env steps per seed "
+                             "(seeds 0-2) against REV instead, checking identical results")
     args = parser.parse_args()
     if args.grids is not None:
         grid_times(args.grids)
         return
     sizes = [int(s) for s in args.sizes.split(",")]
+    if args.env:
+        if args.reference is None:
+            parser.error("--env needs --reference REV")
+        env_times(args.reference, args.env)
+        return
     if args.reference is not None:
         reference_times(args.reference, sizes, args.pairs, args.seed)
         return

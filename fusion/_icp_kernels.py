@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from topo._extract_kernels import _pairwise_sum  # numpy's float64 sum, bit for bit
+
 
 @njit(cache=True, nogil=True)
 def match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep):
@@ -105,3 +107,66 @@ def spread(P):
         c += y * y
     half_gap = math.hypot((a - c) / 2.0, b)
     return cx, cy, (a + c) / 2.0 + half_gap, (a + c) / 2.0 - half_gap, n * top * top
+
+
+@njit(cache=True, nogil=True)
+def stops(prev, f, same, tau, rel_tol):
+    """ICP's stopping rules after an update: the pairs repeat, or the objective changed from
+    ``prev`` to ``f`` by less than ``tau`` or by at most ``rel_tol × prev`` (each rule off when
+    negative)."""
+    change = abs(prev - f)
+    return same or (tau >= 0.0 and change < tau) or (rel_tol >= 0.0 and change <= rel_tol * prev)
+
+
+@njit(cache=True, nogil=True)
+def icp_brute(D, M, theta, tx, ty, max_d2, n_trim, tau, rel_tol, max_iter):
+    """The loop of :func:`fusion.icp_svd` with all-pairs nearest neighbours, in one call (the
+    Python loop cost more than the arithmetic at the merges' sizes); ``tau`` / ``rel_tol``
+    negative when unused. The same steps in the same order: :func:`match_brute`, the TrICP trim
+    (stable sort, the kept distances summed as numpy sums them), :func:`stops`,
+    :func:`fit_rigid`.
+
+    Returns ``(theta, tx, ty, iterations, errors, converged, idx, keep, short)``: ``short`` the
+    number of pairs of a fit that had fewer than 2 (the loop stopped there), else ``-1``."""
+    n = D.shape[0]
+    idx, prev_idx = np.empty(n, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+    keep, prev_keep = np.empty(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
+    d2 = np.empty(n)
+    kept = np.empty(n)
+    errors = np.empty(max_iter + 1)
+    converged = False
+    iterations = 0
+    short = -1
+    while True:
+        f, same = match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep)
+        if n_trim < n:  # TrICP: only the n_trim closest pairs take part
+            order = np.argsort(d2, kind="mergesort")
+            for i in range(n_trim, n):
+                keep[order[i]] = False
+            m = 0
+            for i in range(n):
+                if keep[i]:
+                    kept[m] = d2[i]
+                    m += 1
+            f = _pairwise_sum(kept, m)
+            same = True
+            for i in range(n):
+                if idx[i] != prev_idx[i] or keep[i] != prev_keep[i]:
+                    same = False
+                    break
+        errors[iterations] = f
+        if iterations and stops(errors[iterations - 1], f, same, tau, rel_tol):
+            converged = True
+            break
+        if iterations == max_iter:
+            break
+        new_theta, new_tx, new_ty, n_fit = fit_rigid(D, M, idx, keep)
+        if n_fit < 2:
+            short = n_fit
+            break
+        theta, tx, ty = new_theta, new_tx, new_ty
+        iterations += 1
+        idx, prev_idx = prev_idx, idx
+        keep, prev_keep = prev_keep, keep
+    return (theta, tx, ty, iterations, errors[: iterations + 1].copy(), converged, idx, keep,
+            short)

@@ -50,10 +50,10 @@ def node_pairs(xy, edges, knn, min_dist):
                 near[nbr[p], nbr[q]] = True
     for a in range(n):
         near[a, a] = False
-    dist = np.empty((n, n))
-    for a in range(n):
-        for b in range(n):
-            dist[a, b] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
+    dist = np.zeros((n, n))
+    for a in range(n):  # hypot(-u, -v) == hypot(u, v): each pair once
+        for b in range(a + 1, n):
+            dist[a, b] = dist[b, a] = math.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1])
     cand = near.copy()
     k = min(knn, n - 1)
     taken = np.zeros(n, dtype=np.bool_)
@@ -121,48 +121,60 @@ def mutual_pairs(A, B, theta, tx, ty, dist):
 
 
 @njit(cache=True, nogil=True)
-def pair_hypotheses(A, a_kind, a_i, a_j, a_len, B, b_kind, b_i, b_j, b_len, tol, compat):
-    """2-point consensus: every (A pair, B pair) whose lengths agree within ``tol`` and whose end
-    kinds are compatible gives the rigid motion putting the B pair onto the A pair.
+def pair_candidates(a_kind, a_i, a_j, a_len, b_kind, b_i, b_j, b_len, tol, compat):
+    """2-point consensus: every (A pair ``p``, B pair ``q``) whose lengths agree within ``tol``
+    and whose end kinds are compatible, in the order ``p``, then ``q``.
 
     ``b_len`` must be sorted ascending and the B pairs listed in both orientations. Returns
-    ``(theta, tx, ty, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the
-    angle better).
+    ``(p, q, weight)`` arrays; ``weight`` is the shorter pair length (longer pairs fix the angle
+    better). :func:`pair_motions` gives the motions of the ones kept.
     """
-    n_out = 0
     lo = np.searchsorted(b_len, a_len - tol)
     hi = np.searchsorted(b_len, a_len + tol, side="right")
+    n_max = 0  # pairs of matching lengths: room for every compatible one
+    for p in range(a_i.shape[0]):
+        n_max += hi[p] - lo[p]
+    out_p = np.empty(n_max, dtype=np.int64)
+    out_q = np.empty(n_max, dtype=np.int64)
+    weight = np.empty(n_max)
+    k = 0
     for p in range(a_i.shape[0]):
         for q in range(lo[p], hi[p]):
             if compat[a_kind[a_i[p]], b_kind[b_i[q]]] and compat[a_kind[a_j[p]], b_kind[b_j[q]]]:
-                n_out += 1
-    theta = np.empty(n_out)
-    tx = np.empty(n_out)
-    ty = np.empty(n_out)
-    weight = np.empty(n_out)
+                out_p[k], out_q[k] = p, q
+                weight[k] = min(a_len[p], b_len[q])
+                k += 1
+    return out_p[:k], out_q[:k], weight[:k]
+
+
+@njit(cache=True, nogil=True)
+def pair_motions(A, a_i, a_j, B, b_i, b_j, pairs_p, pairs_q):
+    """The rigid motion putting B pair ``pairs_q[k]`` onto A pair ``pairs_p[k]`` (ends on ends,
+    midpoint on midpoint): ``(theta, tx, ty, cos theta, sin theta)`` arrays."""
+    n = pairs_p.shape[0]
+    theta = np.empty(n)
+    tx = np.empty(n)
+    ty = np.empty(n)
+    cos_t = np.empty(n)
+    sin_t = np.empty(n)
+    ang_a = np.empty(a_i.shape[0])  # each pair's direction once (pairs recur in hypotheses)
+    for p in range(a_i.shape[0]):
+        ang_a[p] = math.atan2(A[a_j[p], 1] - A[a_i[p], 1], A[a_j[p], 0] - A[a_i[p], 0])
     ang_b = np.empty(b_i.shape[0])
     for q in range(b_i.shape[0]):
         ang_b[q] = math.atan2(B[b_j[q], 1] - B[b_i[q], 1], B[b_j[q], 0] - B[b_i[q], 0])
-    k = 0
-    for p in range(a_i.shape[0]):
-        ai, aj = a_i[p], a_j[p]
-        ang_a = math.atan2(A[aj, 1] - A[ai, 1], A[aj, 0] - A[ai, 0])
-        mxa = 0.5 * (A[ai, 0] + A[aj, 0])
-        mya = 0.5 * (A[ai, 1] + A[aj, 1])
-        for q in range(lo[p], hi[p]):
-            bi, bj = b_i[q], b_j[q]
-            if not (compat[a_kind[ai], b_kind[bi]] and compat[a_kind[aj], b_kind[bj]]):
-                continue
-            ang = ang_a - ang_b[q]
-            c, s = math.cos(ang), math.sin(ang)
-            mxb = 0.5 * (B[bi, 0] + B[bj, 0])
-            myb = 0.5 * (B[bi, 1] + B[bj, 1])
-            theta[k] = ang
-            tx[k] = mxa - (c * mxb - s * myb)
-            ty[k] = mya - (s * mxb + c * myb)
-            weight[k] = min(a_len[p], b_len[q])
-            k += 1
-    return theta, tx, ty, weight
+    for k in range(n):
+        ai, aj = a_i[pairs_p[k]], a_j[pairs_p[k]]
+        bi, bj = b_i[pairs_q[k]], b_j[pairs_q[k]]
+        ang = ang_a[pairs_p[k]] - ang_b[pairs_q[k]]
+        c, s = math.cos(ang), math.sin(ang)
+        mxb = 0.5 * (B[bi, 0] + B[bj, 0])
+        myb = 0.5 * (B[bi, 1] + B[bj, 1])
+        theta[k] = ang
+        tx[k] = 0.5 * (A[ai, 0] + A[aj, 0]) - (c * mxb - s * myb)
+        ty[k] = 0.5 * (A[ai, 1] + A[aj, 1]) - (s * mxb + c * myb)
+        cos_t[k], sin_t[k] = c, s
+    return theta, tx, ty, cos_t, sin_t
 
 
 NEAR_ANY_NODE = 3
@@ -215,12 +227,12 @@ def paint_segments(grid, x0, y0, cell, P, edges, radius, bit):
 
 
 @njit(cache=True, nogil=True)
-def paint_nearest(table, best2, x0, y0, cell, points, p_kind, radius, compat):
+def paint_nearest(table, x0, y0, cell, points, p_kind, radius, compat):
     """For each B kind ``k`` and cell, ``table[iy, ix, k]`` becomes the index of the point of a
     kind compatible with ``k`` (``compat[p_kind, k]``) nearest to the cell centre within
     ``radius + cell / 2`` (cells holding ``-1`` where none stay so), and the cells within that
-    reach of any point get bit :data:`NEAR_ANY_NODE` in ``table[iy, ix, -1]``; ``best2``
-    (``table``'s shape, filled with ``inf``) is scratch."""
+    reach of any point get bit :data:`NEAR_ANY_NODE` in ``table[iy, ix, -1]``. The distance
+    of a cell's current point is computed again when another point competes for the cell."""
     ny, nx = table.shape[0], table.shape[1]
     reach2 = (radius + 0.5 * cell) ** 2
     for p in range(points.shape[0]):
@@ -233,15 +245,32 @@ def paint_nearest(table, best2, x0, y0, cell, points, p_kind, radius, compat):
                     continue
                 table[iy, ix, -1] |= 1 << NEAR_ANY_NODE
                 for k in range(compat.shape[1]):
-                    if compat[p_kind[p], k] and d2 < best2[iy, ix, k]:
-                        best2[iy, ix, k] = d2
+                    if not compat[p_kind[p], k]:
+                        continue
+                    q = table[iy, ix, k]
+                    if q < 0 or d2 < _cell_d2(ix, iy, points[q, 0], points[q, 1], x0, y0, cell):
                         table[iy, ix, k] = p
 
 
 @njit(cache=True, nogil=True)
-def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, loose_kind,
-                   min_pairs):
-    """Score each hypothesis after one closed-form fit step, updating it in place.
+def _moved_cells(c, s, ox, oy, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx, my, cell):
+    """The points ``(bx, by)`` moved by ``(c, s, ox, oy)`` into raster coordinates (``mx``,
+    ``my``) and the flat index of their raster cell's first entry (``-1`` outside): a loop
+    without branches or reductions, which the compiler vectorises (scoring a third faster
+    than with the move inside the scoring loop)."""
+    for b in range(bx.shape[0]):
+        x = c * bx[b] - s * by[b] + ox
+        y = s * bx[b] + c * by[b] + oy
+        mx[b], my[b] = x, y
+        inside = (0.0 <= x) & (x < x_hi) & (0.0 <= y) & (y < y_hi)
+        cell[b] = (int(y * inv_cell) * nx + int(x * inv_cell)) * depth if inside else -1
+
+
+@njit(cache=True, nogil=True)
+def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv_cell, tol,
+                   loose_kind, min_pairs):
+    """Score each hypothesis after one closed-form fit step, updating it in place (``cos_t``,
+    ``sin_t``: the cosine and sine of ``theta``, as :func:`pair_motions` gives them).
 
     ``table[iy, ix]`` is a cell of A's raster: entries ``0..2``, the A node of a kind compatible
     with B kind ``0..2`` nearest to the cell (``-1`` if none, :func:`paint_nearest`); the last,
@@ -262,25 +291,27 @@ def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, lo
     tol2 = tol * tol
     bx, by = B[:, 0].copy(), B[:, 1].copy()
     ax, ay = A[:, 0].copy(), A[:, 1].copy()
+    mx, my = np.empty(n_b), np.empty(n_b)
+    cell = np.empty(n_b, dtype=np.int64)
     out = np.zeros(n_h)
     for h in range(n_h):
-        c, s = math.cos(theta[h]), math.sin(theta[h])
-        ox, oy = tx[h] - x0, ty[h] - y0
+        c, s = cos_t[h], sin_t[h]
+        _moved_cells(c, s, tx[h] - x0, ty[h] - y0, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx,
+                     my, cell)
         n = 0
         spx = spy = sqx = sqy = sc = ss = 0.0
         for b in range(n_b):
-            x = c * bx[b] - s * by[b] + ox
-            y = s * bx[b] + c * by[b] + oy
-            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
-                a = flat[(int(y * inv_cell) * nx + int(x * inv_cell)) * depth + b_kind[b]]
-                if a >= 0:
-                    spx += bx[b]
-                    spy += by[b]
-                    sqx += ax[a]
-                    sqy += ay[a]
-                    sc += bx[b] * ax[a] + by[b] * ay[a]
-                    ss += bx[b] * ay[a] - by[b] * ax[a]
-                    n += 1
+            if cell[b] < 0:
+                continue
+            a = flat[cell[b] + b_kind[b]]
+            if a >= 0:
+                spx += bx[b]
+                spy += by[b]
+                sqx += ax[a]
+                sqy += ay[a]
+                sc += bx[b] * ax[a] + by[b] * ay[a]
+                ss += bx[b] * ay[a] - by[b] * ax[a]
+                n += 1
         if n < min_pairs:
             continue  # scored 0, not refitted
         # centred cross sums from the raw ones
@@ -291,22 +322,21 @@ def refined_scores(theta, tx, ty, A, B, b_kind, table, x0, y0, inv_cell, tol, lo
         theta[h] = ang
         tx[h] = (sqx - (c * spx - s * spy)) / n
         ty[h] = (sqy - (s * spx + c * spy)) / n
-        ox, oy = tx[h] - x0, ty[h] - y0
+        _moved_cells(c, s, tx[h] - x0, ty[h] - y0, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx,
+                     my, cell)
         score = 0.0
         for b in range(n_b):
-            x = c * bx[b] - s * by[b] + ox
-            y = s * bx[b] + c * by[b] + oy
-            if 0.0 <= x < x_hi and 0.0 <= y < y_hi:
-                cell = (int(y * inv_cell) * nx + int(x * inv_cell)) * depth
-                a = flat[cell + b_kind[b]]
-                if a >= 0:
-                    d2 = (x + x0 - ax[a]) ** 2 + (y + y0 - ay[a]) ** 2
-                    if d2 < tol2:
-                        score += 1.0 - d2 / tol2
-                elif b_kind[b] != loose_kind:
-                    bits = flat[cell + depth - 1]
-                    if not (bits >> NEAR_ANY_NODE) & 1 and (bits >> ON_PATH) & 1:
-                        score -= 1.0
+            if cell[b] < 0:
+                continue
+            a = flat[cell[b] + b_kind[b]]
+            if a >= 0:
+                d2 = (mx[b] + x0 - ax[a]) ** 2 + (my[b] + y0 - ay[a]) ** 2
+                if d2 < tol2:
+                    score += 1.0 - d2 / tol2
+            elif b_kind[b] != loose_kind:
+                bits = flat[cell[b] + depth - 1]
+                if not (bits >> NEAR_ANY_NODE) & 1 and (bits >> ON_PATH) & 1:
+                    score -= 1.0
         out[h] = score
     return out
 
@@ -416,16 +446,33 @@ def _nearest_compatible(x, y, kind, P, p_kind, compat_row_first, compat, gate2):
 
 
 @njit(cache=True, nogil=True)
-def _segment_distance2(x, y, P, edges, limit2):
-    """Squared distance from ``(x, y)`` to the nearest segment, or ``limit2`` if none is nearer."""
-    best = limit2
-    d = math.sqrt(limit2)
+def _segment_boxes(P, edges, grow):
+    """``(E, 4)`` bounding box ``(x0, x1, y0, y1)`` of each segment ``P[u]``–``P[v]``, grown by
+    ``grow``: what :func:`_segment_distance2` tests first."""
+    out = np.empty((edges.shape[0], 4))
     for e in range(edges.shape[0]):
         ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
         wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
-        if (x < min(ux, wx) - d or x > max(ux, wx) + d or y < min(uy, wy) - d
-                or y > max(uy, wy) + d):
+        out[e, 0], out[e, 1] = min(ux, wx) - grow, max(ux, wx) + grow
+        out[e, 2], out[e, 3] = min(uy, wy) - grow, max(uy, wy) + grow
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _segment_distance2(x, y, P, edges, limit2, boxes, hit):
+    """Squared distance from ``(x, y)`` to the nearest segment, or ``limit2`` if none is nearer.
+    ``boxes``: :func:`_segment_boxes` grown by ``√limit2`` (segments whose box misses the point
+    are farther; tested first, in a vectorised pass: coordinates are finite, so ``>=`` is
+    ``not <``); ``hit`` (one per segment) is scratch."""
+    best = limit2
+    for e in range(edges.shape[0]):
+        hit[e] = ((x >= boxes[e, 0]) & (x <= boxes[e, 1]) & (y >= boxes[e, 2])
+                  & (y <= boxes[e, 3]))
+    for e in range(edges.shape[0]):
+        if not hit[e]:
             continue
+        ux, uy = P[edges[e, 0], 0], P[edges[e, 0], 1]
+        wx, wy = P[edges[e, 1], 0], P[edges[e, 1], 1]
         vx, vy = wx - ux, wy - uy
         ll = vx * vx + vy * vy
         t = 0.0 if ll == 0.0 else ((x - ux) * vx + (y - uy) * vy) / ll
@@ -472,21 +519,30 @@ def _crossings(P, p_edges, p_margin, Q, q_edges, q_margin, min_sin):
         u, v = q_edges[f, 0], q_edges[f, 1]
         q_in[f] = not (max(Q[u, 0], Q[v, 0]) < px0 or min(Q[u, 0], Q[v, 0]) > px1
                        or max(Q[u, 1], Q[v, 1]) < py0 or min(Q[u, 1], Q[v, 1]) > py1)
+    # each Q path's box (from its start and step, as the crossing test reads it)
+    q_box = np.empty((q_edges.shape[0], 4))
+    for f in range(q_edges.shape[0]):
+        bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
+        sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
+        q_box[f, 0], q_box[f, 1] = min(bx, bx + sx), max(bx, bx + sx)
+        q_box[f, 2], q_box[f, 3] = min(by, by + sy), max(by, by + sy)
+    overlap = np.empty(q_edges.shape[0], dtype=np.bool_)
     for e in range(p_edges.shape[0]):
         ax, ay = P[p_edges[e, 0], 0], P[p_edges[e, 0], 1]
         rx, ry = P[p_edges[e, 1], 0] - ax, P[p_edges[e, 1], 1] - ay
         if (max(ax, ax + rx) < qx0 or min(ax, ax + rx) > qx1 or max(ay, ay + ry) < qy0
                 or min(ay, ay + ry) > qy1):
             continue
+        ex0, ex1 = min(ax, ax + rx), max(ax, ax + rx)
+        ey0, ey1 = min(ay, ay + ry), max(ay, ay + ry)
+        for f in range(q_edges.shape[0]):  # the boxes overlap (vectorised)
+            overlap[f] = (q_in[f] & (ex1 >= q_box[f, 0]) & (q_box[f, 1] >= ex0)
+                          & (ey1 >= q_box[f, 2]) & (q_box[f, 3] >= ey0))
         for f in range(q_edges.shape[0]):
-            if not q_in[f]:
+            if not overlap[f]:
                 continue
             bx, by = Q[q_edges[f, 0], 0], Q[q_edges[f, 0], 1]
             sx, sy = Q[q_edges[f, 1], 0] - bx, Q[q_edges[f, 1], 1] - by
-            if (max(ax, ax + rx) < min(bx, bx + sx) or max(bx, bx + sx) < min(ax, ax + rx)
-                    or max(ay, ay + ry) < min(by, by + sy)
-                    or max(by, by + sy) < min(ay, ay + ry)):
-                continue
             den = rx * sy - ry * sx
             # zero-length paths (coincident end nodes) cross nothing
             if den == 0.0 or abs(den) < min_sin * math.sqrt((rx * rx + ry * ry)
@@ -597,16 +653,19 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
             out[2] += 1.0
     miss2 = near_miss * near_miss
     limit2 = max(eps2, miss2)  # farther paths make neither a conflict nor a near miss
+    hit = np.empty(max(a_edges.shape[0], b_edges.shape[0]), dtype=np.bool_)
+    boxes = _segment_boxes(A, a_edges, math.sqrt(limit2))
     for b in range(B.shape[0]):
         if not far_b[b] and b_kind[b] != loose_kind and not near_b[b]:
-            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, limit2)
+            d2 = _segment_distance2(X[b, 0], X[b, 1], A, a_edges, limit2, boxes, hit)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
                 out[8] += 1.0
+    boxes = _segment_boxes(X, b_edges, math.sqrt(limit2))
     for a in range(A.shape[0]):
         if not far_a[a] and a_kind[a] != loose_kind and not near_a[a]:
-            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, limit2)
+            d2 = _segment_distance2(A[a, 0], A[a, 1], X, b_edges, limit2, boxes, hit)
             if d2 <= eps2:
                 out[3] += 1.0
             elif d2 < miss2:
@@ -709,21 +768,33 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
 
 
 @njit(cache=True, nogil=True)
-def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap):
-    """Moved by ``p' = R p + t``, the path samples ``pts`` (weights ``w``, metres of path each)
-    read ``field`` (squared distances, :func:`path_field`): ``(Σ w (1 − d²/tol²) over d < tol,
-    Σ w over off <= d < cap)``."""
-    ny, nx = field.shape
-    agree = away = 0.0
-    tol2, off2, cap2 = tol * tol, off * off, cap * cap
+def _field_cells(c, s, tx, ty, pts, x0, y0, inv_cell, ny, nx, cell):
+    """Flat index into a ``(ny, nx)`` raster (cells ``1 / inv_cell`` wide from ``(x0, y0)``)
+    of each point of ``pts`` moved by ``p' = R p + t`` (``-1`` outside): branch-free, so
+    vectorised (see :func:`_moved_cells`)."""
     for k in range(pts.shape[0]):
         x = c * pts[k, 0] - s * pts[k, 1] + tx
         y = s * pts[k, 0] + c * pts[k, 1] + ty
         ix = int(math.floor((x - x0) * inv_cell))
         iy = int(math.floor((y - y0) * inv_cell))
-        if ix < 0 or iy < 0 or ix >= nx or iy >= ny:
+        inside = (ix >= 0) & (iy >= 0) & (ix < nx) & (iy < ny)
+        cell[k] = iy * nx + ix if inside else -1
+
+
+@njit(cache=True, nogil=True)
+def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap, cell):
+    """Moved by ``p' = R p + t``, the path samples ``pts`` (weights ``w``, metres of path each)
+    read ``field`` (squared distances, :func:`path_field`): ``(Σ w (1 − d²/tol²) over d < tol,
+    Σ w over off <= d < cap)``; ``cell`` (one per sample) is scratch."""
+    ny, nx = field.shape
+    flat = field.ravel()
+    agree = away = 0.0
+    tol2, off2, cap2 = tol * tol, off * off, cap * cap
+    _field_cells(c, s, tx, ty, pts, x0, y0, inv_cell, ny, nx, cell)
+    for k in range(pts.shape[0]):
+        if cell[k] < 0:
             continue
-        d2 = field[iy, ix]
+        d2 = flat[cell[k]]
         if d2 < tol2:
             agree += w[k] * (1.0 - d2 / tol2)
         elif off2 <= d2 < cap2:
@@ -740,17 +811,107 @@ def path_agreement(theta, tx, ty, a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b
     forward, A's read B's moved back (:func:`path_field`); without ``both``, B's samples alone
     (twice their sums: the same scale, half the work)."""
     out = np.zeros((theta.shape[0], 2))
+    cell = np.empty(max(a_pts.shape[0], b_pts.shape[0]), dtype=np.int64)
     for h in range(theta.shape[0]):
         c, s = math.cos(theta[h]), math.sin(theta[h])
         g1, w1 = _field_sums(c, s, tx[h], ty[h], b_pts, b_w, a_field, a_x0, a_y0, inv_cell, tol,
-                             off, cap)
+                             off, cap, cell)
         g2, w2 = g1, w1
         if both:  # the inverse motion: p_B = R^T (p_A - t)
             ix, iy = -(c * tx[h] + s * ty[h]), -(-s * tx[h] + c * ty[h])
             g2, w2 = _field_sums(c, -s, ix, iy, a_pts, a_w, b_field, b_x0, b_y0, inv_cell, tol,
-                                 off, cap)
+                                 off, cap, cell)
         out[h, 0] = g1 + g2
         out[h, 1] = w1 + w2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def map_numbers(xy, edges, ends, eps, pad, pad2):
+    """What :func:`fusion.merge._prepare` needs besides the kernels' outputs: each path's
+    ``margin`` (``min(0.5, eps / length)``, its length as ``np.linalg.norm`` computes it) and the
+    box ``(x0, y0, x1, y1)`` of the nodes and the points ``ends``, grown by ``pad`` and then by
+    ``pad2`` (two roundings, as numpy's ``lo - pad - pad2``)."""
+    margin = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        dx = xy[edges[e, 0], 0] - xy[edges[e, 1], 0]
+        dy = xy[edges[e, 0], 1] - xy[edges[e, 1], 1]
+        margin[e] = min(0.5, eps / max(math.sqrt(dx * dx + dy * dy), 1e-12))
+    x0, x1, y0, y1 = _bbox(xy)
+    if ends.shape[0]:
+        ex0, ex1, ey0, ey1 = _bbox(ends)
+        x0, x1, y0, y1 = min(x0, ex0), max(x1, ex1), min(y0, ey0), max(y1, ey1)
+    return margin, x0 - pad - pad2, y0 - pad - pad2, x1 + pad + pad2, y1 + pad + pad2
+
+
+@njit(cache=True, nogil=True)
+def branch_slots(xy, edges, n):
+    """The paths leaving each of the ``n`` nodes, in order of node (stable): ``(node, slot, d)``
+    — the node, its path's place among its node's, and the vector to the path's other end
+    (``(2E, 2)``, for ``np.arctan2``) — and the largest degree."""
+    m = 2 * edges.shape[0]
+    ends = np.empty((m, 2), dtype=np.int64)
+    ends[: edges.shape[0]] = edges
+    ends[edges.shape[0]:, 0] = edges[:, 1]
+    ends[edges.shape[0]:, 1] = edges[:, 0]
+    order = np.argsort(ends[:, 0], kind="mergesort")
+    degree = np.zeros(n, dtype=np.int64)
+    node = np.empty(m, dtype=np.int64)
+    slot = np.empty(m, dtype=np.int64)
+    d = np.empty((m, 2))
+    for k in range(m):
+        u, v = ends[order[k], 0], ends[order[k], 1]
+        node[k] = u
+        slot[k] = degree[u]
+        degree[u] += 1
+        d[k, 0] = xy[v, 0] - xy[u, 0]
+        d[k, 1] = xy[v, 1] - xy[u, 1]
+    return node, slot, d, degree.max() if n else 0
+
+
+@njit(cache=True, nogil=True)
+def polyline_chords(pts, sizes, chord):
+    """``(S, 4)`` chords ``(x1, y1, x2, y2)`` of the polylines stacked in ``pts`` (``sizes[k]``
+    points each): the first and last point of each, and the first point past each multiple of
+    ``chord`` of arc length along it, joined in order (``math.hypot`` is the C library's, as
+    ``np.hypot``; the arc length sums in order, as ``np.cumsum``)."""
+    n = pts.shape[0]
+    arc = np.empty(n)
+    run = 0.0
+    i = 0
+    for k in range(sizes.shape[0]):  # the running sum over every point, no step between lines
+        for m in range(sizes[k]):
+            if m:
+                run += math.hypot(pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1])
+            else:
+                run += 0.0
+            arc[i] = run
+            i += 1
+    keep = np.zeros(n, dtype=np.bool_)
+    count = 0
+    i = 0
+    for k in range(sizes.shape[0]):
+        start = arc[i]
+        prev = 0.0
+        for m in range(sizes[k]):
+            bucket = math.floor((arc[i] - start) / chord)
+            keep[i] = m == 0 or m == sizes[k] - 1 or bucket != prev
+            prev = bucket
+            count += keep[i] and m > 0
+            i += 1
+    out = np.empty((count, 4))
+    c = 0
+    i = 0
+    for k in range(sizes.shape[0]):
+        last = -1
+        for _ in range(sizes[k]):
+            if keep[i]:
+                if last >= 0:
+                    out[c, 0], out[c, 1] = pts[last, 0], pts[last, 1]
+                    out[c, 2], out[c, 3] = pts[i, 0], pts[i, 1]
+                    c += 1
+                last = i
+            i += 1
     return out
 
 

@@ -42,6 +42,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
 
+from fusion import _grid_kernels as GK
 from fusion.icp import icp_svd
 from fusion.rigid import Rigid2D
 from topo._checks import check_int, check_real
@@ -100,27 +101,24 @@ def _states(grid: Any) -> np.ndarray:
     return np.asarray(s)
 
 
-def _pooled(grid: Any, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _pooled(grid: Any, res: float | tuple[float, ...]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | list | None:
     """(wall mask, free mask, origin) of ``grid`` cropped to its known cells, pooled to
-    ``res``; ``None`` if nothing is known."""
+    ``res`` (a cell is a wall if any fine cell is occupied, free if most are free and none is
+    occupied); for a tuple of resolutions, a list of them (the grid is read once); ``None`` if
+    nothing is known."""
     states = _states(grid)
-    known = states != UNKNOWN
-    rows, cols = np.nonzero(known)
-    if len(rows) == 0:
+    r0, r1, c0, c1 = GK.known_box(states, UNKNOWN)
+    if r0 < 0:
         return None
     fine = float(grid.resolution)
-    f = max(1, int(round(res / fine)))
-    r0, c0 = rows.min(), cols.min()
-    h = (rows.max() - r0) // f + 1
-    w = (cols.max() - c0) // f + 1
-    crop = np.zeros((h * f, w * f), dtype=states.dtype)
-    part = states[r0: r0 + h * f, c0: c0 + w * f]
-    crop[: part.shape[0], : part.shape[1]] = part
-    blocks = crop.reshape(h, f, w, f)
-    wall = (blocks == OCCUPIED).any(axis=(1, 3))
-    free = ((blocks == FREE).sum(axis=(1, 3)) * 2 > f * f) & ~wall
     origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * fine
-    return wall, free, origin
+    out = []
+    for r in (res if isinstance(res, tuple) else (res,)):
+        f = max(1, int(round(r / fine)))
+        h, w = (r1 - r0) // f + 1, (c1 - c0) // f + 1
+        out.append((*GK.pool(states, r0, c0, h, w, f, FREE, OCCUPIED), origin))
+    return out if isinstance(res, tuple) else out[0]
 
 
 def _centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
@@ -186,7 +184,8 @@ class _Correlator:
     against A's layers at one resolution: ``+1`` per B wall on an A wall (within one cell),
     ``−conflict`` per B wall on A free space and per B free cell on an A wall, ``+free_weight``
     per B free cell on A free space (module doc, step 2). A's layers are transformed once;
-    each rotation costs two forward FFTs and one inverse, batched over rotations."""
+    each rotation costs two forward FFTs and one inverse, batched over rotations; only the best
+    translation of each rotation is kept (and the score maps when asked for)."""
 
     def __init__(self, wall_a: np.ndarray, free_a: np.ndarray, origin_a: np.ndarray,
                  res: float, pts_wall: np.ndarray, pts_free: np.ndarray, centre: np.ndarray,
@@ -210,27 +209,36 @@ class _Correlator:
         (correlation is convolution with the flipped kernel)."""
         k = np.zeros((len(thetas), self.side, self.side), dtype=np.float32)
         if len(pts):
-            c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
-            d = pts - self.centre
-            ix = np.floor((c * d[:, 0] - s * d[:, 1]) / self.res).astype(np.int64) + self.half
-            iy = np.floor((s * d[:, 0] + c * d[:, 1]) / self.res).astype(np.int64) + self.half
-            layer = np.broadcast_to(np.arange(len(thetas))[:, None], ix.shape)
-            k[layer, self.side - 1 - iy, self.side - 1 - ix] = 1.0
+            GK.raster_rotated(k, pts, float(self.centre[0]), float(self.centre[1]),
+                              np.cos(thetas), np.sin(thetas), self.res, self.half)
         return k
 
-    def maps(self, thetas: np.ndarray) -> np.ndarray:
-        """``(len(thetas), H, W)`` score of every translation (A-cell offsets) per rotation."""
-        out = np.empty((len(thetas),) + self.shape, dtype=np.float32)
-        for i in range(0, len(thetas), 16):  # bounded memory
+    def best(self, thetas: np.ndarray, keep_maps: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Per rotation: the best score, the flat index of its translation in the score map
+        (:meth:`translation`), and with ``keep_maps`` the ``(len(thetas), H, W)`` score maps
+        of every translation (A-cell offsets)."""
+        n = len(thetas)
+        scores = np.empty(n)
+        at = np.empty(n, dtype=np.int64)
+        out = np.empty((n,) + self.shape, dtype=np.float32) if keep_maps else None
+        rows = np.arange(16)
+        for i in range(0, n, 16):  # bounded memory
             th = thetas[i: i + 16]
             spec = self.fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
                                               workers=1)
             if len(self.pts_free):
                 spec += self.fa_free * sfft.rfft2(self._kernels(self.pts_free, th),
                                                   self.fshape, workers=1)
-            out[i: i + 16] = sfft.irfft2(spec, self.fshape, workers=1)[
-                :, : self.shape[0], : self.shape[1]]
-        return out
+            smaps = sfft.irfft2(spec, self.fshape, workers=1)[:, : self.shape[0],
+                                                               : self.shape[1]]
+            flat = smaps.reshape(len(th), -1)
+            k = np.argmax(flat, axis=1)
+            scores[i: i + 16] = flat[rows[: len(th)], k]
+            at[i: i + 16] = k
+            if out is not None:
+                out[i: i + 16] = smaps
+        return scores, at, out
 
     def translation(self, k: int, theta: float, width: int) -> np.ndarray:
         """T of the flat score-map index ``k`` at rotation ``theta``: the flipped kernel's
@@ -241,22 +249,10 @@ class _Correlator:
         corner = self.origin_a + np.array([col - self.side + 1, r - self.side + 1]) * self.res
         return corner + self.half * self.res - np.array([[c, -s], [s, c]]) @ self.centre
 
-    def best(self, thetas: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
-        """Per rotation: the best score, its T, and the score maps."""
-        smaps = self.maps(thetas)
-        flat = smaps.reshape(len(thetas), -1)
-        k = np.argmax(flat, axis=1)
-        scores = flat[np.arange(len(thetas)), k].astype(np.float64)
-        width = self.shape[1]
-        return scores, [self.translation(kk, th, width) for kk, th in zip(k, thetas,
-                                                                          strict=True)], smaps
 
-
-def _distinct(theta: float, t: np.ndarray, other_theta: float, other_t: np.ndarray,
-              centre: np.ndarray, cfg: GridMergeConfig) -> bool:
+def _distinct(a: Rigid2D, b: Rigid2D, centre: np.ndarray, cfg: GridMergeConfig) -> bool:
     """Whether two alignments are clearly different (``distinct_deg`` / ``distinct_m`` at B's
     wall centroid)."""
-    a, b = Rigid2D(float(theta), t), Rigid2D(float(other_theta), other_t)
     return (math.degrees(a.rotation_error(b)) > cfg.distinct_deg
             or a.translation_error(b, at=centre) > cfg.distinct_m)
 
@@ -273,13 +269,15 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     t0 = time.perf_counter()
     cfg = config or GridMergeConfig()
     res = cfg.resolution
-    pa, pb = _pooled(grid_a, res), _pooled(grid_b, res)
+    # each grid read once: its layers at full and (if the sweep is coarser) coarse resolution
+    both = (res, res * cfg.coarse_factor) if cfg.coarse_factor > 1 else (res,)
+    layers_a, layers_b = _pooled(grid_a, both), _pooled(grid_b, both)
     identity = Rigid2D.identity()
-    if pa is None or pb is None:
+    if layers_a is None or layers_b is None:
         return GridMergeResult(identity, False, 0.0, 0.0, 0.0, 0.0, 0.0,
                                time.perf_counter() - t0, "a grid has no known cells")
-    wall_a, free_a, origin_a = pa
-    wall_b, free_b, origin_b = pb
+    (wall_a, free_a, origin_a), coarse_a = layers_a[0], layers_a[-1]
+    (wall_b, free_b, origin_b), coarse_b = layers_b[0], layers_b[-1]
     if wall_a.sum() < 10 or wall_b.sum() < 10:
         return GridMergeResult(identity, False, 0.0, 0.0, 0.0, 0.0, 0.0,
                                time.perf_counter() - t0, "too few wall cells to align")
@@ -296,17 +294,26 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     fine_res = res
     if cfg.coarse_factor > 1:
         cres = res * cfg.coarse_factor
-        ca, cb = _pooled(grid_a, cres), _pooled(grid_b, cres)
+        ca, cb = coarse_a, coarse_b
         coarse = _Correlator(ca[0], ca[1], ca[2], cres, _centres(cb[0], cb[2], cres),
                              _centres(cb[1], cb[2], cres), centre, radius + cres, cfg)
     else:
         coarse = None
     fine = _Correlator(wall_a, free_a, origin_a, fine_res, pts_wall, pts_free, centre, radius,
                        cfg)
-    c_scores, c_ts, _ = (coarse or fine).best(thetas)
+    sweep = coarse or fine
+    c_scores, c_at, _ = sweep.best(thetas)
+    c_alignments: dict[int, Rigid2D] = {}  # of the rotations looked at
+
+    def c_alignment(i: int) -> Rigid2D:
+        if i not in c_alignments:
+            c_alignments[i] = Rigid2D(float(thetas[i]),
+                                      sweep.translation(c_at[i], thetas[i], sweep.shape[1]))
+        return c_alignments[i]
+
     picked: list[int] = []  # the best clearly different coarse alignments
     for i in np.argsort(-c_scores, kind="stable"):
-        if all(_distinct(thetas[i], c_ts[i], thetas[j], c_ts[j], centre, cfg) for j in picked):
+        if all(_distinct(c_alignment(i), c_alignment(j), centre, cfg) for j in picked):
             picked.append(int(i))
             if len(picked) == cfg.refine_top:
                 break
@@ -314,7 +321,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     offsets = np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 7))
     cand = np.concatenate([thetas[picked[0]] + offsets]
                           + [thetas[i] + offsets[1:6:2] for i in picked[1:]])
-    f_scores, f_ts, f_maps = fine.best(cand)
+    f_scores, f_at, f_maps = fine.best(cand, keep_maps=True)
+    f_ts = [fine.translation(kk, th, fine.shape[1]) for kk, th in zip(f_at, cand, strict=True)]
     k = int(np.argmax(f_scores))
     theta, score, t = float(cand[k]), float(f_scores[k]), f_ts[k]
     estimate = Rigid2D(theta, t)
@@ -327,7 +335,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     far = (rr - r_best) ** 2 + (cc - c_best) ** 2 > (cfg.distinct_m / fine_res) ** 2
     rival = float(smap[far].max()) if far.any() else 0.0
     for th, s, tt in zip(cand, f_scores, f_ts, strict=True):
-        if _distinct(th, tt, theta, t, centre, cfg):
+        if _distinct(Rigid2D(float(th), tt), estimate, centre, cfg):
             rival = max(rival, float(s))
 
     # sub-cell refinement on wall points, gated to the wall band

@@ -19,8 +19,9 @@ ICP minimises, and what is implemented, is the sum over nearest-neighbour pairs,
 
 Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'·m')``, identical to
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
-and free of LAPACK call overhead. Nearest neighbours are a vectorised all-pairs distance for
-small sets and a KD-tree (``pykdtree``) built once on ``M`` for large ones.
+and free of LAPACK call overhead. For small sets the whole loop is one compiled call with an
+all-pairs nearest-neighbour pass (:func:`fusion._icp_kernels.icp_brute`); large ones use a KD-tree
+(scipy's ``cKDTree``, one thread) built once on ``M``.
 """
 
 from __future__ import annotations
@@ -29,9 +30,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from pykdtree.kdtree import KDTree
+from scipy.spatial import cKDTree
 
-from fusion._icp_kernels import fit_rigid, match_brute, spread
+from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
 from fusion.rigid import Rigid2D
 from topo._checks import as_points, check_int, check_real
 
@@ -140,32 +141,26 @@ def _degeneracy(moments: tuple[float, ...], name: str, rel: float = 1e-9) -> str
     return None
 
 
-class _BruteMatcher:
-    """All-pairs nearest neighbours, one compiled call per iteration (small sets)."""
-
-    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
-        self.M, self.D, self.max_d2 = M, D, max_d2
-
-    def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
-                 prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
-                 keep: np.ndarray) -> tuple[float, bool]:
-        return match_brute(self.D, self.M, theta, t[0], t[1], self.max_d2, prev_idx,
-                           prev_keep, idx, d2, keep)
-
-
 class _TreeMatcher:
-    """KD-tree nearest neighbours (pykdtree, built once on the fixed set ``M``; large sets)."""
+    """KD-tree nearest neighbours (built once on the fixed set ``M``; large sets).
+
+    scipy's ``cKDTree`` on one thread, the squared distances recomputed from the pairs
+    (``dx² + dy²``, what pykdtree returned before). pykdtree's OpenMP threads made a query on
+    a busy 2-core machine take 2–10 ms instead of 0.05 ms (they wait for each other's cores):
+    the grid merge's ICP cost 20–90 ms a call instead of ~1 ms."""
 
     def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
-        self.tree = KDTree(M)
-        self.D, self.max_d2 = D, max_d2
+        self.tree = cKDTree(M)
+        self.M, self.D, self.max_d2 = M, D, max_d2
 
     def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
                  prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
                  keep: np.ndarray) -> tuple[float, bool]:
         c, s = math.cos(theta), math.sin(theta)
         moved = self.D @ np.array([[c, s], [-s, c]]) + t
-        d2[:], idx[:] = self.tree.query(moved, k=1, sqr_dists=True)
+        idx[:] = self.tree.query(moved, k=1, workers=1)[1]
+        gap = moved - self.M[idx]
+        np.add(gap[:, 0] * gap[:, 0], gap[:, 1] * gap[:, 1], out=d2)
         np.less_equal(d2, self.max_d2, out=keep)
         same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         return float(d2[keep].sum()), bool(same)
@@ -243,9 +238,20 @@ def icp_svd(
     else:
         theta, t = init.theta, init.T.copy()
     max_d2 = math.inf if max_distance is None else max_distance * max_distance
-    matcher_type = _BruteMatcher if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS else _TreeMatcher
-    match = matcher_type(M, D, max_d2)
     n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
+    rule_tau = -1.0 if tau is None else tau  # the stopping rules, off when negative
+    rule_rel = -1.0 if rel_tol is None else rel_tol
+    if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS:  # the whole loop compiled
+        theta, tx, ty, iterations, errors, converged, idx, keep, short = icp_brute(
+            D, M, theta, t[0], t[1], max_d2, n_trim, rule_tau, rule_rel, max_iter)
+        if short >= 0:
+            degenerate = degenerate or (
+                f"only {short} pair(s) within max_distance/trim: transform not updated")
+        return IcpResult(transform=Rigid2D.trusted(theta, np.array([tx, ty])),
+                         iterations=iterations, errors=errors, converged=converged,
+                         correspondences=np.where(keep, idx, -1).astype(np.int64),
+                         degenerate=degenerate)
+    match = _TreeMatcher(M, D, max_d2)
 
     idx = np.empty(len(D), dtype=np.int64)
     d2 = np.empty(len(D))
@@ -262,15 +268,9 @@ def icp_svd(
             f = float(d2[keep].sum())
             same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         errors.append(f)
-        if iterations:
-            change = abs(errors[-2] - f)
-            if (
-                same
-                or (tau is not None and change < tau)
-                or (rel_tol is not None and change <= rel_tol * errors[-2])
-            ):
-                converged = True
-                break
+        if iterations and stops(errors[-2], f, same, rule_tau, rule_rel):
+            converged = True
+            break
         if iterations == max_iter:
             break
         new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import ndimage
 
 from fusion import Rigid2D
@@ -127,3 +129,72 @@ def test_grids_refute_a_wrong_transform():
     assert check_with_grids(a, b, truth) is None
     why = check_with_grids(a, b, Rigid2D.from_degrees(90.0) @ truth)
     assert why is not None and "wall agreement" in why
+
+
+def _pooled_numpy(states: np.ndarray, fine: float, res: float):
+    """The obvious form of the crop-and-pool: nonzero for the known box, block reductions."""
+    rows, cols = np.nonzero(states != 0)
+    f = max(1, int(round(res / fine)))
+    r0, c0 = rows.min(), cols.min()
+    h, w = (rows.max() - r0) // f + 1, (cols.max() - c0) // f + 1
+    crop = np.zeros((h * f, w * f), dtype=states.dtype)
+    part = states[r0: r0 + h * f, c0: c0 + w * f]
+    crop[: part.shape[0], : part.shape[1]] = part
+    blocks = crop.reshape(h, f, w, f)
+    wall = (blocks == 2).any(axis=(1, 3))
+    free = ((blocks == 1).sum(axis=(1, 3)) * 2 > f * f) & ~wall
+    return wall, free, np.array([c0, r0]) * fine
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), res=st.sampled_from([0.1, 0.2, 0.3, 0.4]))
+def test_pooling_kernels_are_the_numpy_form(seed, res):
+    """fusion._grid_kernels.known_box and pool (via grid_merge._pooled, one or several
+    resolutions in one read) give the masks and origin of the numpy reductions, known cells
+    reaching the grid's edges included."""
+    from fusion.grid_merge import _pooled
+
+    rng = np.random.default_rng(seed)
+    states = np.zeros(tuple(rng.integers(5, 40, 2)), dtype=np.int8)
+    r, c = rng.integers(0, states.shape[0]), rng.integers(0, states.shape[1])
+    states[r:, c:] = rng.choice([0, 1, 1, 2], size=states[r:, c:].shape)
+    states[r, c] = 1
+    snap = GridSnapshot(states, RES, (0.0, 0.0))
+    wall, free, origin = _pooled(snap, res)
+    ref = _pooled_numpy(states, RES, res)
+    np.testing.assert_array_equal(wall, ref[0])
+    np.testing.assert_array_equal(free, ref[1])
+    np.testing.assert_array_equal(origin, ref[2])
+    (w1, f1, _), (w2, f2, _) = _pooled(snap, (RES, res))
+    np.testing.assert_array_equal(w2, ref[0])
+    np.testing.assert_array_equal(f2, ref[1])
+    at_fine = _pooled_numpy(states, RES, RES)
+    np.testing.assert_array_equal(w1, at_fine[0])
+    np.testing.assert_array_equal(f1, at_fine[1])
+    assert _pooled(GridSnapshot(np.zeros((4, 4), np.int8), RES, (0.0, 0.0)), res) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_rotated_raster_kernel_is_the_numpy_form(seed):
+    """fusion._grid_kernels.raster_rotated sets the cells the fancy-indexed numpy form sets."""
+    from fusion import _grid_kernels as GK
+
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-3.0, 3.0, (int(rng.integers(1, 60)), 2))
+    centre, res = pts.mean(axis=0), 0.2
+    radius = float(np.max(np.linalg.norm(pts - centre, axis=1)))
+    side = int(math.ceil(2 * radius / res)) + 2
+    half = side // 2
+    thetas = rng.uniform(-math.pi, math.pi, 5)
+    got = np.zeros((5, side, side), np.float32)
+    GK.raster_rotated(got, pts, float(centre[0]), float(centre[1]), np.cos(thetas),
+                      np.sin(thetas), res, half)
+    want = np.zeros_like(got)
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    d = pts - centre
+    ix = np.floor((c * d[:, 0] - s * d[:, 1]) / res).astype(np.int64) + half
+    iy = np.floor((s * d[:, 0] + c * d[:, 1]) / res).astype(np.int64) + half
+    layer = np.broadcast_to(np.arange(5)[:, None], ix.shape)
+    want[layer, side - 1 - iy, side - 1 - ix] = 1.0
+    np.testing.assert_array_equal(got, want)

@@ -153,3 +153,4 @@ def test_rigid_fit_recovers_a_motion_and_weights_count_as_repeats(seed, n):
     repeated = rigid_fit(np.repeat(P, k, axis=0), np.repeat(Q, k, axis=0))
     assert weighted[0] == pytest.approx(repeated[0], abs=1e-9)
     np.testing.assert_allclose(weighted[1], repeated[1], atol=1e-9)
+

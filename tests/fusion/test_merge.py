@@ -285,8 +285,8 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
     tx = np.array([truth.T[0] + 0.1, truth.T[0]])
     ty = np.array([truth.T[1] - 0.05, truth.T[1]])
-    scores = K.refined_scores(theta, tx, ty, a.xy, b.xy, b.kinds.astype(np.int64), table, x0,
-                              y0, inv_cell, cfg.eps, 1, 4)
+    scores = K.refined_scores(theta, tx, ty, np.cos(theta), np.sin(theta), a.xy, b.xy,
+                              b.kinds.astype(np.int64), table, x0, y0, inv_cell, cfg.eps, 1, 4)
     assert theta[0] == pytest.approx(truth.theta, abs=1e-9)
     assert [tx[0], ty[0]] == pytest.approx(truth.T.tolist(), abs=1e-9)
     assert scores[0] == pytest.approx(a.n_nodes)
@@ -423,3 +423,41 @@ def test_pixel_fine_polylines_are_read_as_chords():
     ev_plain = _evaluate(_prepare(plain, cfg), _prepare(plain, cfg), 0.0, np.zeros(2),
                          cfg).evidence
     assert ev_fine.path_agree == pytest.approx(ev_plain.path_agree, rel=0.05)
+
+
+def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
+    """The numpy form of fusion._merge_kernels.polyline_chords (what merge._segments was)."""
+    pts = np.concatenate(paths).astype(np.float64)
+    sizes = np.array([len(q) for q in paths])
+    last = np.cumsum(sizes) - 1
+    first = last - sizes + 1
+    step = np.zeros(len(pts))
+    step[1:] = np.hypot(*(pts[1:] - pts[:-1]).T)
+    step[first] = 0.0
+    arc = np.cumsum(step)
+    arc -= np.repeat(arc[first], sizes)
+    bucket = np.floor(arc / chord)
+    starts = np.zeros(len(pts), dtype=bool)
+    starts[first] = True
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = bucket[1:] != bucket[:-1]
+    keep[first] = keep[last] = True
+    kept = np.flatnonzero(keep)
+    inner = ~starts[kept[1:]]
+    return np.hstack([pts[kept[:-1][inner]], pts[kept[1:][inner]]])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), chord=st.sampled_from([0.05, 0.4, 1.3]))
+def test_polyline_chords_are_the_numpy_form(seed, chord):
+    """fusion._merge_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
+    (cumulative arc length, a chord end at the first point past each multiple of ``chord``),
+    single-point polylines and repeated points included."""
+    from fusion import _merge_kernels as K
+
+    rng = np.random.default_rng(seed)
+    paths = [np.cumsum(rng.normal(0.0, 0.2, (int(rng.integers(1, 40)), 2)), axis=0)
+             for _ in range(int(rng.integers(1, 6)))]
+    paths[0] = np.vstack([paths[0], paths[0][-1:]])  # a repeated point
+    got = K.polyline_chords(np.concatenate(paths), np.array([len(q) for q in paths]), chord)
+    np.testing.assert_array_equal(got, _chords_numpy(paths, chord))
