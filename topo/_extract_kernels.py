@@ -4,6 +4,8 @@ bit for bit what the library or numpy code it replaces gives, and each tested ag
 extraction of an env episode). On the env's 100–200-cell sonar grids the replaced calls' cost
 was their fixed per-call overhead (scipy sparse matrices, small numpy calls), not the work.
 
+* :func:`free_crop` — step 1's crop to the free cells' bounding box and its border of
+  non-free cells (``np.pad`` of a slice: :func:`free_crop_reference`).
 * :func:`clean_free` — step 1's morphology (skimage ``remove_small_holes``, scipy
   ``binary_erosion`` by a disk, dropping small ``ndimage.label`` components) on horizontal runs
   of pixels; :func:`clean_free_reference` is the library path.
@@ -263,6 +265,44 @@ def clean_free_reference(given: np.ndarray, max_hole: int, footprint: np.ndarray
             small[0] = False
             free = free & ~small[labels]
     return free
+
+
+@njit(cache=True, nogil=True)
+def _free_crop(mask):
+    h, w = mask.shape
+    r_lo, r_hi, c_lo, c_hi = h, -1, w, -1
+    for r in range(h):
+        for c in range(w):
+            if mask[r, c]:
+                r_lo = min(r_lo, r)
+                r_hi = r
+                c_lo = min(c_lo, c)
+                c_hi = max(c_hi, c)
+    if r_hi < 0:
+        return np.zeros((0, 0), dtype=np.bool_), 0, 0
+    r0, c0 = max(r_lo - 1, 0), max(c_lo - 1, 0)
+    r1, c1 = min(r_hi + 2, h), min(c_hi + 2, w)
+    out = np.zeros((r1 - r0 + 2, c1 - c0 + 2), dtype=np.bool_)
+    out[1:-1, 1:-1] = mask[r0:r1, c0:c1]
+    return out, r0, c0
+
+
+def free_crop(mask: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The 2-D boolean ``mask`` cropped to its free cells' bounding box grown by one cell (within
+    the mask), padded with a border of non-free cells, and the crop's first row and column in
+    ``mask``; an empty ``(0, 0)`` array when nothing is free (:func:`free_crop_reference`)."""
+    out, r0, c0 = _free_crop(np.ascontiguousarray(mask, dtype=np.bool_))
+    return out, int(r0), int(c0)
+
+
+def free_crop_reference(mask: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The numpy form of :func:`free_crop`."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if len(rows) == 0:
+        return np.zeros((0, 0), dtype=bool), 0, 0
+    cols = np.flatnonzero(mask.any(axis=0))
+    r0, c0 = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
+    return np.pad(mask[r0: rows[-1] + 2, c0: cols[-1] + 2], 1), int(r0), int(c0)
 
 
 @njit(cache=True, nogil=True)

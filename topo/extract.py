@@ -79,6 +79,7 @@ from topo._extract_kernels import (
     clean_free,
     corner_arms,
     corner_cuts,
+    free_crop,
     metre_paths,
     path_lengths,
     path_nodes,
@@ -532,12 +533,9 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     elif not isinstance(config, ExtractConfig):
         raise TypeError(f"config must be an ExtractConfig or dict, got {type(config).__name__}")
 
-    rows = np.flatnonzero(mask.any(axis=1))
-    if len(rows) == 0:
+    given, r0, c0 = free_crop(mask)  # with a border of non-free cells
+    if given.size == 0:
         return TopoMap.empty()
-    cols = np.flatnonzero(mask.any(axis=0))
-    r0, c0 = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
-    given = np.pad(mask[r0: rows[-1] + 2, c0: cols[-1] + 2], 1)  # a border of non-free cells
     cell_area = res * res
     footprint = (_disk(int(round(config.erode_radius / res))) if config.erode_radius > 0
                  else None)

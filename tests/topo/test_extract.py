@@ -270,6 +270,26 @@ def test_polyline_length_is_numpys_float(seed, n, scale, reverse):
     assert polyline_length(poly) == float(np.sqrt((d * d).sum(axis=1)).sum())
 
 
+@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(1, 30), st.integers(0, 4),
+       st.booleans())
+def test_free_crop_is_the_numpy_crop(seed, h, w, n_free, strided):
+    """The compiled crop to the free cells (grown by one cell, padded by a non-free border) is
+    the numpy slice and ``np.pad``: free cells on the mask's edges, none, one, strided views."""
+    from topo._extract_kernels import free_crop, free_crop_reference
+
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((h, w), bool)
+    mask[rng.integers(0, h, n_free), rng.integers(0, w, n_free)] = True
+    if seed % 2:
+        mask |= ndimage.binary_opening(rng.random((h, w)) < 0.6)
+    if strided:
+        mask = np.repeat(np.repeat(mask, 2, 0), 2, 1)[::2, ::2]
+    got, want = free_crop(mask), free_crop_reference(mask)
+    assert got[0].dtype == bool and got[0].shape == want[0].shape
+    np.testing.assert_array_equal(got[0], want[0])
+    assert got[1:] == want[1:]
+
+
 @given(st.integers(0, 2**32 - 1), st.floats(0.2, 0.9), st.integers(3, 70), st.integers(3, 70),
        st.integers(0, 60), st.integers(-1, 4), st.floats(0.0, 80.0))
 def test_clean_free_is_the_library_morphology(seed, density, h, w, max_hole, radius,
