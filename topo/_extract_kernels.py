@@ -27,6 +27,9 @@ was their fixed per-call overhead (scipy sparse matrices, small numpy calls), no
 * :func:`metre_paths` — the output's polylines in metres, ends on their nodes, turned to run
   from the lower-numbered node, and their lengths (``topo.extract._to_topomap_loop``'s numpy
   arithmetic, edge by edge).
+* :func:`topomap_arrays` — the whole output step around :func:`metre_paths`: nodes in metres
+  and their order (``np.lexsort``), paths sorted by their ends (``sorted``), turned and
+  measured (``topo.extract._to_topomap_loop`` with ``_node_order``).
 """
 
 from __future__ import annotations
@@ -645,6 +648,68 @@ def metre_paths(cells, sizes, ends, xy, res, ox, oy):
         lengths[k] = polyline_length(out[start:stop])
         start = stop
     return out, lengths
+
+
+@njit(cache=True, nogil=True)
+def _lex_order(primary, secondary):
+    """``np.lexsort((secondary, primary))``: indices by ``primary``, then ``secondary``, then
+    index (two stable sorts)."""
+    first = np.argsort(secondary, kind="mergesort")
+    return first[np.argsort(primary[first], kind="mergesort")]
+
+
+@njit(cache=True, nogil=True)
+def topomap_arrays(rc, ids, ends, cells, sizes, res, ox, oy):
+    """The arrays of ``extract_topomap``'s output from the cleaned-up graph: nodes ``ids`` at
+    pixel positions ``rc`` ``(N, 2)``, paths from node ``ends[k, 0]`` to ``ends[k, 1]`` (ids)
+    along the concatenated pixel polylines ``cells`` (``sizes`` points each). Returns the
+    node positions in metres sorted by ``y``, then ``x`` (``topo.extract._node_order``); the
+    paths sorted by their ends' new indices (stable), as sorted index pairs ``(E, 2)``; their
+    :func:`metre_paths` polylines and lengths, their sizes; and ``near``: the paths whose
+    length does not clearly exceed their chord, the only ones where the chord's ulps (numpy's
+    ``dot``, which the caller takes) can be the path's length."""
+    n = len(rc)
+    x = np.empty(n, dtype=np.float64)
+    y = np.empty(n, dtype=np.float64)
+    for i in range(n):
+        x[i] = ox + (rc[i, 1] + 0.5) * res
+        y[i] = oy + (rc[i, 0] + 0.5) * res
+    order = _lex_order(y, x)
+    xy = np.empty((n, 2), dtype=np.float64)
+    slot = np.full(ids.max() + 1, -1, dtype=np.int64)
+    for i in range(n):
+        xy[i, 0], xy[i, 1] = x[order[i]], y[order[i]]
+        slot[ids[order[i]]] = i
+    m = len(sizes)
+    iu = np.empty(m, dtype=np.int64)
+    iv = np.empty(m, dtype=np.int64)
+    first = np.empty(m, dtype=np.int64)
+    start = 0
+    for k in range(m):
+        iu[k], iv[k] = slot[ends[k, 0]], slot[ends[k, 1]]
+        first[k] = start
+        start += sizes[k]
+    by = _lex_order(iu, iv)
+    moved = np.empty_like(cells)
+    new_ends = np.empty((m, 2), dtype=np.int64)
+    new_sizes = np.empty(m, dtype=np.int64)
+    pos = 0
+    for j in range(m):
+        k = by[j]
+        new_ends[j, 0], new_ends[j, 1] = iu[k], iv[k]
+        new_sizes[j] = sizes[k]
+        moved[pos: pos + sizes[k]] = cells[first[k]: first[k] + sizes[k]]
+        pos += sizes[k]
+    metres, lengths = metre_paths(moved, new_sizes, new_ends, xy, res, ox, oy)
+    pairs = np.empty((m, 2), dtype=np.int64)
+    near = np.empty(m, dtype=np.bool_)
+    for j in range(m):
+        a, b = min(new_ends[j, 0], new_ends[j, 1]), max(new_ends[j, 0], new_ends[j, 1])
+        pairs[j, 0], pairs[j, 1] = a, b
+        d0, d1 = xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1]
+        # a chord computed in any order is within a few ulps of this one
+        near[j] = not lengths[j] > math.sqrt(d0 * d0 + d1 * d1) * (1.0 + 1e-12)
+    return xy, pairs, metres, lengths, near, new_sizes
 
 
 # Zhang–Suen thinning as ``skimage.morphology.skeletonize`` (2-D, method "zhang") does it.

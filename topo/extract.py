@@ -80,13 +80,13 @@ from topo._extract_kernels import (
     corner_arms,
     corner_cuts,
     free_crop,
-    metre_paths,
     path_lengths,
     path_nodes,
     peaks,
     polyline_length,
     skeleton_paths,
     skeletonize,
+    topomap_arrays,
     wall_distances,
 )
 from topo.graph import TopoMap
@@ -570,26 +570,27 @@ def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
 def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     """The :class:`TopoMap` in metres: nodes ordered by :func:`_node_order`, edges by their
     ends' indices, each polyline from its lower- to its higher-numbered node with its ends on
-    the nodes; all polylines converted, re-pointed, turned and measured by one compiled kernel
-    (:func:`topo._extract_kernels.metre_paths`): the same floats as :func:`_to_topomap_loop`,
+    the nodes; ordered, converted, re-pointed, turned and measured by one compiled kernel
+    (:func:`topo._extract_kernels.topomap_arrays`): the same floats as :func:`_to_topomap_loop`,
     one edge at a time, which ``tests/topo`` and ``tests/envs`` compare (on the env's ~10-edge
     maps that loop's small numpy calls were most of this step's cost)."""
     if not g.pos:
         return TopoMap.empty()
-    xy, index = _node_order(g, res, origin)
-    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
-    if not edges:
-        return TopoMap.from_valid_arrays(xy, np.empty((0, 2), dtype=np.int64), [], [])
-    ends = np.array([(index[edge.u], index[edge.v]) for edge in edges], dtype=np.int64)
-    sizes = [len(edge.poly) for edge in edges]
-    metres, plen = metre_paths(np.concatenate([edge.poly for edge in edges]),
-                               np.array(sizes, dtype=np.int64), ends, xy, res, *origin)
-    pairs = np.sort(ends, axis=1)
-    # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
-    chord = [math.sqrt(c.dot(c)) for c in xy[pairs[:, 0]] - xy[pairs[:, 1]]]
-    lengths = np.maximum(plen, chord)
+    edges = list(g.edges.values())
+    ends = np.array([(edge.u, edge.v) for edge in edges], dtype=np.int64).reshape(-1, 2)
+    cells = (np.concatenate([edge.poly for edge in edges]) if edges
+             else np.empty((0, 2), dtype=np.float64))
+    xy, pairs, metres, lengths, near, sizes = topomap_arrays(
+        np.concatenate(list(g.pos.values())).reshape(-1, 2),
+        np.fromiter(g.pos, dtype=np.int64, count=len(g.pos)), ends, cells,
+        np.fromiter((len(edge.poly) for edge in edges), dtype=np.int64, count=len(edges)),
+        res, *origin)
+    for k in np.flatnonzero(near).tolist():
+        # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
+        c = xy[pairs[k, 0]] - xy[pairs[k, 1]]
+        lengths[k] = max(lengths[k], math.sqrt(c.dot(c)))
     paths, start = [], 0
-    for n in sizes:
+    for n in sizes.tolist():
         paths.append(metres[start: start + n])
         start += n
     return TopoMap.from_valid_arrays(xy, pairs, lengths, paths)
