@@ -41,7 +41,9 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6 on open paths (all but
 numpy's ``arctan2``) and the output's polylines in metres run as compiled kernels
 (:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
-on random masks and on every extraction of an env episode.
+on random masks and on every extraction of an env episode. Steps 4–7 run as compiled passes
+(:mod:`topo._graph_kernels`, around numpy's ``arctan2``) that give bit for bit the map of the
+Python passes of ``_Graph`` (``_graph_topomap_reference``, tested the same way).
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -89,6 +91,7 @@ from topo._extract_kernels import (
     topomap_arrays,
     wall_distances,
 )
+from topo._graph_kernels import N_EDGES, N_NODES, N_PTS, N_TAB, OVER, graph_first, graph_second
 from topo.graph import TopoMap
 
 
@@ -277,7 +280,9 @@ class _Edge:
 
 class _Graph:
     """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
-    up to date so that every clean-up pass is linear in the graph's size."""
+    up to date so that every clean-up pass is linear in the graph's size: the reference of the
+    compiled passes (:mod:`topo._graph_kernels`), which reproduce its visiting order, Python
+    sets of path ids included."""
 
     def __init__(self, free: np.ndarray) -> None:
         self.free = free
@@ -542,7 +547,18 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     free = clean_free(given, int(config.min_hole_area / cell_area), footprint,
                       config.min_component_area / cell_area)
 
-    g = _skeleton_graph(skeletonize(free), free, given)
+    return _graph_topomap(skeletonize(free), free, given, config, res,
+                          (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
+
+
+def _graph_topomap_reference(skel: np.ndarray, free: np.ndarray, given: np.ndarray,
+                             config: ExtractConfig, res: float,
+                             origin: tuple[float, float]) -> TopoMap:
+    """Steps 3–7 and the output by :class:`_Graph`'s Python passes (the reference of the
+    compiled :func:`_graph_topomap`): the map of skeleton ``skel`` of the cleaned mask ``free``
+    (``given``: the caller's free cells), ``origin`` the metre position of pixel (0, 0)'s
+    corner."""
+    g = _skeleton_graph(skel, free, given)
     to_px = 1.0 / res
     merge_px = config.merge_radius * to_px
     g.prune_spurs(config.min_spur_length * to_px)
@@ -553,7 +569,57 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     g.merge_short(merge_px)
     g.break_self_loops()
     g.snap_to_free()
-    return _to_topomap(g, res, (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
+    return _to_topomap(g, res, origin)
+
+
+def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config: ExtractConfig,
+                   res: float, origin: tuple[float, float]) -> TopoMap:
+    """:func:`_graph_topomap_reference` by the compiled passes of :mod:`topo._graph_kernels`
+    (the same map, bit for bit), with numpy's ``arctan2`` between them on the same arrays as
+    :meth:`_Graph.split_corners` (the open paths' turns at once, each loop's by
+    :func:`_loop_corners`); arrays that are too small are made larger and the pass re-run."""
+    if not skel.any():
+        return TopoMap.empty()
+    coords, bounds, pixels = skeleton_paths(skel)
+    node_pixels, ends = path_nodes(len(coords), bounds, pixels)
+    node_rc = coords[node_pixels]
+    points = coords[pixels]
+    radius = wall_distances(free, node_rc)
+    to_px = 1.0 / res
+    merge_px = config.merge_radius * to_px
+    arm, min_turn = config.corner_arm * to_px, math.radians(config.corner_angle)
+    n, m, p = len(node_rc), len(ends), len(points)
+    caps = np.array([n, 2 * m + 16, 3 * p + 256, 32 * n + 256], dtype=np.int64)
+    while True:
+        first = graph_first(node_rc, ends, points, bounds, path_lengths(points, bounds), radius,
+                            given, config.min_spur_length * to_px, merge_px, arm, caps)
+        if not first[0][-1][OVER]:
+            break
+        caps *= 2
+    state, open_ids, open_lens, arc, cross, dot, loop_ids, loop_lens, loop_pts = first
+    loop_cuts: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
+    start = 0
+    for size in loop_lens.tolist():
+        poly = loop_pts[start: start + size]
+        start += size
+        loop_cuts[0].append(_loop_corners(poly, arm, min_turn, merge_px))
+        loop_cuts[1].append(_loop_corners(poly, arm, min_turn, 0.0))
+    cuts = [np.concatenate([np.empty(0, dtype=np.int64), *c]).astype(np.int64)
+            for c in loop_cuts]
+    counts = [np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts]
+    used = state[-1]
+    caps = np.array([used[N_NODES] + len(arc) + 2 * m + 16, 2 * used[N_EDGES] + len(arc) + 16,
+                     used[N_PTS] + 64, used[N_TAB] + 16 * used[N_NODES] + 64], dtype=np.int64)
+    while True:
+        cnt, arrays = graph_second(state, open_ids, open_lens, arc, np.abs(np.arctan2(cross, dot)),
+                                   loop_ids, cuts[0], counts[0], cuts[1], counts[1], given,
+                                   min_turn, merge_px, res, *origin, caps)
+        if not cnt[OVER]:
+            break
+        caps *= 2
+    if len(arrays[0]) == 0:
+        return TopoMap.empty()
+    return _topomap(*arrays)
 
 
 def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
@@ -580,11 +646,18 @@ def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     ends = np.array([(edge.u, edge.v) for edge in edges], dtype=np.int64).reshape(-1, 2)
     cells = (np.concatenate([edge.poly for edge in edges]) if edges
              else np.empty((0, 2), dtype=np.float64))
-    xy, pairs, metres, lengths, near, sizes = topomap_arrays(
+    return _topomap(*topomap_arrays(
         np.concatenate(list(g.pos.values())).reshape(-1, 2),
         np.fromiter(g.pos, dtype=np.int64, count=len(g.pos)), ends, cells,
         np.fromiter((len(edge.poly) for edge in edges), dtype=np.int64, count=len(edges)),
-        res, *origin)
+        res, *origin))
+
+
+def _topomap(xy: np.ndarray, pairs: np.ndarray, metres: np.ndarray, lengths: np.ndarray,
+             near: np.ndarray, sizes: np.ndarray) -> TopoMap:
+    """The :class:`TopoMap` of :func:`topo._extract_kernels.topomap_arrays`' arrays: the
+    lengths of the paths ``near`` their chord made at least numpy's chord, the polylines cut
+    apart."""
     for k in np.flatnonzero(near).tolist():
         # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
         c = xy[pairs[k, 0]] - xy[pairs[k, 1]]

@@ -392,6 +392,7 @@ def test_topomap_output_kernel_is_the_loop(seed, density, h, w, res, sonar):
     cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
     with pytest.MonkeyPatch.context() as m:
         m.setattr(extract, "_to_topomap", both)
+        m.setattr(extract, "_graph_topomap", extract._graph_topomap_reference)  # its caller
         extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
                         config=cfg)
     assert len(seen) == int(mask.any())
@@ -487,3 +488,105 @@ def test_open_corners_kernels_are_the_numpy_form(seed, n_polys, arm, min_turn, m
     a, b = points - points[back], points[ahead] - points
     assert cross.tobytes() == (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).tobytes()
     assert dot.tobytes() == (a * b).sum(axis=1).tobytes()
+
+
+# ---------------------------------------------------------------- the compiled clean-up
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 4)), max_size=80),
+       st.sampled_from([8, 16, 40, 300, 70000]), st.integers(0, 2**32 - 1))
+def test_path_sets_iterate_as_python_sets(ops, key_range, seed):
+    """``topo._graph_kernels``: The per-node hash tables give CPython's ``set`` iteration order after every add and
+    discard (repeated keys, keys colliding in 8 slots, dummies reused, tables growing past 3/5
+    full and rebuilt), for the non-negative int keys the clean-up stores."""
+    from topo._graph_kernels import OVER, new_set, set_add, set_discard, set_items
+
+    rng = np.random.default_rng(seed)
+    ni = np.zeros((1, 7), dtype=np.int64)
+    tab = np.empty(1 << 16, dtype=np.int64)
+    cnt = np.zeros(5, dtype=np.int64)
+    assert new_set(tab, ni, cnt, 0)
+    ref: set[int] = set()
+    for add, pick in ops:
+        if add or not ref:
+            key = int(rng.integers(key_range))
+            ref.add(key)
+            set_add(tab, ni, cnt, 0, key)
+        else:
+            key = sorted(ref)[pick % len(ref)] if pick else int(rng.integers(key_range))
+            ref.discard(key)
+            set_discard(tab, ni, cnt, 0, key)
+        assert not cnt[OVER]
+        assert set_items(tab, ni, 0).tolist() == list(ref)
+
+
+def test_full_tables_flag_overflow_instead_of_writing():
+    """A table pool too small to grow a set sets the overflow flag and leaves the pool as it
+    was (the caller re-runs with larger arrays)."""
+    from topo._graph_kernels import N_TAB, OVER, new_set, set_add
+
+    ni = np.zeros((1, 7), dtype=np.int64)
+    tab = np.full(10, 99, dtype=np.int64)
+    cnt = np.zeros(5, dtype=np.int64)
+    assert new_set(tab, ni, cnt, 0)
+    for key in range(8):
+        set_add(tab, ni, cnt, 0, key)
+    assert cnt[OVER] and cnt[N_TAB] == 8 and tab[8:].tolist() == [99, 99]
+
+
+def _compare(monkeypatch):
+    """Make ``extract_topomap`` compute each map both ways and compare; returns the list of
+    compared maps."""
+    from topo import extract
+
+    seen = []
+    compiled = extract._graph_topomap
+
+    def both(*args):
+        got = compiled(*args)
+        assert_same_maps(got, extract._graph_topomap_reference(*args))
+        seen.append(got)
+        return got
+
+    monkeypatch.setattr(extract, "_graph_topomap", both)
+    return seen
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.35, 0.85), st.integers(4, 90), st.integers(4, 90),
+       st.sampled_from([1.0, 0.5, 0.25, 0.1]), st.booleans(), st.integers(0, 2))
+def test_compiled_clean_up_is_the_python_passes(seed, density, h, w, res, sonar, opening):
+    """Bit for bit the map of ``_Graph``'s passes, on random blobs' skeletons at coarse and fine
+    cells (spurs, junction clusters, loops, parallel paths, corners, isolated nodes, nodes off
+    free space, empty maps), with both configs."""
+    rng = np.random.default_rng(seed)
+    mask = rng.random((h, w)) < density
+    if opening:
+        mask = ndimage.binary_opening(mask, iterations=opening)
+    cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
+    with pytest.MonkeyPatch.context() as m:
+        seen = _compare(m)
+        extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
+                        config=cfg)
+    assert len(seen) == int(mask.any())
+
+
+def test_compiled_clean_up_on_real_maps(monkeypatch):
+    """A real floor plan's crops (tens of junctions, long loops)."""
+    seen = _compare(monkeypatch)
+    plan = load_floor_plan(MAPS / "dungeon" / "1.png", resolution=0.1)
+    for r0, c0 in ((0, 0), (150, 200), (230, 390)):
+        extract_topomap(np.ascontiguousarray(plan.free[r0: r0 + 250, c0: c0 + 250]), 0.1)
+    assert len(seen) == 3 and max(m.n_nodes for m in seen) >= 10
+
+
+def test_compiled_clean_up_on_every_env_extraction(monkeypatch):
+    """Every extraction of a short env episode (the robots' sonar grids, ``for_sonar``)."""
+    from envs import two_robot_explore_v0
+
+    seen = _compare(monkeypatch)
+    par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
+    par.reset(seed=4)
+    rng = np.random.default_rng(4)
+    while par.agents:
+        par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
+    assert len(seen) >= 100 and max(m.n_nodes for m in seen) >= 10
