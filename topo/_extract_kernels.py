@@ -271,30 +271,41 @@ def clean_free_reference(given: np.ndarray, max_hole: int, footprint: np.ndarray
 
 
 @njit(cache=True, nogil=True)
-def _free_crop(mask):
+def _free_box(mask):
+    """Rows ``r0:r1`` and columns ``c0:c1`` of the free cells' bounding box grown by one cell
+    (within the mask); ``r1 == 0`` when nothing is free. Each row is scanned from both ends to
+    its first and last free cell."""
     h, w = mask.shape
     r_lo, r_hi, c_lo, c_hi = h, -1, w, -1
     for r in range(h):
-        for c in range(w):
-            if mask[r, c]:
-                r_lo = min(r_lo, r)
-                r_hi = r
-                c_lo = min(c_lo, c)
-                c_hi = max(c_hi, c)
+        lo = 0
+        while lo < w and not mask[r, lo]:
+            lo += 1
+        if lo == w:
+            continue
+        hi = w - 1
+        while not mask[r, hi]:
+            hi -= 1
+        r_lo = min(r_lo, r)
+        r_hi = r
+        c_lo = min(c_lo, lo)
+        c_hi = max(c_hi, hi)
     if r_hi < 0:
-        return np.zeros((0, 0), dtype=np.bool_), 0, 0
-    r0, c0 = max(r_lo - 1, 0), max(c_lo - 1, 0)
-    r1, c1 = min(r_hi + 2, h), min(c_hi + 2, w)
-    out = np.zeros((r1 - r0 + 2, c1 - c0 + 2), dtype=np.bool_)
-    out[1:-1, 1:-1] = mask[r0:r1, c0:c1]
-    return out, r0, c0
+        return 0, 0, 0, 0
+    return max(r_lo - 1, 0), min(r_hi + 2, h), max(c_lo - 1, 0), min(c_hi + 2, w)
 
 
 def free_crop(mask: np.ndarray) -> tuple[np.ndarray, int, int]:
     """The 2-D boolean ``mask`` cropped to its free cells' bounding box grown by one cell (within
     the mask), padded with a border of non-free cells, and the crop's first row and column in
-    ``mask``; an empty ``(0, 0)`` array when nothing is free (:func:`free_crop_reference`)."""
-    out, r0, c0 = _free_crop(np.ascontiguousarray(mask, dtype=np.bool_))
+    ``mask``; an empty ``(0, 0)`` array when nothing is free (:func:`free_crop_reference`). The
+    box by a compiled scan, the copy by numpy."""
+    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    r0, r1, c0, c1 = _free_box(mask)
+    if r1 == 0:
+        return np.zeros((0, 0), dtype=bool), 0, 0
+    out = np.zeros((r1 - r0 + 2, c1 - c0 + 2), dtype=bool)
+    out[1:-1, 1:-1] = mask[r0:r1, c0:c1]
     return out, int(r0), int(c0)
 
 

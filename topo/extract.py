@@ -572,6 +572,9 @@ def _graph_topomap_reference(skel: np.ndarray, free: np.ndarray, given: np.ndarr
     return _to_topomap(g, res, origin)
 
 
+_NO_INTS = np.empty(0, dtype=np.int64)  # no loops' cuts (not read-only: one kernel signature)
+
+
 def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config: ExtractConfig,
                    res: float, origin: tuple[float, float]) -> TopoMap:
     """:func:`_graph_topomap_reference` by the compiled passes of :mod:`topo._graph_kernels`
@@ -597,16 +600,17 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
             break
         caps *= 2
     state, open_ids, open_lens, arc, cross, dot, loop_ids, loop_lens, loop_pts = first
-    loop_cuts: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
-    start = 0
-    for size in loop_lens.tolist():
-        poly = loop_pts[start: start + size]
-        start += size
-        loop_cuts[0].append(_loop_corners(poly, arm, min_turn, merge_px))
-        loop_cuts[1].append(_loop_corners(poly, arm, min_turn, 0.0))
-    cuts = [np.concatenate([np.empty(0, dtype=np.int64), *c]).astype(np.int64)
-            for c in loop_cuts]
-    counts = [np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts]
+    cuts = counts = (_NO_INTS, _NO_INTS)
+    if len(loop_ids):
+        loop_cuts: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
+        start = 0
+        for size in loop_lens.tolist():
+            poly = loop_pts[start: start + size]
+            start += size
+            loop_cuts[0].append(_loop_corners(poly, arm, min_turn, merge_px))
+            loop_cuts[1].append(_loop_corners(poly, arm, min_turn, 0.0))
+        cuts = tuple(np.concatenate(c).astype(np.int64) for c in loop_cuts)
+        counts = tuple(np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts)
     used = state[-1]
     caps = np.array([used[N_NODES] + len(arc) + 2 * m + 16, 2 * used[N_EDGES] + len(arc) + 16,
                      used[N_PTS] + 64, used[N_TAB] + 16 * used[N_NODES] + 64], dtype=np.int64)
