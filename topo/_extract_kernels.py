@@ -769,13 +769,20 @@ def _zhang(image, lut):
     # pixel whose table value is not 0; an interior pixel, code 255, has value 0)
     cand = np.empty(total, dtype=np.int64)
     due = np.zeros(total, dtype=np.uint8)
+    code = np.zeros(total, dtype=np.uint8)  # each pixel's 8-neighbour code, kept up to date
     n = 0
     for k in range(wp, total - wp):
-        if sk[k] and lut[_code(sk, k, wp)]:
-            cand[n] = k
-            n += 1
-            due[k] = 3
+        if sk[k]:
+            code[k] = _code(sk, k, wp)
+            if lut[code[k]]:
+                cand[n] = k
+                n += 1
+                due[k] = 3
     gone = np.empty(total, dtype=np.int64)
+    # neighbour k + offsets[t] sees pixel k in the direction whose code bit ``keep[t]`` clears
+    offsets = np.array([-wp - 1, -wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1], dtype=np.int64)
+    keep = np.array([255 - 16, 255 - 32, 255 - 64, 255 - 128, 255 - 1, 255 - 2, 255 - 4,
+                     255 - 8], dtype=np.uint8)
     removed_any = False
     p = 0
     while True:
@@ -787,7 +794,7 @@ def _zhang(image, lut):
             k = cand[i]
             d = due[k]
             if d & bit:
-                v = lut[_code(sk, k, wp)]
+                v = lut[code[k]]
                 if v & bit:
                     gone[ngone] = k
                     ngone += 1
@@ -805,8 +812,9 @@ def _zhang(image, lut):
             sk[gone[i]] = 0
         for i in range(ngone):  # only pixels beside a removed one can change their decision
             g = gone[i]
-            for o in (-wp - 1, -wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1):
-                j = g + o
+            for t in range(8):
+                j = g + offsets[t]
+                code[j] &= keep[t]
                 if sk[j]:
                     if due[j] == 0:
                         cand[n] = j
