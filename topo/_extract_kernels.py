@@ -409,32 +409,32 @@ def _pixel_graph(skel, dr, dc):
     (``indptr``, ``indices``; neighbours by increasing id; ``diag``: the step is diagonal) of
     the 8-connected pixel graph of ``skel``."""
     h, w = skel.shape
-    ids = np.full((h, w), -1, dtype=np.int64)
+    flat = skel.ravel()
+    where = np.empty(h * w, dtype=np.int64)
     n = 0
-    for r in range(h):
-        for c in range(w):
-            if skel[r, c]:
-                ids[r, c] = n
-                n += 1
+    for i in range(h * w):
+        if flat[i]:
+            where[n] = i
+            n += 1
+    ids = np.empty(h * w, dtype=np.int64)  # set (and read) at skeleton pixels only
+    for p in range(n):
+        ids[where[p]] = p
     coords = np.empty((n, 2), dtype=np.float64)
     indptr = np.zeros(n + 1, dtype=np.int64)
     indices = np.empty(8 * n, dtype=np.int64)
     diag = np.empty(8 * n, dtype=np.bool_)
     k = 0
-    for r in range(h):
-        for c in range(w):
-            p = ids[r, c]
-            if p < 0:
-                continue
-            coords[p, 0] = r
-            coords[p, 1] = c
-            for j in range(8):
-                rr, cc = r + dr[j], c + dc[j]
-                if 0 <= rr < h and 0 <= cc < w and ids[rr, cc] >= 0:
-                    indices[k] = ids[rr, cc]
-                    diag[k] = dr[j] != 0 and dc[j] != 0
-                    k += 1
-            indptr[p + 1] = k
+    for p in range(n):
+        r, c = where[p] // w, where[p] % w
+        coords[p, 0] = r
+        coords[p, 1] = c
+        for j in range(8):
+            rr, cc = r + dr[j], c + dc[j]
+            if 0 <= rr < h and 0 <= cc < w and flat[rr * w + cc]:
+                indices[k] = ids[rr * w + cc]
+                diag[k] = dr[j] != 0 and dc[j] != 0
+                k += 1
+        indptr[p + 1] = k
     return coords, indptr, indices[:k], diag[:k]
 
 
