@@ -143,13 +143,12 @@ def _row_runs(mask, value):
 
 
 @njit(cache=True, nogil=True)
-def _run_components(mask, value):
-    """4-connected components of the pixels of ``mask`` equal to ``value`` (``ndimage.label``'s
-    default structure), labelled by horizontal runs: ``runs`` ``(R, 3)`` as ``row, start,
-    stop``, each run's component ``root`` (a run index) and ``size``, the pixel count of each
-    root's component (runs of adjacent rows that share a column are joined)."""
-    h = mask.shape[0]
-    runs, first = _row_runs(mask, value)
+def _join_runs(runs, first, h):
+    """4-connected components of a mask's pixels given as horizontal runs (``runs`` ``(R, 3)``
+    as ``row, start, stop`` in raster order, row ``r``'s runs ``first[r]:first[r + 1]``):
+    ``ndimage.label``'s default structure. Returns each run's component ``root`` (a run index)
+    and ``size``, the pixel count of each root's component (runs of adjacent rows that share a
+    column are joined)."""
     n = len(runs)
     root = np.arange(n)
     for r in range(1, h):
@@ -167,17 +166,41 @@ def _run_components(mask, value):
     for k in range(n):
         root[k] = _find(root, k)
         size[root[k]] += runs[k, 2] - runs[k, 1]
-    return runs, root, size
+    return root, size
 
 
 @njit(cache=True, nogil=True)
-def _erode(mask, footprint):
-    """Binary erosion of ``mask`` by ``footprint`` (centred; outside the array counts as
-    non-free), for footprints whose rows are each one centred run (a disk): pixel ``(r, c)``
-    stays iff in every footprint row ``i`` (half width ``a``) the ``2a + 1`` pixels of row
+def _gaps(runs, first, keep, h, w):
+    """The runs of the pixels of each row of width ``w`` outside its ``keep`` runs (the complement
+    of those runs; the other runs count as outside too), laid out as :func:`_row_runs`'."""
+    out = np.empty((len(runs) + h, 3), dtype=np.int64)
+    out_first = np.zeros(h + 1, dtype=np.int64)
+    n = 0
+    for r in range(h):
+        out_first[r] = n
+        c = 0
+        for k in range(first[r], first[r + 1]):
+            if not keep[k]:
+                continue
+            if runs[k, 1] > c:
+                out[n, 0], out[n, 1], out[n, 2] = r, c, runs[k, 1]
+                n += 1
+            c = runs[k, 2]
+        if c < w:
+            out[n, 0], out[n, 1], out[n, 2] = r, c, w
+            n += 1
+    out_first[h] = n
+    return out[:n], out_first
+
+
+@njit(cache=True, nogil=True)
+def _erode_runs(runs, first, h, w, footprint):
+    """Binary erosion by ``footprint`` (centred; outside the array counts as non-free) of the
+    ``h × w`` mask whose set pixels are the runs ``runs``/``first`` (:func:`_row_runs`), as
+    runs; for footprints whose rows are each one centred run (a disk): pixel ``(r, c)`` stays
+    iff in every footprint row ``i`` (half width ``a``) the ``2a + 1`` pixels of row
     ``r + i - centre`` around ``c`` are set, i.e. ``c`` lies in a run ``[s, e)`` of that row
     shrunk to ``[s + a, e - a)``; the shrunk runs of each row are counted per column."""
-    h, w = mask.shape
     fh = footprint.shape[0]
     centre = fh // 2
     half = np.full(fh, -1, dtype=np.int64)
@@ -189,10 +212,12 @@ def _erode(mask, footprint):
     for i in range(fh):
         if half[i] >= 0:
             need += 1
-    runs, first = _row_runs(mask, True)
-    out = np.zeros((h, w), dtype=np.bool_)
+    out = np.empty((h * ((w + 1) // 2) + 1, 3), dtype=np.int64)
+    out_first = np.zeros(h + 1, dtype=np.int64)
+    n = 0
     count = np.zeros(w + 1, dtype=np.int64)
     for r in range(h):
+        out_first[r] = n
         count[:] = 0
         inside = True
         for i in range(fh):
@@ -211,28 +236,52 @@ def _erode(mask, footprint):
         if not inside:
             continue
         acc = 0
+        start = -1
         for c in range(w):
             acc += count[c]
-            out[r, c] = acc == need
-    return out
+            if acc == need:
+                if start < 0:
+                    start = c
+            elif start >= 0:
+                out[n, 0], out[n, 1], out[n, 2] = r, start, c
+                n += 1
+                start = -1
+        if start >= 0:
+            out[n, 0], out[n, 1], out[n, 2] = r, start, w
+            n += 1
+    out_first[h] = n
+    return out[:n], out_first
 
 
 @njit(cache=True, nogil=True)
 def _clean_free(given, max_hole, footprint, min_cells):
-    filled = given.copy()
+    """On horizontal runs: the non-free runs of ``given`` and their components (holes), the
+    free runs of the filled mask as the gaps between the holes kept, eroded run by run, their
+    components, and the mask painted from the runs kept (one scan of the image in all)."""
+    h, w = given.shape
     if max_hole > 0:
-        runs, root, size = _run_components(given, False)
-        for k in range(len(runs)):
-            if size[root[k]] <= max_hole:
-                filled[runs[k, 0], runs[k, 1]: runs[k, 2]] = True
-    out = filled
+        holes, holes_first = _row_runs(given, False)
+        root, size = _join_runs(holes, holes_first, h)
+        keep = np.empty(len(holes), dtype=np.bool_)
+        for k in range(len(holes)):
+            keep[k] = size[root[k]] > max_hole
+        runs, first = _gaps(holes, holes_first, keep, h, w)
+    else:
+        runs, first = _row_runs(given, True)
     if footprint.size:
-        out = _erode(filled, footprint)
+        runs, first = _erode_runs(runs, first, h, w, footprint)
+    root = np.zeros(len(runs), dtype=np.int64)
+    size = np.zeros(len(runs), dtype=np.int64)
     if min_cells > 0:
-        runs, root, size = _run_components(out, True)
-        for k in range(len(runs)):
-            if size[root[k]] < min_cells:
-                out[runs[k, 0], runs[k, 1]: runs[k, 2]] = False
+        root, size = _join_runs(runs, first, h)
+    out = np.zeros((h, w), dtype=np.bool_)
+    flat = out.ravel()
+    for k in range(len(runs)):
+        if min_cells > 0 and size[root[k]] < min_cells:
+            continue
+        base = runs[k, 0] * w
+        for c in range(runs[k, 1], runs[k, 2]):
+            flat[base + c] = True
     return out
 
 
