@@ -239,9 +239,38 @@ def _open_corners_numpy(polys: list[np.ndarray], arm: float, min_turn: float,
     return [cuts[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
+def _loop_corner_sets(poly: np.ndarray, arm: float, min_turn: float,
+                      margins: tuple[float, ...]) -> list[np.ndarray]:
+    """:func:`_loop_corners` for each of ``margins`` (the turns computed once): the arc lengths
+    and chord products by the compiled :func:`topo._extract_kernels.corner_arms` and numpy's
+    ``arctan2``, the same floats as :func:`_loop_corners_numpy` (``tests/topo`` compares)."""
+    ring = poly[:-1]
+    n = len(ring)
+    if n < 4:
+        return [np.empty(0, dtype=np.int64) for _ in margins]
+    points = np.concatenate([ring, ring, ring, ring[:1]])
+    arc, cross, dot = corner_arms(points, np.array([len(points)], dtype=np.int64), arm)
+    total = arc[n]
+    if total <= 2.0 * arm:
+        return [np.empty(0, dtype=np.int64) for _ in margins]
+    turn = np.abs(np.arctan2(cross, dot))
+    local = arc - arc[n]
+    candidate = np.zeros(len(points), dtype=bool)
+    candidate[n // 2: 2 * n + n // 2] = turn[n // 2: 2 * n + n // 2] > min_turn
+    at = peaks(turn, candidate, np.zeros(len(points), dtype=np.int64))
+    at = at[(at >= n) & (at < 2 * n)]
+    return [np.sort(at[(local[at] >= m) & (total - local[at] >= m)] - n) for m in margins]
+
+
 def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) -> np.ndarray:
     """Corner indices of a closed polyline (``poly[0] == poly[-1]``) into ``poly[:-1]``,
     ignoring the stretch within ``margin`` of the anchor ``poly[0]`` (0 = no anchor)."""
+    return _loop_corner_sets(poly, arm, min_turn, (margin,))[0]
+
+
+def _loop_corners_numpy(poly: np.ndarray, arm: float, min_turn: float,
+                        margin: float) -> np.ndarray:
+    """The numpy form of :func:`_loop_corners` (its reference in ``tests/topo``)."""
     ring = poly[:-1]
     n = len(ring)
     if n < 4:
@@ -607,8 +636,9 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
         for size in loop_lens.tolist():
             poly = loop_pts[start: start + size]
             start += size
-            loop_cuts[0].append(_loop_corners(poly, arm, min_turn, merge_px))
-            loop_cuts[1].append(_loop_corners(poly, arm, min_turn, 0.0))
+            anchored, free = _loop_corner_sets(poly, arm, min_turn, (merge_px, 0.0))
+            loop_cuts[0].append(anchored)
+            loop_cuts[1].append(free)
         cuts = tuple(np.concatenate(c).astype(np.int64) for c in loop_cuts)
         counts = tuple(np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts)
     used = state[-1]

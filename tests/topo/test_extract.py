@@ -490,6 +490,40 @@ def test_open_corners_kernels_are_the_numpy_form(seed, n_polys, arm, min_turn, m
     assert dot.tobytes() == (a * b).sum(axis=1).tobytes()
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 200), st.floats(0.5, 12.0),
+       st.floats(0.1, 2.5), st.floats(0.0, 6.0), st.booleans())
+def test_loop_corners_kernel_is_the_numpy_form(seed, k, arm, min_turn, margin, ring):
+    """The corner step on a closed polyline with the compiled arcs and chord products gives the
+    numpy form's corners, for one margin and for several at once: random closed pixel walks
+    (straight runs, repeated points, a jump back to the start) and rectangles' rings."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    if ring:
+        h, w = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+        corners = np.array([[0, 0], [0, w], [h, w], [h, 0], [0, 0]], dtype=np.float64)
+        poly = np.concatenate([np.linspace(a, b, int(max(abs(b - a).max(), 1)) + 1)[:-1]
+                               for a, b in zip(corners[:-1], corners[1:], strict=True)]
+                              + [corners[:1]])
+        poly = np.roll(poly[:-1], int(rng.integers(0, len(poly) - 1)), axis=0)
+        poly = np.concatenate([poly, poly[:1]])
+    else:
+        moves = np.array([[-1, -1], [-1, 0], [-1, 1], [0, 1], [1, 1], [1, 0], [1, -1], [0, -1],
+                          [0, 0]], dtype=np.float64)
+        heading = rng.integers(0, 8, size=k)
+        heading[rng.random(k) < 0.6] = heading[0]
+        heading[rng.random(k) < 0.05] = 8
+        walk = np.cumsum(moves[heading], axis=0)
+        poly = np.concatenate([[[0.0, 0.0]], walk, [[0.0, 0.0]]])
+    want = [extract._loop_corners_numpy(poly, arm, min_turn, m) for m in (margin, 0.0)]
+    got = extract._loop_corner_sets(poly, arm, min_turn, (margin, 0.0))
+    for a, b in zip(got, want, strict=True):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(extract._loop_corners(poly, arm, min_turn, margin), want[0])
+
+
 # ---------------------------------------------------------------- the compiled clean-up
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.tuples(st.booleans(), st.integers(0, 4)), max_size=80),
