@@ -601,6 +601,7 @@ def _graph_topomap_reference(skel: np.ndarray, free: np.ndarray, given: np.ndarr
     return _to_topomap(g, res, origin)
 
 
+_SHRINK = 1  # the clean-up kernels' first capacities are divided by this (tests: re-runs)
 _NO_INTS = np.empty(0, dtype=np.int64)  # no loops' cuts (not read-only: one kernel signature)
 
 
@@ -621,13 +622,13 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
     merge_px = config.merge_radius * to_px
     arm, min_turn = config.corner_arm * to_px, math.radians(config.corner_angle)
     n, m, p = len(node_rc), len(ends), len(points)
-    caps = np.array([n, 2 * m + 16, 3 * p + 256, 32 * n + 256], dtype=np.int64)
+    caps = np.array([n, 2 * m + 16, 3 * p + 256, 32 * n + 256], dtype=np.int64) // _SHRINK
     while True:
         first = graph_first(node_rc, ends, points, bounds, path_lengths(points, bounds), radius,
                             given, config.min_spur_length * to_px, merge_px, arm, caps)
         if not first[0][-1][OVER]:
             break
-        caps *= 2
+        caps = 2 * caps + 16
     state, open_ids, open_lens, arc, cross, dot, loop_ids, loop_lens, loop_pts = first
     cuts = counts = (_NO_INTS, _NO_INTS)
     if len(loop_ids):
@@ -643,14 +644,15 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
         counts = tuple(np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts)
     used = state[-1]
     caps = np.array([used[N_NODES] + len(arc) + 2 * m + 16, 2 * used[N_EDGES] + len(arc) + 16,
-                     used[N_PTS] + 64, used[N_TAB] + 16 * used[N_NODES] + 64], dtype=np.int64)
+                     used[N_PTS] + 64, used[N_TAB] + 16 * used[N_NODES] + 64],
+                    dtype=np.int64) // _SHRINK
     while True:
         cnt, arrays = graph_second(state, open_ids, open_lens, arc, np.abs(np.arctan2(cross, dot)),
                                    loop_ids, cuts[0], counts[0], cuts[1], counts[1], given,
                                    min_turn, merge_px, res, *origin, caps)
         if not cnt[OVER]:
             break
-        caps *= 2
+        caps = 2 * caps + 16
     if len(arrays[0]) == 0:
         return TopoMap.empty()
     return _topomap(*arrays)

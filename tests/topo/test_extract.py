@@ -604,6 +604,22 @@ def test_compiled_clean_up_is_the_python_passes(seed, density, h, w, res, sonar,
     assert len(seen) == int(mask.any())
 
 
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([4, 1000]))
+def test_compiled_clean_up_grows_its_arrays(seed, shrink):
+    """Starting from arrays far too small, the compiled passes re-run with larger ones and give
+    the same map."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    mask = ndimage.binary_opening(rng.random((60, 70)) < 0.6)
+    with pytest.MonkeyPatch.context() as m:
+        seen = _compare(m)
+        m.setattr(extract, "_SHRINK", shrink)
+        extract_topomap(mask, resolution=0.25)
+    assert len(seen) == 1
+
+
 def test_compiled_clean_up_on_real_maps(monkeypatch):
     """A real floor plan's crops (tens of junctions, long loops)."""
     seen = _compare(monkeypatch)
