@@ -897,19 +897,6 @@ def skeletonize(mask: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _search(a, v, right):
-    """``np.searchsorted(a, v, side="right" if right else "left")`` on a sorted ``a``."""
-    lo, hi = 0, len(a)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] < v or (right and a[mid] == v):
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True, nogil=True)
 def corner_arms(points, lens, arm):
     """Corner step 6 of ``extract_topomap`` on the open polylines ``points`` (concatenated,
     ``lens`` points each), up to the turn's ``arctan2`` (numpy's, applied by the caller):
@@ -939,9 +926,16 @@ def corner_arms(points, lens, arm):
         start += lens[k]
     cross = np.empty(n, dtype=np.float64)
     dot = np.empty(n, dtype=np.float64)
+    # np.searchsorted of arc[i] -/+ arm, which grow with i: two pointers that only move on
+    le = lt = 0  # how many arc values are <= arc[i] - arm, and < arc[i] + arm
     for i in range(n):
-        back = max(_search(arc, arc[i] - arm, True) - 1, lo[i])
-        ahead = min(_search(arc, arc[i] + arm, False), hi[i])
+        v, u = arc[i] - arm, arc[i] + arm
+        while le < n and arc[le] <= v:
+            le += 1
+        while lt < n and arc[lt] < u:
+            lt += 1
+        back = max(le - 1, lo[i])
+        ahead = min(lt, hi[i])
         a0 = points[i, 0] - points[back, 0]
         a1 = points[i, 1] - points[back, 1]
         b0 = points[ahead, 0] - points[i, 0]
