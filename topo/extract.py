@@ -42,8 +42,8 @@ Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6 on open pat
 numpy's ``arctan2``) and the output's polylines in metres run as compiled kernels
 (:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
 on random masks and on every extraction of an env episode. Steps 4–7 run as compiled passes
-(:mod:`topo._graph_kernels`, around numpy's ``arctan2``) that give bit for bit the map of the
-Python passes of ``_Graph`` (``_graph_topomap_reference``, tested the same way).
+(there too, around numpy's ``arctan2``) that give bit for bit the map of the Python passes of
+``_Graph`` (``_graph_topomap_reference``, tested the same way).
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -78,10 +78,17 @@ from skimage.morphology import disk
 
 from topo._checks import check_real
 from topo._extract_kernels import (
+    N_EDGES,
+    N_NODES,
+    N_PTS,
+    N_TAB,
+    OVER,
     clean_free,
     corner_arms,
     corner_cuts,
     free_crop,
+    graph_first,
+    graph_second,
     path_lengths,
     path_nodes,
     peaks,
@@ -91,7 +98,6 @@ from topo._extract_kernels import (
     topomap_arrays,
     wall_distances,
 )
-from topo._graph_kernels import N_EDGES, N_NODES, N_PTS, N_TAB, OVER, graph_first, graph_second
 from topo.graph import TopoMap
 
 
@@ -310,8 +316,8 @@ class _Edge:
 class _Graph:
     """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
     up to date so that every clean-up pass is linear in the graph's size: the reference of the
-    compiled passes (:mod:`topo._graph_kernels`), which reproduce its visiting order, Python
-    sets of path ids included."""
+    compiled passes (``graph_first``/``graph_second`` in :mod:`topo._extract_kernels`), which
+    reproduce its visiting order, Python sets of path ids included."""
 
     def __init__(self, free: np.ndarray) -> None:
         self.free = free
@@ -607,7 +613,7 @@ _NO_INTS = np.empty(0, dtype=np.int64)  # no loops' cuts (not read-only: one ker
 
 def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config: ExtractConfig,
                    res: float, origin: tuple[float, float]) -> TopoMap:
-    """:func:`_graph_topomap_reference` by the compiled passes of :mod:`topo._graph_kernels`
+    """:func:`_graph_topomap_reference` by the compiled passes of :mod:`topo._extract_kernels`
     (the same map, bit for bit), with numpy's ``arctan2`` between them on the same arrays as
     :meth:`_Graph.split_corners` (the open paths' turns at once, each loop's by
     :func:`_loop_corners`); arrays that are too small are made larger and the pass re-run."""

@@ -529,10 +529,10 @@ def test_loop_corners_kernel_is_the_numpy_form(seed, k, arm, min_turn, margin, r
 @given(st.lists(st.tuples(st.booleans(), st.integers(0, 4)), max_size=80),
        st.sampled_from([8, 16, 40, 300, 70000]), st.integers(0, 2**32 - 1))
 def test_path_sets_iterate_as_python_sets(ops, key_range, seed):
-    """``topo._graph_kernels``: The per-node hash tables give CPython's ``set`` iteration order after every add and
+    """The compiled clean-up's per-node hash tables give CPython's ``set`` iteration order after every add and
     discard (repeated keys, keys colliding in 8 slots, dummies reused, tables growing past 3/5
     full and rebuilt), for the non-negative int keys the clean-up stores."""
-    from topo._graph_kernels import OVER, new_set, set_add, set_discard, set_items
+    from topo._extract_kernels import OVER, new_set, set_add, set_discard, set_items
 
     rng = np.random.default_rng(seed)
     ni = np.zeros((1, 7), dtype=np.int64)
@@ -556,7 +556,7 @@ def test_path_sets_iterate_as_python_sets(ops, key_range, seed):
 def test_full_tables_flag_overflow_instead_of_writing():
     """A table pool too small to grow a set sets the overflow flag and leaves the pool as it
     was (the caller re-runs with larger arrays)."""
-    from topo._graph_kernels import N_TAB, OVER, new_set, set_add
+    from topo._extract_kernels import N_TAB, OVER, new_set, set_add
 
     ni = np.zeros((1, 7), dtype=np.int64)
     tab = np.full(10, 99, dtype=np.int64)
