@@ -992,172 +992,65 @@ def corner_cuts(turn, arc, lens, min_turn, margin):
 # the map of the Python passes (``topo.extract._graph_topomap_reference``), which ``tests/topo``
 # compares on hypothesis masks and on every extraction of env episodes.
 #
-# The passes' results depend on the order in which ``_Graph`` visits a node's paths (which of a
+# The passes' results depend on the order in which they visit a node's paths (which of a
 # degree-two node's two paths comes first sets the joined polyline's direction, and so later
-# floats and choices), and ``_Graph`` keeps them in Python sets of path ids. So each node's paths
-# are kept here in a hash table that reproduces CPython's ``set`` of small non-negative ints
-# (``Objects/setobject.c``: an 8-slot table, linear probes of 9 then perturbed probing, dummies
-# left by removals and reused by the last one passed, resizing at 3/5 full to the smallest power
-# of two above 4 × the size); ``tests/topo`` checks its iteration order against ``set`` itself on
-# random add/remove sequences.
+# floats and choices). ``_Graph`` makes that order explicit: ascending path id (``paths_of``). So
+# each node's paths are kept here in ascending id in its row of ``inc`` (the first ``DEG`` entries
+# of a fixed-width row): a new path always has the highest id yet, so adding appends it (once for
+# a loop), and removing one shifts the later ones down.
 #
-# The kernels are pure: arrays have fixed capacities, and a pass that would overflow one sets a
-# flag and stops, so that the caller (:mod:`topo.extract`) runs the kernel again with larger ones.
+# The kernels are pure: arrays have fixed capacities (nodes, paths, points, and the width of the
+# ``inc`` rows), and a pass that would overflow one sets a flag and stops, so that the caller
+# (:mod:`topo.extract`) runs the kernel again with larger ones.
 
-NULL, DUMMY = -1, -2  # set slots: never used, removed
 # columns of the node table ``ni``
-ALIVE, MASS, CORNER, TOFF, TMASK, FILL, USED = range(7)
+ALIVE, MASS, CORNER, DEG = range(4)
 # columns of the edge table ``ei``
 EALIVE, EU, EV, POFF, PLEN = range(5)
 # the counters ``cnt``
-N_NODES, N_EDGES, N_PTS, N_TAB, OVER = range(5)
+N_NODES, N_EDGES, N_PTS, OVER = range(4)
 
 
 @njit(cache=True, nogil=True)
-def _new_table(tab, cnt, size):
-    off = cnt[N_TAB]
-    if off + size > len(tab):
+def _attach(ni, inc, cnt, n, e):
+    """Path ``e``, the highest id yet, joins node ``n``'s row (once: a loop is attached twice);
+    a full row sets ``cnt[OVER]`` instead."""
+    d = ni[n, DEG]
+    if d and inc[n, d - 1] == e:
+        return
+    if d == inc.shape[1]:
         cnt[OVER] = 1
-        return -1
-    tab[off: off + size] = NULL
-    cnt[N_TAB] = off + size
-    return off
-
-
-@njit(cache=True, nogil=True)
-def _insert_clean(tab, off, mask, key):
-    perturb = key
-    i = key & mask
-    while True:
-        if tab[off + i] == NULL:
-            break
-        found = False
-        if i + 9 <= mask:
-            for j in range(1, 10):
-                if tab[off + i + j] == NULL:
-                    i += j
-                    found = True
-                    break
-        if found:
-            break
-        perturb >>= 5
-        i = (i * 5 + 1 + perturb) & mask
-    tab[off + i] = key
-
-
-@njit(cache=True, nogil=True)
-def _resize(tab, ni, cnt, n, minused):
-    size = 8
-    while size <= minused:
-        size <<= 1
-    old, old_mask = ni[n, TOFF], ni[n, TMASK]
-    if size == 8 and old_mask == 7 and ni[n, FILL] == ni[n, USED]:
         return
-    off = _new_table(tab, cnt, size)
-    if off < 0:
-        return
-    for s in range(old_mask + 1):
-        key = tab[old + s]
-        if key >= 0:
-            _insert_clean(tab, off, size - 1, key)
-    ni[n, TOFF], ni[n, TMASK], ni[n, FILL] = off, size - 1, ni[n, USED]
+    inc[n, d] = e
+    ni[n, DEG] = d + 1
 
 
 @njit(cache=True, nogil=True)
-def _probe(tab, off, mask, key):
-    """CPython's probe sequence for ``key`` up to its slot or the first never-used one: that
-    slot and the last dummy passed on the way (-1 if none)."""
-    i = key & mask
-    perturb = key
-    free = -1
-    while True:
-        probes = 9 if i + 9 <= mask else 0
-        j = i
-        while True:
-            k = tab[off + j]
-            if k == NULL or k == key:
-                return j, free
-            if k == DUMMY:
-                free = j
-            if probes == 0:
-                break
-            probes -= 1
-            j += 1
-        perturb >>= 5
-        i = (i * 5 + 1 + perturb) & mask
+def _detach(ni, inc, n, e):
+    """Path ``e`` leaves node ``n``'s row (if there), the later ones move down."""
+    d = ni[n, DEG]
+    for i in range(d):
+        if inc[n, i] == e:
+            for j in range(i + 1, d):
+                inc[n, j - 1] = inc[n, j]
+            ni[n, DEG] = d - 1
+            return
 
 
 @njit(cache=True, nogil=True)
-def set_add(tab, ni, cnt, n, key):
-    """``inc[n].add(key)`` as CPython's ``set_add_entry`` does it (nothing once a table could not
-    grow: ``cnt[OVER]``)."""
-    if cnt[OVER]:
-        return
-    off, mask = ni[n, TOFF], ni[n, TMASK]
-    j, free = _probe(tab, off, mask, key)
-    if tab[off + j] == key:
-        return
-    ni[n, USED] += 1
-    if free >= 0:
-        tab[off + free] = key
-        return
-    tab[off + j] = key
-    ni[n, FILL] += 1
-    if ni[n, FILL] * 5 >= mask * 3:
-        used = ni[n, USED]
-        _resize(tab, ni, cnt, n, used * 2 if used > 50000 else used * 4)
-
-
-@njit(cache=True, nogil=True)
-def set_discard(tab, ni, cnt, n, key):
-    """``inc[n].discard(key)`` (the slot becomes a dummy; nothing after ``cnt[OVER]``)."""
-    if cnt[OVER]:
-        return
-    off = ni[n, TOFF]
-    j, _ = _probe(tab, off, ni[n, TMASK], key)
-    if tab[off + j] == key:
-        tab[off + j] = DUMMY
-        ni[n, USED] -= 1
-
-
-@njit(cache=True, nogil=True)
-def set_items(tab, ni, n):
-    """The keys of ``inc[n]`` in ``set`` iteration order (slot order)."""
-    out = np.empty(ni[n, USED], dtype=np.int64)
-    k = 0
-    off = ni[n, TOFF]
-    for s in range(ni[n, TMASK] + 1):
-        key = tab[off + s]
-        if key >= 0:
-            out[k] = key
-            k += 1
-    return out
-
-
-@njit(cache=True, nogil=True)
-def new_set(tab, ni, cnt, n):
-    """An empty ``set()`` for node ``n``."""
-    off = _new_table(tab, cnt, 8)
-    ni[n, TOFF], ni[n, TMASK], ni[n, FILL], ni[n, USED] = off, 7, 0, 0
-    return off >= 0
-
-
-@njit(cache=True, nogil=True)
-def _add_node(ni, pos, tab, cnt, r, c):
+def _add_node(ni, pos, cnt, r, c):
     n = cnt[N_NODES]
     if n >= len(ni):
         cnt[OVER] = 1
         return -1
-    if not new_set(tab, ni, cnt, n):
-        return -1
     cnt[N_NODES] = n + 1
-    ni[n, ALIVE], ni[n, MASS], ni[n, CORNER] = 1, 1, 0
+    ni[n, ALIVE], ni[n, MASS], ni[n, CORNER], ni[n, DEG] = 1, 1, 0, 0
     pos[n, 0], pos[n, 1] = r, c
     return n
 
 
 @njit(cache=True, nogil=True)
-def _add_edge(ni, ei, elen, pts, tab, cnt, u, v, off, size):
+def _add_edge(ni, ei, elen, pts, inc, cnt, u, v, off, size):
     e = cnt[N_EDGES]
     if e >= len(ei):
         cnt[OVER] = 1
@@ -1165,16 +1058,16 @@ def _add_edge(ni, ei, elen, pts, tab, cnt, u, v, off, size):
     cnt[N_EDGES] = e + 1
     ei[e, EALIVE], ei[e, EU], ei[e, EV], ei[e, POFF], ei[e, PLEN] = 1, u, v, off, size
     elen[e] = polyline_length(pts[off: off + size])
-    set_add(tab, ni, cnt, u, e)
-    set_add(tab, ni, cnt, v, e)
+    _attach(ni, inc, cnt, u, e)
+    _attach(ni, inc, cnt, v, e)
     return e
 
 
 @njit(cache=True, nogil=True)
-def _remove_edge(ni, ei, tab, cnt, e):
+def _remove_edge(ni, ei, inc, e):
     ei[e, EALIVE] = 0
-    set_discard(tab, ni, cnt, ei[e, EU], e)
-    set_discard(tab, ni, cnt, ei[e, EV], e)
+    _detach(ni, inc, ei[e, EU], e)
+    _detach(ni, inc, ei[e, EV], e)
 
 
 @njit(cache=True, nogil=True)
@@ -1183,12 +1076,11 @@ def _is_free(given, r, c):
 
 
 @njit(cache=True, nogil=True)
-def _dissolve(ni, ei, elen, pts, tab, cnt, n):
+def _dissolve(ni, ei, elen, pts, inc, cnt, n):
     """``_Graph.dissolve``: join the two paths of an alive, non-corner degree-two node."""
-    if not ni[n, ALIVE] or ni[n, CORNER] or ni[n, USED] != 2:
+    if not ni[n, ALIVE] or ni[n, CORNER] or ni[n, DEG] != 2:
         return
-    pair = set_items(tab, ni, n)
-    ea, eb = pair[0], pair[1]
+    ea, eb = inc[n, 0], inc[n, 1]  # ascending id
     if ei[ea, EU] == ei[ea, EV] or ei[eb, EU] == ei[eb, EV]:
         return
     ua = ei[ea, EV] if ei[ea, EU] == n else ei[ea, EU]
@@ -1208,22 +1100,22 @@ def _dissolve(ni, ei, elen, pts, tab, cnt, n):
     for i in range(1, lb):  # path b from n, without n
         j = b0 + (lb - 1 - i if turn_b else i)
         pts[off + la - 1 + i, 0], pts[off + la - 1 + i, 1] = pts[j, 0], pts[j, 1]
-    _remove_edge(ni, ei, tab, cnt, ea)
-    _remove_edge(ni, ei, tab, cnt, eb)
+    _remove_edge(ni, ei, inc, ea)
+    _remove_edge(ni, ei, inc, eb)
     ni[n, ALIVE], ni[n, CORNER] = 0, 0
-    _add_edge(ni, ei, elen, pts, tab, cnt, ua, vb, off, size)
+    _add_edge(ni, ei, elen, pts, inc, cnt, ua, vb, off, size)
 
 
 @njit(cache=True, nogil=True)
-def _dissolve_all(ni, ei, elen, pts, tab, cnt):
+def _dissolve_all(ni, ei, elen, pts, inc, cnt):
     for n in range(cnt[N_NODES]):
-        _dissolve(ni, ei, elen, pts, tab, cnt, n)
+        _dissolve(ni, ei, elen, pts, inc, cnt, n)
         if cnt[OVER]:
             return
 
 
 @njit(cache=True, nogil=True)
-def _prune_spurs(ni, ei, elen, pts, tab, cnt, radius, min_protrusion):
+def _prune_spurs(ni, ei, elen, pts, inc, cnt, radius, min_protrusion):
     """``_Graph.prune_spurs``."""
     leaves = np.empty(len(ei), dtype=np.int64)
     hubs = np.empty(len(ei), dtype=np.int64)
@@ -1235,7 +1127,7 @@ def _prune_spurs(ni, ei, elen, pts, tab, cnt, radius, min_protrusion):
             u, v = ei[e, EU], ei[e, EV]
             if u == v:
                 continue
-            du, dv = ni[u, USED], ni[v, USED]
+            du, dv = ni[u, DEG], ni[v, DEG]
             if du == 1 and dv >= 3:
                 leaf, hub = u, v
             elif dv == 1 and du >= 3:
@@ -1252,17 +1144,17 @@ def _prune_spurs(ni, ei, elen, pts, tab, cnt, radius, min_protrusion):
             return
         for k in range(nd):
             leaf = leaves[k]
-            for e in set_items(tab, ni, leaf):
-                _remove_edge(ni, ei, tab, cnt, e)
+            while ni[leaf, DEG]:  # its paths in ascending id
+                _remove_edge(ni, ei, inc, inc[leaf, 0])
             ni[leaf, ALIVE], ni[leaf, CORNER] = 0, 0
         for k in range(nd):
-            _dissolve(ni, ei, elen, pts, tab, cnt, hubs[k])
+            _dissolve(ni, ei, elen, pts, inc, cnt, hubs[k])
             if cnt[OVER]:
                 return
 
 
 @njit(cache=True, nogil=True)
-def _merge_short(ni, pos, ei, elen, pts, tab, cnt, given, radius):
+def _merge_short(ni, pos, ei, elen, pts, inc, cnt, given, radius):
     """``_Graph.merge_short``."""
     m = cnt[N_EDGES]
     ids = np.empty(m, dtype=np.int64)
@@ -1277,17 +1169,18 @@ def _merge_short(ni, pos, ei, elen, pts, tab, cnt, given, radius):
         u, v = ei[e, EU], ei[e, EV]
         if not ei[e, EALIVE] or u == v or elen[e] >= radius:
             continue
-        _remove_edge(ni, ei, tab, cnt, e)
-        keep, drop = (u, v) if ni[u, USED] >= ni[v, USED] else (v, u)
+        _remove_edge(ni, ei, inc, e)
+        keep, drop = (u, v) if ni[u, DEG] >= ni[v, DEG] else (v, u)
         mk, md = ni[keep, MASS], ni[drop, MASS]
         r = (mk * pos[keep, 0] + md * pos[drop, 0]) / (mk + md)
         c = (mk * pos[keep, 1] + md * pos[drop, 1]) / (mk + md)
         if _is_free(given, r, c):
             pos[keep, 0], pos[keep, 1] = r, c
-        for k in set_items(tab, ni, drop):
+        while ni[drop, DEG]:  # its paths in ascending id; the new ones do not end at drop
+            k = inc[drop, 0]
             ou, ov = ei[k, EU], ei[k, EV]
-            _remove_edge(ni, ei, tab, cnt, k)
-            _add_edge(ni, ei, elen, pts, tab, cnt, keep if ou == drop else ou,
+            _remove_edge(ni, ei, inc, k)
+            _add_edge(ni, ei, elen, pts, inc, cnt, keep if ou == drop else ou,
                       keep if ov == drop else ov, ei[k, POFF], ei[k, PLEN])
             if cnt[OVER]:
                 return
@@ -1298,27 +1191,28 @@ def _merge_short(ni, pos, ei, elen, pts, tab, cnt, given, radius):
 
 
 @njit(cache=True, nogil=True)
-def _split(ni, pos, ei, elen, pts, tab, cnt, e, cuts, at_start):
+def _split(ni, pos, ei, elen, pts, inc, cnt, e, cuts, at_start):
     """``_Graph._split``."""
     u, v, off, size = ei[e, EU], ei[e, EV], ei[e, POFF], ei[e, PLEN]
-    _remove_edge(ni, ei, tab, cnt, e)
+    _remove_edge(ni, ei, inc, e)
     if at_start:
         ni[u, CORNER] = 1
     prev, prev_cut = u, 0
     for c in cuts:
-        node = _add_node(ni, pos, tab, cnt, pts[off + c, 0], pts[off + c, 1])
+        node = _add_node(ni, pos, cnt, pts[off + c, 0], pts[off + c, 1])
         if node < 0:
             return
         ni[node, CORNER] = 1
-        _add_edge(ni, ei, elen, pts, tab, cnt, prev, node, off + prev_cut, c + 1 - prev_cut)
+        _add_edge(ni, ei, elen, pts, inc, cnt, prev, node, off + prev_cut, c + 1 - prev_cut)
         prev, prev_cut = node, c
-    _add_edge(ni, ei, elen, pts, tab, cnt, prev, v, off + prev_cut, size - prev_cut)
+    _add_edge(ni, ei, elen, pts, inc, cnt, prev, v, off + prev_cut, size - prev_cut)
 
 
 @njit(cache=True, nogil=True)
-def _degree(ei, tab, ni, n):
+def _degree(ei, inc, ni, n):
     d = 0
-    for e in set_items(tab, ni, n):
+    for i in range(ni[n, DEG]):
+        e = inc[n, i]
         d += 2 if ei[e, EU] == ei[e, EV] else 1
     return d
 
@@ -1336,7 +1230,7 @@ def _search_left(a, v):
 
 
 @njit(cache=True, nogil=True)
-def _break_self_loops(ni, pos, ei, elen, pts, tab, cnt):
+def _break_self_loops(ni, pos, ei, elen, pts, inc, cnt):
     """``_Graph.break_self_loops``."""
     m = cnt[N_EDGES]
     for e in range(m):
@@ -1344,7 +1238,7 @@ def _break_self_loops(ni, pos, ei, elen, pts, tab, cnt):
             continue
         off, size = ei[e, POFF], ei[e, PLEN]
         if size < 4:
-            _remove_edge(ni, ei, tab, cnt, e)
+            _remove_edge(ni, ei, inc, e)
             continue
         arc = np.empty(size, dtype=np.float64)
         arc[0] = 0.0
@@ -1355,13 +1249,13 @@ def _break_self_loops(ni, pos, ei, elen, pts, tab, cnt):
         c1 = min(max(_search_left(arc, arc[-1] * 1.0 / 3.0), 1), size - 2)
         c2 = min(max(_search_left(arc, arc[-1] * 2.0 / 3.0), 1), size - 2)
         cuts = np.array([c1]) if c1 == c2 else np.array([min(c1, c2), max(c1, c2)])
-        _split(ni, pos, ei, elen, pts, tab, cnt, e, cuts, False)
+        _split(ni, pos, ei, elen, pts, inc, cnt, e, cuts, False)
         if cnt[OVER]:
             return
 
 
 @njit(cache=True, nogil=True)
-def _snap_to_free(ni, pos, ei, pts, tab, cnt, given):
+def _snap_to_free(ni, pos, ei, pts, inc, cnt, given):
     """``_Graph.snap_to_free``."""
     for n in range(cnt[N_NODES]):
         if not ni[n, ALIVE]:
@@ -1370,7 +1264,8 @@ def _snap_to_free(ni, pos, ei, pts, tab, cnt, given):
         if _is_free(given, r, c):
             continue
         best, best_d = -1, np.inf
-        for e in set_items(tab, ni, n):
+        for i in range(ni[n, DEG]):  # ascending id: ties go to the lowest-numbered path
+            e = inc[n, i]
             off = ei[e, POFF]
             arg, d_min = -1, np.inf
             for i in range(off, off + ei[e, PLEN]):
@@ -1389,31 +1284,31 @@ def _snap_to_free(ni, pos, ei, pts, tab, cnt, given):
 def _state(node_rc, ends, points, bounds, lengths, caps):
     """``_Graph.start``: nodes ``0..N-1``, path ``k`` from ``ends[k, 0]`` to ``ends[k, 1]``
     along ``points[bounds[k]:bounds[k + 1]]``, in arrays of capacities ``caps`` (nodes, edges,
-    points, set slots)."""
-    ni = np.zeros((caps[0], 7), dtype=np.int64)
+    points, ``inc`` row width)."""
+    ni = np.zeros((caps[0], 4), dtype=np.int64)
     pos = np.empty((caps[0], 2), dtype=np.float64)
     ei = np.zeros((caps[1], 5), dtype=np.int64)
     elen = np.empty(caps[1], dtype=np.float64)
     pts = np.empty((caps[2], 2), dtype=np.float64)
-    tab = np.empty(caps[3], dtype=np.int64)
-    cnt = np.zeros(5, dtype=np.int64)
+    inc = np.empty((caps[0], caps[3]), dtype=np.int64)
+    cnt = np.zeros(4, dtype=np.int64)
     if len(node_rc) > caps[0] or len(ends) > caps[1] or len(points) > caps[2]:
         cnt[OVER] = 1
-        return ni, pos, ei, elen, pts, tab, cnt
+        return ni, pos, ei, elen, pts, inc, cnt
     pts[: len(points)] = points
     cnt[N_PTS] = len(points)
     for n in range(len(node_rc)):
-        if _add_node(ni, pos, tab, cnt, node_rc[n, 0], node_rc[n, 1]) < 0:
-            return ni, pos, ei, elen, pts, tab, cnt
+        if _add_node(ni, pos, cnt, node_rc[n, 0], node_rc[n, 1]) < 0:
+            return ni, pos, ei, elen, pts, inc, cnt
     for k in range(len(ends)):
         u, v = ends[k, 0], ends[k, 1]
         ei[k, EALIVE], ei[k, EU], ei[k, EV] = 1, u, v
         ei[k, POFF], ei[k, PLEN] = bounds[k], bounds[k + 1] - bounds[k]
         elen[k] = lengths[k]
-        set_add(tab, ni, cnt, u, k)
-        set_add(tab, ni, cnt, v, k)
+        _attach(ni, inc, cnt, u, k)
+        _attach(ni, inc, cnt, v, k)
     cnt[N_EDGES] = len(ends)
-    return ni, pos, ei, elen, pts, tab, cnt
+    return ni, pos, ei, elen, pts, inc, cnt
 
 
 @njit(cache=True, nogil=True)
@@ -1460,42 +1355,42 @@ def graph_first(node_rc, ends, points, bounds, lengths, radius, given, min_protr
     """The clean-up up to numpy's ``arctan2`` of the corner step (``extract_topomap``'s
     ``_Graph.start``, ``prune_spurs``, ``dissolve_degree_two``, ``merge_short``, and
     :func:`topo._extract_kernels.corner_arms` of the open paths, as ``split_corners`` calls it):
-    the graph's state (``ni, pos, ei, elen, pts, tab, cnt``; ``cnt[OVER]`` set if ``caps`` were
+    the graph's state (``ni, pos, ei, elen, pts, inc, cnt``; ``cnt[OVER]`` set if ``caps`` were
     too small), the open paths' ids, sizes, arc lengths, cross and dot products, and the loops'
     ids, sizes and concatenated polylines."""
-    ni, pos, ei, elen, pts, tab, cnt = _state(node_rc, ends, points, bounds, lengths, caps)
+    ni, pos, ei, elen, pts, inc, cnt = _state(node_rc, ends, points, bounds, lengths, caps)
     if not cnt[OVER]:
-        _prune_spurs(ni, ei, elen, pts, tab, cnt, radius, min_protrusion)
+        _prune_spurs(ni, ei, elen, pts, inc, cnt, radius, min_protrusion)
     if not cnt[OVER]:
-        _dissolve_all(ni, ei, elen, pts, tab, cnt)
+        _dissolve_all(ni, ei, elen, pts, inc, cnt)
     if not cnt[OVER]:
-        _merge_short(ni, pos, ei, elen, pts, tab, cnt, given, merge_px)
+        _merge_short(ni, pos, ei, elen, pts, inc, cnt, given, merge_px)
     open_ids, open_lens, open_pts, loop_ids, loop_lens, loop_pts = _open_and_loops(ei, pts, cnt)
     if len(open_ids):
         arc, cross, dot = corner_arms(open_pts, open_lens, arm)
     else:
         arc = cross = dot = np.empty(0, dtype=np.float64)
-    return ((ni, pos, ei, elen, pts, tab, cnt), open_ids, open_lens, arc, cross, dot, loop_ids,
+    return ((ni, pos, ei, elen, pts, inc, cnt), open_ids, open_lens, arc, cross, dot, loop_ids,
             loop_lens, loop_pts)
 
 
 @njit(cache=True, nogil=True)
 def _grown(state, caps):
-    ni0, pos0, ei0, elen0, pts0, tab0, cnt0 = state
-    ni = np.zeros((max(caps[0], len(ni0)), 7), dtype=np.int64)
+    ni0, pos0, ei0, elen0, pts0, inc0, cnt0 = state
+    ni = np.zeros((max(caps[0], len(ni0)), 4), dtype=np.int64)
     pos = np.empty((len(ni), 2), dtype=np.float64)
     ei = np.zeros((max(caps[1], len(ei0)), 5), dtype=np.int64)
     elen = np.empty(len(ei), dtype=np.float64)
     pts = np.empty((max(caps[2], len(pts0)), 2), dtype=np.float64)
-    tab = np.empty(max(caps[3], len(tab0)), dtype=np.int64)
-    n, m, p, t = cnt0[N_NODES], cnt0[N_EDGES], cnt0[N_PTS], cnt0[N_TAB]
+    inc = np.empty((len(ni), max(caps[3], inc0.shape[1])), dtype=np.int64)
+    n, m, p = cnt0[N_NODES], cnt0[N_EDGES], cnt0[N_PTS]
     ni[:n] = ni0[:n]
     pos[:n] = pos0[:n]
     ei[:m] = ei0[:m]
     elen[:m] = elen0[:m]
     pts[:p] = pts0[:p]
-    tab[:t] = tab0[:t]
-    return ni, pos, ei, elen, pts, tab, cnt0.copy()
+    inc[:n, : inc0.shape[1]] = inc0[:n]
+    return ni, pos, ei, elen, pts, inc, cnt0.copy()
 
 
 @njit(cache=True, nogil=True)
@@ -1508,13 +1403,13 @@ def graph_second(state, open_ids, open_lens, arc, turn, loop_ids, anchored_cuts,
     ``dissolve_degree_two``, ``merge_short``, ``break_self_loops`` and ``snap_to_free``; returns
     ``cnt`` (``cnt[OVER]``: run again with larger ``caps``) and
     :func:`topo._extract_kernels.topomap_arrays` of the result (an empty graph: no nodes)."""
-    ni, pos, ei, elen, pts, tab, cnt = _grown(state, caps)
+    ni, pos, ei, elen, pts, inc, cnt = _grown(state, caps)
     if len(open_ids) and not cnt[OVER]:
         cuts, counts = corner_cuts(turn, arc, open_lens, min_turn, merge_px)
         start = 0
         for j in range(len(open_ids)):
             if counts[j]:
-                _split(ni, pos, ei, elen, pts, tab, cnt, open_ids[j],
+                _split(ni, pos, ei, elen, pts, inc, cnt, open_ids[j],
                        cuts[start: start + counts[j]], False)
                 start += counts[j]
             if cnt[OVER]:
@@ -1525,7 +1420,7 @@ def graph_second(state, open_ids, open_lens, arc, turn, loop_ids, anchored_cuts,
             break
         e = loop_ids[j]
         u = ei[e, EU]
-        if _degree(ei, tab, ni, u) > 2 or ni[u, CORNER]:
+        if _degree(ei, inc, ni, u) > 2 or ni[u, CORNER]:
             cuts = anchored_cuts[a: a + anchored_counts[j]]
         else:
             cuts = free_cuts[f: f + free_counts[j]]
@@ -1535,15 +1430,15 @@ def graph_second(state, open_ids, open_lens, arc, turn, loop_ids, anchored_cuts,
             at_start = False
             for c in cuts:
                 at_start |= c == 0
-            _split(ni, pos, ei, elen, pts, tab, cnt, e, cuts[cuts > 0], at_start)
+            _split(ni, pos, ei, elen, pts, inc, cnt, e, cuts[cuts > 0], at_start)
     if not cnt[OVER]:
-        _dissolve_all(ni, ei, elen, pts, tab, cnt)
+        _dissolve_all(ni, ei, elen, pts, inc, cnt)
     if not cnt[OVER]:
-        _merge_short(ni, pos, ei, elen, pts, tab, cnt, given, merge_px)
+        _merge_short(ni, pos, ei, elen, pts, inc, cnt, given, merge_px)
     if not cnt[OVER]:
-        _break_self_loops(ni, pos, ei, elen, pts, tab, cnt)
+        _break_self_loops(ni, pos, ei, elen, pts, inc, cnt)
     if not cnt[OVER]:
-        _snap_to_free(ni, pos, ei, pts, tab, cnt, given)
+        _snap_to_free(ni, pos, ei, pts, inc, cnt, given)
     n_nodes = m = p = 0
     if not cnt[OVER]:
         for n in range(cnt[N_NODES]):

@@ -43,7 +43,9 @@ numpy's ``arctan2``) and the output's polylines in metres run as compiled kernel
 (:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
 on random masks and on every extraction of an env episode. Steps 4–7 run as compiled passes
 (there too, around numpy's ``arctan2``) that give bit for bit the map of the Python passes of
-``_Graph`` (``_graph_topomap_reference``, tested the same way).
+``_Graph`` (``_graph_topomap_reference``, tested the same way). Both visit nodes and paths in
+an explicit order — by ascending id, a node's paths included — so the map depends on no hash
+set's layout.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -58,8 +60,8 @@ boxes with free speckle inside) 75 nodes, (49, 17, 9). DungeonMaps at 0.1 m/pixe
 ``103`` 17 (8, 4, 5), ``104`` 14 (7, 5, 2), ``105`` 10 (5, 3, 2).
 
 Rotating a map by 90° (``np.rot90``) gives the same counts on all of those but ``depot`` (counts
-within 7 %, 81–89 % of its nodes matched); junctions land within one cell (diagonal included)
-of their rotated twins, corners within 2.3 cells and dead ends within 3.2 cells: ``skeletonize``
+within 7 %, 81–85 % of its nodes matched); junctions land within one cell (diagonal included)
+of their rotated twins, corners within 2.9 cells and dead ends within 3.2 cells: ``skeletonize``
 is not symmetric under rotation, and thinning stops a pixel or two early or late at a dead end.
 A 90° bend of a corridor wider than ~1.5 m whose skeleton cuts the corner on a long diagonal may
 measure under ``corner_angle`` and get no corner node.
@@ -81,7 +83,6 @@ from topo._extract_kernels import (
     N_EDGES,
     N_NODES,
     N_PTS,
-    N_TAB,
     OVER,
     clean_free,
     corner_arms,
@@ -317,7 +318,14 @@ class _Graph:
     """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
     up to date so that every clean-up pass is linear in the graph's size: the reference of the
     compiled passes (``graph_first``/``graph_second`` in :mod:`topo._extract_kernels`), which
-    reproduce its visiting order, Python sets of path ids included."""
+    visit everything in the same order.
+
+    That order is explicit, so that the map does not depend on how Python lays out a ``set``:
+    nodes and paths are visited by ascending id (ids are handed out in increasing order and
+    ``pos``/``edges`` keep insertion order), and a node's paths (the set ``inc[n]``) always in
+    ascending path id (:meth:`paths_of`); ``merge_short`` takes paths by length, equal lengths by
+    id. Which of a degree-two node's two paths comes first sets the direction of the joined
+    polyline, and so later floats and choices."""
 
     def __init__(self, free: np.ndarray) -> None:
         self.free = free
@@ -374,9 +382,13 @@ class _Graph:
         self.radius.pop(n, None)
 
     def remove_node(self, n: int) -> None:
-        for e in list(self.inc[n]):
+        for e in self.paths_of(n):
             self.remove_edge(e)
         self._forget(n)
+
+    def paths_of(self, n: int) -> list[int]:
+        """The paths at node ``n`` in ascending id (the order every pass visits them in)."""
+        return sorted(self.inc[n])
 
     def degree(self, n: int) -> int:
         # a self-loop counts twice, as in networkx
@@ -410,10 +422,11 @@ class _Graph:
                 self.dissolve(hub)
 
     def dissolve(self, n: int) -> None:
-        """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner."""
+        """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner: the
+        lower-numbered path, then the other (the new path runs from the first one's far end)."""
         if n not in self.pos or n in self.corners or len(self.inc[n]) != 2:
             return
-        ea, eb = self.inc[n]
+        ea, eb = self.paths_of(n)
         a, b = self.edges[ea], self.edges[eb]
         if a.u == a.v or b.u == b.v:
             return
@@ -439,12 +452,13 @@ class _Graph:
 
     def snap_to_free(self) -> None:
         """Move a node that sits on a non-free cell (a filled speck, or a merged mean) to the
-        nearest free pixel of its own paths, so that every node lies in free space."""
+        nearest free pixel of its own paths, so that every node lies in free space (of equally
+        near pixels, the first of the lowest-numbered path)."""
         for n, rc in self.pos.items():
             if self._is_free(rc):
                 continue
             best, best_d = None, np.inf
-            for e in self.inc[n]:
+            for e in self.paths_of(n):
                 poly = self.edges[e].poly
                 ok = self._free_at(poly)
                 if ok.any():
@@ -457,7 +471,9 @@ class _Graph:
     def merge_short(self, radius: float) -> None:
         """Contract paths shorter than ``radius``, shortest first, into one node at the mean of
         the skeleton nodes both ends stand for (the better connected end's place if that mean
-        is not free); it takes over both ends' other paths."""
+        is not free); it takes over both ends' other paths (the dropped end's in ascending id,
+        each becoming a new path). Equal lengths go by path id (a stable sort of ``edges``,
+        which is in id order)."""
         for e in sorted(self.edges, key=lambda k: self.edges[k].length):
             edge = self.edges.get(e)
             if edge is None or edge.u == edge.v or edge.length >= radius:
@@ -469,7 +485,7 @@ class _Graph:
             mean = (mk * self.pos[keep] + md * self.pos[drop]) / (mk + md)
             if self._is_free(mean):
                 self.pos[keep] = mean
-            for k in list(self.inc[drop]):
+            for k in self.paths_of(drop):
                 other = self.remove_edge(k)
                 a = keep if other.u == drop else other.u
                 b = keep if other.v == drop else other.v
@@ -628,7 +644,8 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
     merge_px = config.merge_radius * to_px
     arm, min_turn = config.corner_arm * to_px, math.radians(config.corner_angle)
     n, m, p = len(node_rc), len(ends), len(points)
-    caps = np.array([n, 2 * m + 16, 3 * p + 256, 32 * n + 256], dtype=np.int64) // _SHRINK
+    # nodes, paths, points, and paths per node (a junction cluster merged into one node)
+    caps = np.array([n, 2 * m + 16, 3 * p + 256, 16], dtype=np.int64) // _SHRINK
     while True:
         first = graph_first(node_rc, ends, points, bounds, path_lengths(points, bounds), radius,
                             given, config.min_spur_length * to_px, merge_px, arm, caps)
@@ -650,8 +667,7 @@ def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config
         counts = tuple(np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts)
     used = state[-1]
     caps = np.array([used[N_NODES] + len(arc) + 2 * m + 16, 2 * used[N_EDGES] + len(arc) + 16,
-                     used[N_PTS] + 64, used[N_TAB] + 16 * used[N_NODES] + 64],
-                    dtype=np.int64) // _SHRINK
+                     used[N_PTS] + 64, state[5].shape[1]], dtype=np.int64) // _SHRINK
     while True:
         cnt, arrays = graph_second(state, open_ids, open_lens, arc, np.abs(np.arctan2(cross, dot)),
                                    loop_ids, cuts[0], counts[0], cuts[1], counts[1], given,
