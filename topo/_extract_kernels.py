@@ -994,7 +994,8 @@ def corner_cuts(turn, arc, lens, min_turn, margin):
 #
 # The passes' results depend on the order in which they visit a node's paths (which of a
 # degree-two node's two paths comes first sets the joined polyline's direction, and so later
-# floats and choices). ``_Graph`` makes that order explicit: ascending path id (``paths_of``). So
+# floats and choices). ``_Graph`` makes that order explicit: ascending path id (``paths_of``), as
+# for the nodes and paths themselves (``range`` over the tables here, its dicts there). So
 # each node's paths are kept here in ascending id in its row of ``inc`` (the first ``DEG`` entries
 # of a fixed-width row): a new path always has the highest id yet, so adding appends it (once for
 # a loop), and removing one shifts the later ones down.

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from topo import NodeKind, OccupancyGrid
+from topo import NodeKind, OccupancyGrid, TopoMap
 from topo.extract import ExtractConfig, extract_topomap
 from topo.maps import load_floor_plan
 
@@ -594,6 +594,48 @@ def test_compiled_clean_up_is_the_python_passes(seed, density, h, w, res, sonar,
         extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
                         config=cfg)
     assert len(seen) == int(mask.any())
+
+
+class _BackwardsSet(set):
+    """A set iterating in descending order (whatever CPython's layout would give)."""
+
+    def __iter__(self):
+        return iter(sorted(set.__iter__(self), reverse=True))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.45, 0.75), st.sampled_from([0.25, 0.1]),
+       st.booleans())
+def test_python_passes_do_not_depend_on_set_order(seed, density, res, sonar):
+    """``_Graph``'s map is the same when its sets of a node's paths iterate backwards: every
+    pass visits them in an explicit order (``paths_of``), not in the set's."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    mask = ndimage.binary_opening(rng.random((70, 80)) < density)
+    cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
+    args = []
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(extract, "_graph_topomap", lambda *a: args.append(a) or TopoMap.empty())
+        extract_topomap(mask, resolution=res, config=cfg)
+    if not args:
+        return
+    want = extract._graph_topomap_reference(*args[0])
+    start, add_node = extract._Graph.start, extract._Graph.add_node
+
+    def start_backwards(self, *a):
+        start(self, *a)
+        self.inc = {n: _BackwardsSet(s) for n, s in self.inc.items()}
+
+    def add_node_backwards(self, rc):
+        n = add_node(self, rc)
+        self.inc[n] = _BackwardsSet()
+        return n
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(extract._Graph, "start", start_backwards)
+        m.setattr(extract._Graph, "add_node", add_node_backwards)
+        assert_same_maps(extract._graph_topomap_reference(*args[0]), want)
 
 
 @settings(max_examples=20, deadline=None)
