@@ -4,7 +4,8 @@ Masks are crops of a DungeonMaps floor plan (real corridors and rooms) at 0.1 m/
 400x400 sonar grid built by scanning that plan (ragged free space, ``ExtractConfig.for_sonar``);
 medians over repeats, all in this one process, so the ratio to ``skeletonize`` is fair on a busy
 machine. The last row ("env sonar") extracts the env's own grids (the nodes column there is the
-number of masks).
+number of masks); then the clean-up after thinning on those masks, compiled against the Python
+passes it reproduces.
 
     python benchmarks/topo_speed.py
 """
@@ -120,6 +121,34 @@ def env_row(steps: int = 1000) -> None:
     print(f"{'env sonar':>10} {len(masks):>6} {t['ex'] / len(masks) * 1e3:>9.2f} "
           f"{t['sk'] / len(masks) * 1e3:>9.2f} {t['ex'] / t['sk']:>6.2f} "
           f"{'(masks ~' + format(side, '.0f') + ' cells)':>12}")
+    clean_up_row(masks, cfg)
+
+
+def clean_up_row(masks: list[np.ndarray], cfg: ExtractConfig) -> None:
+    """The clean-up after thinning (steps 3-7 and the output) on the env masks: the compiled
+    passes against the Python ones they reproduce (``_graph_topomap_reference``)."""
+    from topo import extract
+
+    inputs = []
+    orig = extract._graph_topomap
+
+    def record(*args):
+        inputs.append(args)
+        return orig(*args)
+
+    extract._graph_topomap = record
+    try:
+        for m in masks:
+            extract_topomap(m, 0.1, config=cfg)
+    finally:
+        extract._graph_topomap = orig
+    t = interleaved_medians(
+        {"compiled": lambda: [extract._graph_topomap(*a) for a in inputs],
+         "python": lambda: [extract._graph_topomap_reference(*a) for a in inputs]}, 5)
+    print(f"\nclean-up after thinning on the {len(inputs)} env masks, median ms per mask")
+    print(f"{'compiled':>9} {'python':>9} {'ratio':>6}")
+    print(f"{t['compiled'] / len(inputs) * 1e3:>9.3f} {t['python'] / len(inputs) * 1e3:>9.3f} "
+          f"{t['python'] / t['compiled']:>6.2f}")
 
 
 if __name__ == "__main__":

@@ -41,7 +41,11 @@ Pipeline (all parameters in :class:`ExtractConfig`):
 Steps 1–3, the free-disc radii of step 4, polyline lengths, step 6 on open paths (all but
 numpy's ``arctan2``) and the output's polylines in metres run as compiled kernels
 (:mod:`topo._extract_kernels`), each tested to give exactly the library's or numpy's result,
-on random masks and on every extraction of an env episode.
+on random masks and on every extraction of an env episode. Steps 4–7 run as compiled passes
+(there too, around numpy's ``arctan2``) that give bit for bit the map of the Python passes of
+``_Graph`` (``_graph_topomap_reference``, tested the same way). Both visit nodes and paths in
+an explicit order — by ascending id, a node's paths included — so the map depends on no hash
+set's layout.
 
 Nodes are numbered in a deterministic order (by ``y``, then ``x``). Coordinates are metres in the
 mask's frame: cell ``(iy, ix)`` has its centre at ``origin + (ix + 0.5, iy + 0.5) · resolution``
@@ -56,8 +60,8 @@ boxes with free speckle inside) 75 nodes, (49, 17, 9). DungeonMaps at 0.1 m/pixe
 ``103`` 17 (8, 4, 5), ``104`` 14 (7, 5, 2), ``105`` 10 (5, 3, 2).
 
 Rotating a map by 90° (``np.rot90``) gives the same counts on all of those but ``depot`` (counts
-within 7 %, 81–89 % of its nodes matched); junctions land within one cell (diagonal included)
-of their rotated twins, corners within 2.3 cells and dead ends within 3.2 cells: ``skeletonize``
+within 7 %, 81–85 % of its nodes matched); junctions land within one cell (diagonal included)
+of their rotated twins, corners within 2.9 cells and dead ends within 3.2 cells: ``skeletonize``
 is not symmetric under rotation, and thinning stops a pixel or two early or late at a dead end.
 A 90° bend of a corridor wider than ~1.5 m whose skeleton cuts the corner on a long diagonal may
 measure under ``corner_angle`` and get no corner node.
@@ -76,16 +80,23 @@ from skimage.morphology import disk
 
 from topo._checks import check_real
 from topo._extract_kernels import (
+    N_EDGES,
+    N_NODES,
+    N_PTS,
+    OVER,
     clean_free,
     corner_arms,
     corner_cuts,
-    metre_paths,
+    free_crop,
+    graph_first,
+    graph_second,
     path_lengths,
     path_nodes,
     peaks,
     polyline_length,
     skeleton_paths,
     skeletonize,
+    topomap_arrays,
     wall_distances,
 )
 from topo.graph import TopoMap
@@ -235,9 +246,38 @@ def _open_corners_numpy(polys: list[np.ndarray], arm: float, min_turn: float,
     return [cuts[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
+def _loop_corner_sets(poly: np.ndarray, arm: float, min_turn: float,
+                      margins: tuple[float, ...]) -> list[np.ndarray]:
+    """:func:`_loop_corners` for each of ``margins`` (the turns computed once): the arc lengths
+    and chord products by the compiled :func:`topo._extract_kernels.corner_arms` and numpy's
+    ``arctan2``, the same floats as :func:`_loop_corners_numpy` (``tests/topo`` compares)."""
+    ring = poly[:-1]
+    n = len(ring)
+    if n < 4:
+        return [np.empty(0, dtype=np.int64) for _ in margins]
+    points = np.concatenate([ring, ring, ring, ring[:1]])
+    arc, cross, dot = corner_arms(points, np.array([len(points)], dtype=np.int64), arm)
+    total = arc[n]
+    if total <= 2.0 * arm:
+        return [np.empty(0, dtype=np.int64) for _ in margins]
+    turn = np.abs(np.arctan2(cross, dot))
+    local = arc - arc[n]
+    candidate = np.zeros(len(points), dtype=bool)
+    candidate[n // 2: 2 * n + n // 2] = turn[n // 2: 2 * n + n // 2] > min_turn
+    at = peaks(turn, candidate, np.zeros(len(points), dtype=np.int64))
+    at = at[(at >= n) & (at < 2 * n)]
+    return [np.sort(at[(local[at] >= m) & (total - local[at] >= m)] - n) for m in margins]
+
+
 def _loop_corners(poly: np.ndarray, arm: float, min_turn: float, margin: float) -> np.ndarray:
     """Corner indices of a closed polyline (``poly[0] == poly[-1]``) into ``poly[:-1]``,
     ignoring the stretch within ``margin`` of the anchor ``poly[0]`` (0 = no anchor)."""
+    return _loop_corner_sets(poly, arm, min_turn, (margin,))[0]
+
+
+def _loop_corners_numpy(poly: np.ndarray, arm: float, min_turn: float,
+                        margin: float) -> np.ndarray:
+    """The numpy form of :func:`_loop_corners` (its reference in ``tests/topo``)."""
     ring = poly[:-1]
     n = len(ring)
     if n < 4:
@@ -276,7 +316,16 @@ class _Edge:
 
 class _Graph:
     """Nodes (pixel positions) and edges (pixel polylines) during clean-up, with incidence kept
-    up to date so that every clean-up pass is linear in the graph's size."""
+    up to date so that every clean-up pass is linear in the graph's size: the reference of the
+    compiled passes (``graph_first``/``graph_second`` in :mod:`topo._extract_kernels`), which
+    visit everything in the same order.
+
+    That order is explicit, so that the map does not depend on how Python lays out a ``set``:
+    nodes and paths are visited by ascending id (ids are handed out in increasing order and
+    ``pos``/``edges`` keep insertion order), and a node's paths (the set ``inc[n]``) always in
+    ascending path id (:meth:`paths_of`); ``merge_short`` takes paths by length, equal lengths by
+    id. Which of a degree-two node's two paths comes first sets the direction of the joined
+    polyline, and so later floats and choices."""
 
     def __init__(self, free: np.ndarray) -> None:
         self.free = free
@@ -333,9 +382,13 @@ class _Graph:
         self.radius.pop(n, None)
 
     def remove_node(self, n: int) -> None:
-        for e in list(self.inc[n]):
+        for e in self.paths_of(n):
             self.remove_edge(e)
         self._forget(n)
+
+    def paths_of(self, n: int) -> list[int]:
+        """The paths at node ``n`` in ascending id (the order every pass visits them in)."""
+        return sorted(self.inc[n])
 
     def degree(self, n: int) -> int:
         # a self-loop counts twice, as in networkx
@@ -369,10 +422,11 @@ class _Graph:
                 self.dissolve(hub)
 
     def dissolve(self, n: int) -> None:
-        """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner."""
+        """Join the two paths of ``n`` into one if ``n`` has degree 2 and is not a corner: the
+        lower-numbered path, then the other (the new path runs from the first one's far end)."""
         if n not in self.pos or n in self.corners or len(self.inc[n]) != 2:
             return
-        ea, eb = self.inc[n]
+        ea, eb = self.paths_of(n)
         a, b = self.edges[ea], self.edges[eb]
         if a.u == a.v or b.u == b.v:
             return
@@ -398,12 +452,13 @@ class _Graph:
 
     def snap_to_free(self) -> None:
         """Move a node that sits on a non-free cell (a filled speck, or a merged mean) to the
-        nearest free pixel of its own paths, so that every node lies in free space."""
+        nearest free pixel of its own paths, so that every node lies in free space (of equally
+        near pixels, the first of the lowest-numbered path)."""
         for n, rc in self.pos.items():
             if self._is_free(rc):
                 continue
             best, best_d = None, np.inf
-            for e in self.inc[n]:
+            for e in self.paths_of(n):
                 poly = self.edges[e].poly
                 ok = self._free_at(poly)
                 if ok.any():
@@ -416,7 +471,9 @@ class _Graph:
     def merge_short(self, radius: float) -> None:
         """Contract paths shorter than ``radius``, shortest first, into one node at the mean of
         the skeleton nodes both ends stand for (the better connected end's place if that mean
-        is not free); it takes over both ends' other paths."""
+        is not free); it takes over both ends' other paths (the dropped end's in ascending id,
+        each becoming a new path). Equal lengths go by path id (a stable sort of ``edges``,
+        which is in id order)."""
         for e in sorted(self.edges, key=lambda k: self.edges[k].length):
             edge = self.edges.get(e)
             if edge is None or edge.u == edge.v or edge.length >= radius:
@@ -428,7 +485,7 @@ class _Graph:
             mean = (mk * self.pos[keep] + md * self.pos[drop]) / (mk + md)
             if self._is_free(mean):
                 self.pos[keep] = mean
-            for k in list(self.inc[drop]):
+            for k in self.paths_of(drop):
                 other = self.remove_edge(k)
                 a = keep if other.u == drop else other.u
                 b = keep if other.v == drop else other.v
@@ -532,19 +589,27 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     elif not isinstance(config, ExtractConfig):
         raise TypeError(f"config must be an ExtractConfig or dict, got {type(config).__name__}")
 
-    rows = np.flatnonzero(mask.any(axis=1))
-    if len(rows) == 0:
+    given, r0, c0 = free_crop(mask)  # with a border of non-free cells
+    if given.size == 0:
         return TopoMap.empty()
-    cols = np.flatnonzero(mask.any(axis=0))
-    r0, c0 = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
-    given = np.pad(mask[r0: rows[-1] + 2, c0: cols[-1] + 2], 1)  # a border of non-free cells
     cell_area = res * res
     footprint = (_disk(int(round(config.erode_radius / res))) if config.erode_radius > 0
                  else None)
     free = clean_free(given, int(config.min_hole_area / cell_area), footprint,
                       config.min_component_area / cell_area)
 
-    g = _skeleton_graph(skeletonize(free), free, given)
+    return _graph_topomap(skeletonize(free), free, given, config, res,
+                          (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
+
+
+def _graph_topomap_reference(skel: np.ndarray, free: np.ndarray, given: np.ndarray,
+                             config: ExtractConfig, res: float,
+                             origin: tuple[float, float]) -> TopoMap:
+    """Steps 3–7 and the output by :class:`_Graph`'s Python passes (the reference of the
+    compiled :func:`_graph_topomap`): the map of skeleton ``skel`` of the cleaned mask ``free``
+    (``given``: the caller's free cells), ``origin`` the metre position of pixel (0, 0)'s
+    corner."""
+    g = _skeleton_graph(skel, free, given)
     to_px = 1.0 / res
     merge_px = config.merge_radius * to_px
     g.prune_spurs(config.min_spur_length * to_px)
@@ -555,7 +620,64 @@ def extract_topomap(grid_or_free_mask: Any, resolution: float | None = None,
     g.merge_short(merge_px)
     g.break_self_loops()
     g.snap_to_free()
-    return _to_topomap(g, res, (ox + (c0 - 1) * res, oy + (r0 - 1) * res))
+    return _to_topomap(g, res, origin)
+
+
+_SHRINK = 1  # the clean-up kernels' first capacities are divided by this (tests: re-runs)
+_NO_INTS = np.empty(0, dtype=np.int64)  # no loops' cuts (not read-only: one kernel signature)
+
+
+def _graph_topomap(skel: np.ndarray, free: np.ndarray, given: np.ndarray, config: ExtractConfig,
+                   res: float, origin: tuple[float, float]) -> TopoMap:
+    """:func:`_graph_topomap_reference` by the compiled passes of :mod:`topo._extract_kernels`
+    (the same map, bit for bit), with numpy's ``arctan2`` between them on the same arrays as
+    :meth:`_Graph.split_corners` (the open paths' turns at once, each loop's by
+    :func:`_loop_corners`); arrays that are too small are made larger and the pass re-run."""
+    if not skel.any():
+        return TopoMap.empty()
+    coords, bounds, pixels = skeleton_paths(skel)
+    node_pixels, ends = path_nodes(len(coords), bounds, pixels)
+    node_rc = coords[node_pixels]
+    points = coords[pixels]
+    radius = wall_distances(free, node_rc)
+    to_px = 1.0 / res
+    merge_px = config.merge_radius * to_px
+    arm, min_turn = config.corner_arm * to_px, math.radians(config.corner_angle)
+    n, m, p = len(node_rc), len(ends), len(points)
+    # nodes, paths, points, and paths per node (a junction cluster merged into one node)
+    caps = np.array([n, 2 * m + 16, 3 * p + 256, 16], dtype=np.int64) // _SHRINK
+    while True:
+        first = graph_first(node_rc, ends, points, bounds, path_lengths(points, bounds), radius,
+                            given, config.min_spur_length * to_px, merge_px, arm, caps)
+        if not first[0][-1][OVER]:
+            break
+        caps = 2 * caps + 16
+    state, open_ids, open_lens, arc, cross, dot, loop_ids, loop_lens, loop_pts = first
+    cuts = counts = (_NO_INTS, _NO_INTS)
+    if len(loop_ids):
+        loop_cuts: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
+        start = 0
+        for size in loop_lens.tolist():
+            poly = loop_pts[start: start + size]
+            start += size
+            anchored, free = _loop_corner_sets(poly, arm, min_turn, (merge_px, 0.0))
+            loop_cuts[0].append(anchored)
+            loop_cuts[1].append(free)
+        cuts = tuple(np.concatenate(c).astype(np.int64) for c in loop_cuts)
+        counts = tuple(np.array([len(k) for k in c], dtype=np.int64) for c in loop_cuts)
+    used = state[-1]
+    caps = np.array([used[N_NODES] + len(arc) + 2 * m + 16, 2 * used[N_EDGES] + len(arc) + 16,
+                     used[N_PTS] + 64, state[5].shape[1]], dtype=np.int64) // _SHRINK
+    while True:
+        cnt, arrays = graph_second(state, open_ids, open_lens, arc, np.abs(np.arctan2(cross, dot)),
+                                   loop_ids, cuts[0], counts[0], cuts[1], counts[1], given,
+                                   min_turn, merge_px, res, *origin, caps)
+        if not cnt[OVER]:
+            break
+        caps = 2 * caps + 16
+    if len(arrays[0]) == 0:
+        return TopoMap.empty()
+    return _topomap(*arrays)
 
 
 def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
@@ -572,26 +694,34 @@ def _node_order(g: _Graph, res: float, origin: tuple[float, float]):
 def _to_topomap(g: _Graph, res: float, origin: tuple[float, float]) -> TopoMap:
     """The :class:`TopoMap` in metres: nodes ordered by :func:`_node_order`, edges by their
     ends' indices, each polyline from its lower- to its higher-numbered node with its ends on
-    the nodes; all polylines converted, re-pointed, turned and measured by one compiled kernel
-    (:func:`topo._extract_kernels.metre_paths`): the same floats as :func:`_to_topomap_loop`,
+    the nodes; ordered, converted, re-pointed, turned and measured by one compiled kernel
+    (:func:`topo._extract_kernels.topomap_arrays`): the same floats as :func:`_to_topomap_loop`,
     one edge at a time, which ``tests/topo`` and ``tests/envs`` compare (on the env's ~10-edge
     maps that loop's small numpy calls were most of this step's cost)."""
     if not g.pos:
         return TopoMap.empty()
-    xy, index = _node_order(g, res, origin)
-    edges = sorted(g.edges.values(), key=lambda edge: (index[edge.u], index[edge.v]))
-    if not edges:
-        return TopoMap.from_valid_arrays(xy, np.empty((0, 2), dtype=np.int64), [], [])
-    ends = np.array([(index[edge.u], index[edge.v]) for edge in edges], dtype=np.int64)
-    sizes = [len(edge.poly) for edge in edges]
-    metres, plen = metre_paths(np.concatenate([edge.poly for edge in edges]),
-                               np.array(sizes, dtype=np.int64), ends, xy, res, *origin)
-    pairs = np.sort(ends, axis=1)
-    # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
-    chord = [math.sqrt(c.dot(c)) for c in xy[pairs[:, 0]] - xy[pairs[:, 1]]]
-    lengths = np.maximum(plen, chord)
+    edges = list(g.edges.values())
+    ends = np.array([(edge.u, edge.v) for edge in edges], dtype=np.int64).reshape(-1, 2)
+    cells = (np.concatenate([edge.poly for edge in edges]) if edges
+             else np.empty((0, 2), dtype=np.float64))
+    return _topomap(*topomap_arrays(
+        np.concatenate(list(g.pos.values())).reshape(-1, 2),
+        np.fromiter(g.pos, dtype=np.int64, count=len(g.pos)), ends, cells,
+        np.fromiter((len(edge.poly) for edge in edges), dtype=np.int64, count=len(edges)),
+        res, *origin))
+
+
+def _topomap(xy: np.ndarray, pairs: np.ndarray, metres: np.ndarray, lengths: np.ndarray,
+             near: np.ndarray, sizes: np.ndarray) -> TopoMap:
+    """The :class:`TopoMap` of :func:`topo._extract_kernels.topomap_arrays`' arrays: the
+    lengths of the paths ``near`` their chord made at least numpy's chord, the polylines cut
+    apart."""
+    for k in np.flatnonzero(near).tolist():
+        # chord length as np.linalg.norm computes it (sqrt of the dot product: BLAS, maybe fused)
+        c = xy[pairs[k, 0]] - xy[pairs[k, 1]]
+        lengths[k] = max(lengths[k], math.sqrt(c.dot(c)))
     paths, start = [], 0
-    for n in sizes:
+    for n in sizes.tolist():
         paths.append(metres[start: start + n])
         start += n
     return TopoMap.from_valid_arrays(xy, pairs, lengths, paths)

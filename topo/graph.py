@@ -72,6 +72,11 @@ def kinds_from_degree(degree: np.ndarray) -> np.ndarray:
     return kinds
 
 
+_KIND_OF_DEGREE = np.array([NodeKind.DEAD_END, NodeKind.DEAD_END, NodeKind.CORNER,
+                            NodeKind.JUNCTION], dtype=np.int8)
+"""``kinds_from_degree`` of degrees 0, 1, 2 and ≥ 3, as a table."""
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class TopoMap:
     """A topological map: nodes with positions and kinds, and undirected paths between them.
@@ -145,7 +150,8 @@ class TopoMap:
         self-loops, ``lengths`` at least the straight lines, float64 polylines of at least two
         points. The same map as :meth:`from_arrays`, without the validation's cost (a tenth of
         an extraction on small maps); bad input here is not diagnosed."""
-        codes = kinds_from_degree(np.bincount(edges.ravel(), minlength=len(xy)))
+        degree = np.bincount(edges.ravel(), minlength=len(xy))
+        codes = _KIND_OF_DEGREE[np.minimum(degree, 3)]  # kinds_from_degree of counts
         return cls(_frozen(xy), _frozen(codes), _frozen(edges),
                    _frozen(np.asarray(lengths, dtype=np.float64).reshape(-1)),
                    tuple(_frozen(p) for p in paths))

@@ -110,8 +110,10 @@ def _assert_same_maps(a, b):
 def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     """On the env's own sonar grids (every extraction of a short episode), the compiled
     free-space clean-up gives the skimage/scipy mask, the compiled thinning skimage's skeleton,
-    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's, the compiled
-    corner step and TopoMap output the numpy forms', exactly."""
+    the compiled tracing skan's paths, the compiled free-disc radii the cKDTree's, and the
+    compiled graph clean-up ``_Graph``'s Python passes' map (``_graph_topomap_reference``),
+    exactly; inside those passes, the compiled corner step and TopoMap output give the numpy
+    forms'."""
     from envs import two_robot_explore_v0
     from topo import extract
     from topo._extract_kernels import (
@@ -143,9 +145,18 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
         return got
 
     to_topomap, thin, corners = extract._to_topomap, extract.skeletonize, extract._open_corners
+    graph_topomap = extract._graph_topomap
+    compared, ran = [], {"corners": 0, "topomap": 0}
+
+    def graph_both(*args):
+        got = graph_topomap(*args)
+        _assert_same_maps(got, extract._graph_topomap_reference(*args))
+        compared.append(got.n_nodes)
+        return got
 
     def corners_both(*args):
         got = corners(*args)
+        ran["corners"] += 1
         assert got == extract._open_corners_numpy(*args)
         return got
 
@@ -158,21 +169,25 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
 
     def topomap_both(g, res, origin):
         got = to_topomap(g, res, origin)
+        ran["topomap"] += 1
         _assert_same_maps(got, extract._to_topomap_loop(g, res, origin))
         return got
 
     monkeypatch.setattr(extract, "wall_distances", walls_both)
     monkeypatch.setattr(extract, "skeleton_paths", paths_both)
     monkeypatch.setattr(extract, "clean_free", clean_both)
-    monkeypatch.setattr(extract, "_to_topomap", topomap_both)
     monkeypatch.setattr(extract, "skeletonize", skeleton_both)
-    monkeypatch.setattr(extract, "_open_corners", corners_both)
+    monkeypatch.setattr(extract, "_open_corners", corners_both)  # called by the reference
+    monkeypatch.setattr(extract, "_to_topomap", topomap_both)  # likewise
+    monkeypatch.setattr(extract, "_graph_topomap", graph_both)
     par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
     par.reset(seed=3)
     rng = np.random.default_rng(3)
     while par.agents:
         par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
     assert len(seen) >= 100 and max(seen) >= 10
+    assert len(compared) >= 100 and max(compared) >= 5
+    assert ran["corners"] == ran["topomap"] == len(compared)  # the checks above did run
 
 
 @given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(1, 40))

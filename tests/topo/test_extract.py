@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from topo import NodeKind, OccupancyGrid
+from topo import NodeKind, OccupancyGrid, TopoMap
 from topo.extract import ExtractConfig, extract_topomap
 from topo.maps import load_floor_plan
 
@@ -270,6 +270,26 @@ def test_polyline_length_is_numpys_float(seed, n, scale, reverse):
     assert polyline_length(poly) == float(np.sqrt((d * d).sum(axis=1)).sum())
 
 
+@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(1, 30), st.integers(0, 4),
+       st.booleans())
+def test_free_crop_is_the_numpy_crop(seed, h, w, n_free, strided):
+    """The compiled crop to the free cells (grown by one cell, padded by a non-free border) is
+    the numpy slice and ``np.pad``: free cells on the mask's edges, none, one, strided views."""
+    from topo._extract_kernels import free_crop, free_crop_reference
+
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((h, w), bool)
+    mask[rng.integers(0, h, n_free), rng.integers(0, w, n_free)] = True
+    if seed % 2:
+        mask |= ndimage.binary_opening(rng.random((h, w)) < 0.6)
+    if strided:
+        mask = np.repeat(np.repeat(mask, 2, 0), 2, 1)[::2, ::2]
+    got, want = free_crop(mask), free_crop_reference(mask)
+    assert got[0].dtype == bool and got[0].shape == want[0].shape
+    np.testing.assert_array_equal(got[0], want[0])
+    assert got[1:] == want[1:]
+
+
 @given(st.integers(0, 2**32 - 1), st.floats(0.2, 0.9), st.integers(3, 70), st.integers(3, 70),
        st.integers(0, 60), st.integers(-1, 4), st.floats(0.0, 80.0))
 def test_clean_free_is_the_library_morphology(seed, density, h, w, max_hole, radius,
@@ -372,6 +392,7 @@ def test_topomap_output_kernel_is_the_loop(seed, density, h, w, res, sonar):
     cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
     with pytest.MonkeyPatch.context() as m:
         m.setattr(extract, "_to_topomap", both)
+        m.setattr(extract, "_graph_topomap", extract._graph_topomap_reference)  # its caller
         extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
                         config=cfg)
     assert len(seen) == int(mask.any())
@@ -467,3 +488,189 @@ def test_open_corners_kernels_are_the_numpy_form(seed, n_polys, arm, min_turn, m
     a, b = points - points[back], points[ahead] - points
     assert cross.tobytes() == (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).tobytes()
     assert dot.tobytes() == (a * b).sum(axis=1).tobytes()
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 200), st.floats(0.5, 12.0),
+       st.floats(0.1, 2.5), st.floats(0.0, 6.0), st.booleans())
+def test_loop_corners_kernel_is_the_numpy_form(seed, k, arm, min_turn, margin, ring):
+    """The corner step on a closed polyline with the compiled arcs and chord products gives the
+    numpy form's corners, for one margin and for several at once: random closed pixel walks
+    (straight runs, repeated points, a jump back to the start) and rectangles' rings."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    if ring:
+        h, w = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+        corners = np.array([[0, 0], [0, w], [h, w], [h, 0], [0, 0]], dtype=np.float64)
+        poly = np.concatenate([np.linspace(a, b, int(max(abs(b - a).max(), 1)) + 1)[:-1]
+                               for a, b in zip(corners[:-1], corners[1:], strict=True)]
+                              + [corners[:1]])
+        poly = np.roll(poly[:-1], int(rng.integers(0, len(poly) - 1)), axis=0)
+        poly = np.concatenate([poly, poly[:1]])
+    else:
+        moves = np.array([[-1, -1], [-1, 0], [-1, 1], [0, 1], [1, 1], [1, 0], [1, -1], [0, -1],
+                          [0, 0]], dtype=np.float64)
+        heading = rng.integers(0, 8, size=k)
+        heading[rng.random(k) < 0.6] = heading[0]
+        heading[rng.random(k) < 0.05] = 8
+        walk = np.cumsum(moves[heading], axis=0)
+        poly = np.concatenate([[[0.0, 0.0]], walk, [[0.0, 0.0]]])
+    want = [extract._loop_corners_numpy(poly, arm, min_turn, m) for m in (margin, 0.0)]
+    got = extract._loop_corner_sets(poly, arm, min_turn, (margin, 0.0))
+    for a, b in zip(got, want, strict=True):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(extract._loop_corners(poly, arm, min_turn, margin), want[0])
+
+
+# ---------------------------------------------------------------- the compiled clean-up
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 3), st.booleans()), max_size=80),
+       st.integers(0, 9))
+def test_node_rows_keep_paths_in_ascending_id(ops, width):
+    """The compiled clean-up's per-node rows of path ids are ``sorted(inc[n])`` after every new
+    path (a new path has the highest id yet; a loop joins its node once) and every removal; a
+    full row sets the overflow flag and is left as it was."""
+    from topo._extract_kernels import DEG, OVER, _attach, _detach
+
+    ni = np.zeros((2, 4), dtype=np.int64)
+    inc = np.full((2, width), -7, dtype=np.int64)
+    cnt = np.zeros(4, dtype=np.int64)
+    ref: list[set[int]] = [set(), set()]
+    next_id = 0
+    for add, pick, loop in ops:
+        if add:
+            ends = (0, 0) if loop else (0, 1)
+            for n in ends:
+                before = inc[n].copy()
+                _attach(ni, inc, cnt, n, next_id)
+                if len(ref[n] | {next_id}) > width:
+                    assert cnt[OVER] and (inc[n] == before).all()
+                    return
+                ref[n].add(next_id)
+            next_id += 1
+        else:
+            key = pick if not ref[0] else sorted(ref[0])[pick % len(ref[0])]
+            _detach(ni, inc, 0, key)
+            ref[0].discard(key)
+        assert not cnt[OVER]
+        for n in (0, 1):
+            assert inc[n, : ni[n, DEG]].tolist() == sorted(ref[n])
+
+
+def _compare(monkeypatch):
+    """Make ``extract_topomap`` compute each map both ways and compare; returns the list of
+    compared maps."""
+    from topo import extract
+
+    seen = []
+    compiled = extract._graph_topomap
+
+    def both(*args):
+        got = compiled(*args)
+        assert_same_maps(got, extract._graph_topomap_reference(*args))
+        seen.append(got)
+        return got
+
+    monkeypatch.setattr(extract, "_graph_topomap", both)
+    return seen
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.35, 0.85), st.integers(4, 90), st.integers(4, 90),
+       st.sampled_from([1.0, 0.5, 0.25, 0.1]), st.booleans(), st.integers(0, 2))
+def test_compiled_clean_up_is_the_python_passes(seed, density, h, w, res, sonar, opening):
+    """Bit for bit the map of ``_Graph``'s passes, on random blobs' skeletons at coarse and fine
+    cells (spurs, junction clusters, loops, parallel paths, corners, isolated nodes, nodes off
+    free space, empty maps), with both configs."""
+    rng = np.random.default_rng(seed)
+    mask = rng.random((h, w)) < density
+    if opening:
+        mask = ndimage.binary_opening(mask, iterations=opening)
+    cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
+    with pytest.MonkeyPatch.context() as m:
+        seen = _compare(m)
+        extract_topomap(mask, resolution=res, origin=(rng.uniform(-5, 5), rng.uniform(-5, 5)),
+                        config=cfg)
+    assert len(seen) == int(mask.any())
+
+
+class _BackwardsSet(set):
+    """A set iterating in descending order (whatever CPython's layout would give)."""
+
+    def __iter__(self):
+        return iter(sorted(set.__iter__(self), reverse=True))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.45, 0.75), st.sampled_from([0.25, 0.1]),
+       st.booleans())
+def test_python_passes_do_not_depend_on_set_order(seed, density, res, sonar):
+    """``_Graph``'s map is the same when its sets of a node's paths iterate backwards: every
+    pass visits them in an explicit order (``paths_of``), not in the set's."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    mask = ndimage.binary_opening(rng.random((70, 80)) < density)
+    cfg = ExtractConfig.for_sonar() if sonar else ExtractConfig()
+    args = []
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(extract, "_graph_topomap", lambda *a: args.append(a) or TopoMap.empty())
+        extract_topomap(mask, resolution=res, config=cfg)
+    if not args:
+        return
+    want = extract._graph_topomap_reference(*args[0])
+    start, add_node = extract._Graph.start, extract._Graph.add_node
+
+    def start_backwards(self, *a):
+        start(self, *a)
+        self.inc = {n: _BackwardsSet(s) for n, s in self.inc.items()}
+
+    def add_node_backwards(self, rc):
+        n = add_node(self, rc)
+        self.inc[n] = _BackwardsSet()
+        return n
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(extract._Graph, "start", start_backwards)
+        m.setattr(extract._Graph, "add_node", add_node_backwards)
+        assert_same_maps(extract._graph_topomap_reference(*args[0]), want)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([4, 1000]))
+def test_compiled_clean_up_grows_its_arrays(seed, shrink):
+    """Starting from arrays far too small, the compiled passes re-run with larger ones and give
+    the same map."""
+    from topo import extract
+
+    rng = np.random.default_rng(seed)
+    mask = ndimage.binary_opening(rng.random((60, 70)) < 0.6)
+    with pytest.MonkeyPatch.context() as m:
+        seen = _compare(m)
+        m.setattr(extract, "_SHRINK", shrink)
+        extract_topomap(mask, resolution=0.25)
+    assert len(seen) == 1
+
+
+def test_compiled_clean_up_on_real_maps(monkeypatch):
+    """A real floor plan's crops (tens of junctions, long loops)."""
+    seen = _compare(monkeypatch)
+    plan = load_floor_plan(MAPS / "dungeon" / "1.png", resolution=0.1)
+    for r0, c0 in ((0, 0), (150, 200), (230, 390)):
+        extract_topomap(np.ascontiguousarray(plan.free[r0: r0 + 250, c0: c0 + 250]), 0.1)
+    assert len(seen) == 3 and max(m.n_nodes for m in seen) >= 10
+
+
+def test_compiled_clean_up_on_every_env_extraction(monkeypatch):
+    """Every extraction of a short env episode (the robots' sonar grids, ``for_sonar``)."""
+    from envs import two_robot_explore_v0
+
+    seen = _compare(monkeypatch)
+    par = two_robot_explore_v0.parallel_env(max_cycles=300, mapping={"topo_every": 5})
+    par.reset(seed=4)
+    rng = np.random.default_rng(4)
+    while par.agents:
+        par.step({a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)]) for a in par.agents})
+    assert len(seen) >= 100 and max(m.n_nodes for m in seen) >= 10
