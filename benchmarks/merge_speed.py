@@ -125,7 +125,7 @@ def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
 
 def _env_merge_calls(steps: int) -> list[dict]:
     """The arguments of every merge the environment makes (``mapping.run_merge``, default
-    config) in ``steps`` steps of seeds 0, 1, 2 under the actions of ``/work/tools/env_hash.py``
+    config) in ``steps`` steps of seeds 0, 1, 2 under the actions of ``benchmarks/env_hash.py``
     (a new random command every 10 steps), the grids copied as they were then."""
     from envs import two_robot_explore_v0
     from envs.two_robot_explore import env as env_module
