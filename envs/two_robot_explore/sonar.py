@@ -60,7 +60,7 @@ class Sonar:
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "true_last",
                  "last_pose", "fresh",
                  "_local_dir", "_local_dirs", "_length", "_cos_dropout", "_since", "_n_rays",
-                 "_rays", "_info")
+                 "_rays", "_info", "_filter", "_filter_of")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -83,6 +83,8 @@ class Sonar:
         self._since = math.inf
         # the one query result struct every cast of this sonar writes into
         self._info = _ffi.new("cpSegmentQueryInfo *")
+        self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
+        self._filter = None
 
     def reset(self) -> None:
         """Forget the last scan (the next :meth:`measure` always scans)."""
@@ -114,15 +116,18 @@ class Sonar:
         c, s = math.cos(th), math.sin(th)
         length = self._length
         mount = self.mount_radius
-        start = (x, y)
-        cspace, info, query, null = space._space, self._info, _QUERY_FIRST, _NULL
+        # the filter and the start as C structs once per scan, not converted on every ray
+        if shape_filter is not self._filter_of:
+            self._filter_of = shape_filter
+            self._filter = _ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
+        start = _ffi.new("cpVect *", (x, y))[0]
+        cspace, info, query, null, flt = space._space, self._info, _QUERY_FIRST, _NULL, self._filter
         dist: list[float] = []
         cos_inc: list[float] = []
         for lc, ls in self._local_dirs:
             dx = c * lc - s * ls
             dy = s * lc + c * ls
-            if query(cspace, start, (x + length * dx, y + length * dy), 0.0, shape_filter,
-                     info) == null:
+            if query(cspace, start, (x + length * dx, y + length * dy), 0.0, flt, info) == null:
                 dist.append(math.inf)
                 cos_inc.append(1.0)
             else:
