@@ -30,8 +30,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fusion.evaluate import (  # noqa: E402
-    ROTATION_OK_DEG,
-    TRANSLATION_OK_M,
+    is_success,
     oracle_transform,
     synthetic_pairs,
     transform_errors,
@@ -42,11 +41,6 @@ BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 0.8))
 NOISES = (0.05, 0.15)
 SCORES = (-3.0, -2.0, -1.5, -1.0, -0.5, 0.0, 1.0, 2.0)
 MARGINS = (0.0, 1.0, 2.0, 3.0)
-
-
-def _right(transform, pair) -> bool:
-    err = transform_errors(transform, pair)
-    return err is not None and err[0] < ROTATION_OK_DEG and err[1] < TRANSLATION_OK_M
 
 
 def merge_all(pairs, desc: str) -> list[dict]:
@@ -60,8 +54,8 @@ def merge_all(pairs, desc: str) -> list[dict]:
         oracle = oracle_transform(p) if overlapping else None
         rows.append({
             "noise": p.noise, "overlap": p.overlap, "evidence": res.evidence,
-            "right": overlapping and _right(res.transform, p),
-            "oracle": oracle is not None and _right(oracle, p),
+            "right": overlapping and is_success(transform_errors(res.transform, p)),
+            "oracle": oracle is not None and is_success(transform_errors(oracle, p)),
         })
     return rows
 

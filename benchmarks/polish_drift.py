@@ -15,8 +15,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fusion.evaluate import (  # noqa: E402
-    ROTATION_OK_DEG,
-    TRANSLATION_OK_M,
+    is_success,
     oracle_transform,
     synthetic_pairs,
     transform_errors,
@@ -25,10 +24,6 @@ from fusion.merge import MergeConfig, _evaluate, _polish, _prepare  # noqa: E402
 
 BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 0.8))
 OVERLAP = {"overlap_range": [0.2, 0.8], "no_overlap_fraction": 0}
-
-
-def _ok(err) -> bool:
-    return err is not None and err[0] < ROTATION_OK_DEG and err[1] < TRANSLATION_OK_M
 
 
 def drift(pairs, cfg: MergeConfig, verbose: bool = False) -> dict:
@@ -42,13 +37,13 @@ def drift(pairs, cfg: MergeConfig, verbose: bool = False) -> dict:
             continue
         row = table.setdefault((p.noise, label), Counter())
         oracle = oracle_transform(p)
-        if oracle is None or not _ok(transform_errors(oracle, p)):
+        if oracle is None or not is_success(transform_errors(oracle, p)):
             continue
         row["oracle"] += 1
         pa, pb = _prepare(p.map_a, cfg), _prepare(p.map_b, cfg)
         out = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, cfg), cfg)
         err = transform_errors(out.transform, p)
-        if not _ok(err):
+        if not is_success(err):
             row["drift"] += 1
             if verbose:
                 print(f"{p.name} overlap {p.overlap:.2f}: {err[0]:.2f} deg {err[1]:.2f} m")

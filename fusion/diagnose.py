@@ -30,9 +30,8 @@ from collections import Counter, defaultdict
 from collections.abc import Sequence
 
 from fusion.evaluate import (
-    ROTATION_OK_DEG,
-    TRANSLATION_OK_M,
     EvalPair,
+    is_success,
     oracle_transform,
     synthetic_pairs,
     transform_errors,
@@ -45,19 +44,15 @@ CLASSES = ("truth_too_few_matches", "truth_below_threshold", "right_rejected", "
 BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 1.01))
 
 
-def _ok(errors: tuple[float, float]) -> bool:
-    return errors[0] < ROTATION_OK_DEG and errors[1] < TRANSLATION_OK_M
-
-
 def classify(pair: EvalPair, config: MergeConfig) -> str | None:
     """``"oracle_fails"`` when the oracle misses too, ``None`` when ``auto`` succeeds, else the
     failure class (:data:`CLASSES`)."""
     oracle = oracle_transform(pair)
-    if oracle is None or not _ok(transform_errors(oracle, pair)):
+    if oracle is None or not is_success(transform_errors(oracle, pair)):
         return "oracle_fails"
     result = merge_maps(pair.map_a, pair.map_b, config=config)
     errors = transform_errors(result.transform, pair)
-    if result.accepted and _ok(errors):
+    if result.accepted and is_success(errors):
         return None
     pa, pb = _prepare(pair.map_a, config), _prepare(pair.map_b, config)
     truth = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
@@ -65,7 +60,7 @@ def classify(pair: EvalPair, config: MergeConfig) -> str | None:
         return "truth_too_few_matches"
     if truth.score < config.min_score:
         return "truth_below_threshold"
-    if _ok(errors):
+    if is_success(errors):
         return "right_rejected"
     if errors[0] < 5.0 and errors[1] < 1.0:
         return "refine_off"

@@ -161,12 +161,17 @@ def transform_errors(estimate: Rigid2D, pair: EvalPair) -> tuple[float, float] |
             estimate.translation_error(pair.transform, at=centre))
 
 
+def is_success(errors: tuple[float, float] | None) -> bool:
+    """Whether :func:`transform_errors`' ``errors`` are within the success thresholds
+    (:data:`ROTATION_OK_DEG`, :data:`TRANSLATION_OK_M`); ``False`` for ``None``."""
+    return errors is not None and errors[0] < ROTATION_OK_DEG and errors[1] < TRANSLATION_OK_M
+
+
 # ------------------------------------------------------------------------------ evaluation
 def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bool,
             time_s: float, score: float | None, reason: str | None) -> Record:
     errors = transform_errors(transform, pair) if transform is not None else None
-    good = (errors is not None and pair.kind == "overlap"
-            and errors[0] < ROTATION_OK_DEG and errors[1] < TRANSLATION_OK_M)
+    good = pair.kind == "overlap" and is_success(errors)
     return Record(
         pair.name, method, pair.kind, pair.overlap, pair.noise,
         None if pair.transform is None else pair.transform.degrees, bool(accepted),

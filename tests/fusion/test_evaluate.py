@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from fusion.evaluate import (
+    ROTATION_OK_DEG,
+    TRANSLATION_OK_M,
     EvalPair,
     evaluate,
+    is_success,
     load_pair_dir,
     main,
     oracle_transform,
@@ -18,6 +21,13 @@ from fusion.evaluate import (
     synthetic_pairs,
 )
 from fusion.synthetic import make_pair
+
+
+def test_success_needs_both_errors_strictly_below_the_thresholds():
+    assert is_success((ROTATION_OK_DEG - 1e-9, TRANSLATION_OK_M - 1e-9))
+    assert not is_success((ROTATION_OK_DEG, 0.0))
+    assert not is_success((0.0, TRANSLATION_OK_M))
+    assert not is_success(None)  # no true transform (another world)
 
 
 def test_cli_writes_results_and_plots(tmp_path, capsys):
