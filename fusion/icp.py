@@ -244,15 +244,25 @@ def icp_svd(
     if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS:  # the whole loop compiled
         theta, tx, ty, iterations, errors, converged, idx, keep, short = icp_brute(
             D, M, theta, t[0], t[1], max_d2, n_trim, rule_tau, rule_rel, max_iter)
-        if short >= 0:
-            degenerate = degenerate or (
-                f"only {short} pair(s) within max_distance/trim: transform not updated")
-        return IcpResult(transform=Rigid2D.trusted(theta, np.array([tx, ty])),
-                         iterations=iterations, errors=errors, converged=converged,
-                         correspondences=np.where(keep, idx, -1).astype(np.int64),
-                         degenerate=degenerate)
-    match = _TreeMatcher(M, D, max_d2)
+        t = np.array([tx, ty])
+    else:
+        theta, t, iterations, errors, converged, idx, keep, short = _icp_tree(
+            M, D, theta, t, max_d2, n_trim, rule_tau, rule_rel, max_iter)
+    if short >= 0:
+        degenerate = degenerate or (
+            f"only {short} pair(s) within max_distance/trim: transform not updated")
+    return IcpResult(transform=Rigid2D.trusted(theta, t), iterations=iterations, errors=errors,
+                     converged=converged,
+                     correspondences=np.where(keep, idx, -1).astype(np.int64),
+                     degenerate=degenerate)
 
+
+def _icp_tree(M: np.ndarray, D: np.ndarray, theta: float, t: np.ndarray, max_d2: float,
+              n_trim: int, tau: float, rel_tol: float, max_iter: int):
+    """:func:`icp_svd`'s loop with the KD-tree matcher (large point sets); the same rules and
+    result tuple as the compiled brute-force loop ``fusion._icp_kernels.icp_brute``, but
+    ``(theta, t, ...)`` with ``t`` an array."""
+    match = _TreeMatcher(M, D, max_d2)
     idx = np.empty(len(D), dtype=np.int64)
     d2 = np.empty(len(D))
     keep = np.empty(len(D), dtype=bool)
@@ -261,6 +271,7 @@ def icp_svd(
     errors: list[float] = []
     converged = False
     iterations = 0
+    short = -1
     while True:
         f, same = match(theta, t, prev_idx, prev_keep, idx, d2, keep)
         if n_trim < len(D):  # TrICP: only the n_trim closest pairs take part
@@ -268,29 +279,18 @@ def icp_svd(
             f = float(d2[keep].sum())
             same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         errors.append(f)
-        if iterations and stops(errors[-2], f, same, rule_tau, rule_rel):
+        if iterations and stops(errors[-2], f, same, tau, rel_tol):
             converged = True
             break
         if iterations == max_iter:
             break
         new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)
         if n_fit < 2:
-            degenerate = degenerate or (
-                f"only {n_fit} pair(s) within max_distance/trim: transform not updated"
-            )
+            short = n_fit
             break
         theta, t = new_theta, np.array([tx, ty])
         iterations += 1
         idx, prev_idx = prev_idx, idx
         keep, prev_keep = prev_keep, keep
         # the buffers swapped: prev_* now hold this iteration's pairs, idx/keep get overwritten
-
-    correspondences = np.where(keep, idx, -1).astype(np.int64)
-    return IcpResult(
-        transform=Rigid2D.trusted(theta, t),
-        iterations=iterations,
-        errors=np.asarray(errors),
-        converged=converged,
-        correspondences=correspondences,
-        degenerate=degenerate,
-    )
+    return theta, t, iterations, np.asarray(errors), converged, idx, keep, short
