@@ -30,18 +30,26 @@ from envs import two_robot_explore_v0  # noqa: E402
 SCALARS = (int, float, bool, str)
 
 
-def fingerprint(seed: int, steps: int, every: int = 100):
-    """Yield ``(step, hex digest)`` of the running hash every ``every`` steps of one episode."""
+def episode(seed: int, steps: int):
+    """Run one episode of at most ``steps`` steps under the fixed actions (a new random command
+    every 10 steps from ``default_rng(seed)``); yield ``(env, step index, step outputs)``."""
     par = two_robot_explore_v0.parallel_env(max_cycles=steps)
     par.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    h = hashlib.sha256()
     acts = {}
     for k in range(steps):
         if k % 10 == 0:
             acts = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)], dtype=np.float32)
                     for a in par.agents}
-        obs, rew, term, trunc, info = par.step(acts)
+        yield par, k, par.step(acts)
+        if not par.agents:
+            break
+
+
+def fingerprint(seed: int, steps: int, every: int = 100):
+    """Yield ``(step, hex digest)`` of the running hash every ``every`` steps of one episode."""
+    h = hashlib.sha256()
+    for par, k, (obs, rew, term, trunc, info) in episode(seed, steps):
         for a in sorted(obs):
             for key in sorted(obs[a]):
                 h.update(np.ascontiguousarray(obs[a][key]).tobytes())
@@ -55,8 +63,6 @@ def fingerprint(seed: int, steps: int, every: int = 100):
                 h.update(np.ascontiguousarray(arr).tobytes())
         if (k + 1) % every == 0:
             yield k + 1, h.hexdigest()[:16]
-        if not par.agents:
-            break
 
 
 def main() -> None:

@@ -126,8 +126,9 @@ def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
 def _env_merge_calls(steps: int) -> list[dict]:
     """The arguments of every merge the environment makes (``mapping.run_merge``, default
     config) in ``steps`` steps of seeds 0, 1, 2 under the actions of ``benchmarks/env_hash.py``
-    (a new random command every 10 steps), the grids copied as they were then."""
-    from envs import two_robot_explore_v0
+    (its :func:`env_hash.episode`), the grids copied as they were then."""
+    from env_hash import episode
+
     from envs.two_robot_explore import env as env_module
     from fusion.pairs import GridSnapshot
 
@@ -143,16 +144,8 @@ def _env_merge_calls(steps: int) -> list[dict]:
     env_module.run_merge = recording
     try:
         for seed in (0, 1, 2):
-            par = two_robot_explore_v0.parallel_env(max_cycles=steps)
-            par.reset(seed=seed)
-            rng = np.random.default_rng(seed)
-            for k in range(steps):
-                if k % 10 == 0:
-                    acts = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)],
-                                        dtype=np.float32) for a in par.agents}
-                par.step(acts)
-                if not par.agents:
-                    break
+            for _ in episode(seed, steps):
+                pass
     finally:
         env_module.run_merge = run_merge
     return calls
