@@ -1,7 +1,8 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
-disk): the window a sonar scan can touch, folding the cells it made known into the "ever
-known" masks, and the ``graph_nodes`` observation. Each replaces a dozen small numpy calls
-whose overhead, not arithmetic, was the cost (four grids are updated every env step)."""
+disk): a whole scan's grid update (the grid's sonar model, the window the scan can touch,
+folding the cells it made known into the "ever known" masks), the ``local_map`` crop, and the
+``graph_nodes`` observation. Each replaces a dozen small numpy calls whose overhead, not
+arithmetic, was the cost (four grids are updated every env step)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from topo._grid_kernels import sonar_update
 
 
 @njit(cache=True, nogil=True)
@@ -25,6 +28,28 @@ def scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half, margin):
             lo_x, hi_x = min(lo_x, px), max(hi_x, px)
             lo_y, hi_y = min(lo_y, py), max(hi_y, py)
     return cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin)
+
+
+@njit(cache=True, nogil=True)
+def integrate_scan(log_odds, states, ever, ox, oy, res, x, y, theta, ranges, angles, mount,
+                   max_range, half_cone, hit_half, l_free, l_occ, clamp, threshold, margin,
+                   union, reachable):
+    """One scan into a grid and its "ever known" mask, in one call: the grid's sonar model
+    (``topo._grid_kernels.sonar_update``) with ``ranges + mount`` and ``max_range + mount``
+    (ranges are from the transducers, the model's sensors sit at the centre), then
+    :func:`absorb` over the :func:`scan_window` of reaches ``min(ranges, max_range) + mount``
+    (``margin`` cells around). Returns :func:`absorb`'s counts."""
+    n = ranges.shape[0]
+    shifted = np.empty(n)
+    reach = np.empty(n)
+    for k in range(n):
+        shifted[k] = ranges[k] + mount
+        reach[k] = min(ranges[k], max_range) + mount
+    sonar_update(log_odds, states, ox, oy, res, x, y, theta, shifted, angles, max_range + mount,
+                 half_cone, hit_half, l_free, l_occ, clamp, threshold)
+    h, w = states.shape
+    win = scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half_cone, margin)
+    return absorb(states, ever, win, union, reachable)
 
 
 @njit(cache=True, nogil=True)

@@ -27,11 +27,10 @@ import numpy as np
 
 from envs.two_robot_explore._map_kernels import (
     NO_UNION,
-    absorb,
     cell_box,
+    integrate_scan,
     or_into,
     sample_states,
-    scan_window,
 )
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
@@ -131,12 +130,13 @@ class RobotMap:
         topomap: the latest extracted ``topo.TopoMap`` (own frame).
     """
 
-    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
+    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap", "_cells")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float) -> None:
         self.grid = OccupancyGrid(resolution=resolution, extent=extent)
         self.geometry = geometry_of(self.grid)
         self.states = self.grid.states()
+        self._cells = self.grid._states  # the grid's writable states, which integrate updates
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
         self.n_ever = 0
         self.bbox: list[int] | None = None
@@ -154,19 +154,20 @@ class RobotMap:
         counts ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: how many cells became known
         for the first time and their bounding box (all zero if none).
         """
-        # the env's scans are valid by construction: the grid's checks would double the cost
-        self.grid.update_valid(pose, ranges + mount_radius, angles, max_range + mount_radius,
-                               half_cone)
-        g = self.geometry
-        reach = np.minimum(ranges, max_range) + mount_radius
-        win = scan_window(g.origin[0], g.origin[1], g.resolution, g.shape[0], g.shape[1],
-                          float(pose[0]), float(pose[1]), float(pose[2]), reach, angles,
-                          half_cone, _MARGIN_CELLS)
-        counts = absorb(self.states, self.ever, win, union, reachable)
+        # one compiled call: the grid's update (OccupancyGrid.update_valid: the env's scans are
+        # valid by construction, the grid's checks would double the cost), the scan's window
+        # and the "ever known" bookkeeping
+        grid, g = self.grid, self.geometry
+        m = grid.model
+        counts = integrate_scan(grid.log_odds, self._cells, self.ever, g.origin[0], g.origin[1],
+                                g.resolution, float(pose[0]), float(pose[1]), float(pose[2]),
+                                ranges, angles, mount_radius, max_range, half_cone,
+                                (m.hit_width or grid.resolution) / 2.0, m.l_free, m.l_occupied,
+                                m.clamp, m.threshold, _MARGIN_CELLS, union, reachable)
         n = int(counts[0])
         if n:
             self.n_ever += n
-            r0, r1, c0, c1 = (int(v) for v in counts[1:5])
+            r0, r1, c0, c1 = counts[1:5].tolist()
             if self.bbox is None:
                 self.bbox = [r0, r1, c0, c1]
             else:
