@@ -116,6 +116,9 @@ def or_into(dst, src, win):
 NO_UNION = np.zeros((0, 0), dtype=np.bool_)
 """The ``union``/``reachable`` arguments of :func:`absorb` when there is no union to fold into."""
 
+NO_STATES = np.zeros((0, 0), dtype=np.int8)
+"""The ``states2`` argument of :func:`sample_image` when there is no second grid."""
+
 
 @njit(cache=True, nogil=True)
 def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
@@ -137,6 +140,46 @@ def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
             val = states[int(v), int(u)]
             if val > out[k]:
                 out[k] = val
+
+
+@njit(cache=True, nogil=True)
+def sample_image(image, values, offsets, states, ox, oy, res, x, y, theta,
+                 states2, ox2, oy2, res2, x2, y2, theta2):
+    """The ``local_map`` pixels in one pass: ``image`` (``(1, n, n)`` uint8, ``n * n``
+    offsets in row-major order) gets ``values[state]`` of :func:`sample_states`' state of
+    ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of the larger of
+    that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid with its own
+    origin and cell size). The same arithmetic as :func:`sample_states`."""
+    flat = image.reshape(-1)
+    h, w = states.shape
+    inv = 1.0 / res
+    c = math.cos(theta) * inv
+    s = math.sin(theta) * inv
+    u0 = (x - ox) * inv
+    v0 = (y - oy) * inv
+    both = states2.size > 0
+    h2, w2 = states2.shape
+    inv2 = 1.0 / res2
+    c2 = math.cos(theta2) * inv2
+    s2 = math.sin(theta2) * inv2
+    u02 = (x2 - ox2) * inv2
+    v02 = (y2 - oy2) * inv2
+    for k in range(offsets.shape[1]):
+        f = offsets[0, k]
+        g = offsets[1, k]
+        u = u0 + c * f - s * g
+        v = v0 + s * f + c * g
+        st = 0
+        if 0.0 <= u < w and 0.0 <= v < h:
+            st = states[int(v), int(u)]
+        if both:
+            u = u02 + c2 * f - s2 * g
+            v = v02 + s2 * f + c2 * g
+            if 0.0 <= u < w2 and 0.0 <= v < h2:
+                st2 = states2[int(v), int(u)]
+                if st2 > st:
+                    st = st2
+        flat[k] = values[st]
 
 
 @njit(cache=True, nogil=True)

@@ -198,7 +198,6 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from envs.two_robot_explore._map_kernels import nearest_nodes
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
-    LOCAL_MAP_VALUES,
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
@@ -673,16 +672,14 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._graph_cache[i] = (static, None, None)
 
     def _local_map(self, i: int) -> np.ndarray:
-        size = self.config.mapping.local_map_size
         pose = self.robots[i].odometry
         own = self.maps[i]
-        st = self._sampler.sample(own.states, own.geometry, pose)
         t = self.shared.transform
+        other = None
         if t is not None:
-            other = self.maps[1 - i]
-            moved = compose_pose(t if i == 1 else t.inverse(), pose)
-            self._sampler.sample(other.states, other.geometry, moved, out=st)
-        return LOCAL_MAP_VALUES.take(st).reshape(1, size, size)
+            peer = self.maps[1 - i]
+            other = (peer.states, peer.geometry, compose_pose(t if i == 1 else t.inverse(), pose))
+        return self._sampler.image(own.states, own.geometry, pose, other)
 
     # ------------------------------------------------------------------ infos
     def merge_errors(self) -> tuple[float, float]:

@@ -26,10 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from envs.two_robot_explore._map_kernels import (
+    NO_STATES,
     NO_UNION,
     cell_box,
     integrate_scan,
     or_into,
+    sample_image,
     sample_states,
 )
 from fusion.rigid import Rigid2D
@@ -343,6 +345,23 @@ class LocalMapSampler:
         sample_states(out, states, self._offsets, geometry.origin[0], geometry.origin[1],
                       geometry.resolution, float(pose[0]), float(pose[1]), float(pose[2]))
         return out
+
+    def image(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
+              other: tuple[np.ndarray, Geometry, np.ndarray] | None = None) -> np.ndarray:
+        """The ``(1, size, size)`` uint8 ``local_map``: :data:`LOCAL_MAP_VALUES` of
+        :meth:`sample`'s states, with ``other`` = ``(states, geometry, pose)`` of a second
+        grid of the cell-wise maximum of both samples (as ``sample(..., out=...)``); one
+        compiled pass, a fresh array."""
+        img = np.empty((1, self.size, self.size), dtype=np.uint8)
+        if other is None:
+            states2, g2, pose2 = NO_STATES, geometry, pose
+        else:
+            states2, g2, pose2 = other
+        sample_image(img, LOCAL_MAP_VALUES, self._offsets, states, geometry.origin[0],
+                     geometry.origin[1], geometry.resolution, float(pose[0]), float(pose[1]),
+                     float(pose[2]), states2, g2.origin[0], g2.origin[1], g2.resolution,
+                     float(pose2[0]), float(pose2[1]), float(pose2[2]))
+        return img
 
 
 def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:
