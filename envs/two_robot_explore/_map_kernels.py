@@ -183,10 +183,14 @@ def sample_image(image, values, offsets, states, ox, oy, res, x, y, theta,
 
 
 @njit(cache=True, nogil=True)
-def nearest_nodes(rel, dist2, static, lim, nodes, mask):
-    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest by ``dist2`` (stable order:
-    ties by index) get their offsets ``rel`` clipped to ``[-lim, lim]`` and their ``static``
-    features, and a 1 in ``mask``; returns their indices."""
+def nearest_nodes(rel, static, lim, nodes, mask):
+    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest to the robot (by squared
+    distance ``x² + y²`` of their offsets ``rel``; stable order: ties by index) get their
+    offsets clipped to ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``;
+    returns their indices."""
+    dist2 = np.empty(rel.shape[0])
+    for q in range(rel.shape[0]):
+        dist2[q] = rel[q, 0] * rel[q, 0] + rel[q, 1] * rel[q, 1]
     order = np.argsort(dist2, kind="mergesort")[: nodes.shape[0]]
     for j in range(order.shape[0]):
         q = order[j]
@@ -196,3 +200,19 @@ def nearest_nodes(rel, dist2, static, lim, nodes, mask):
             nodes[j, 2 + f] = static[q, f]
         mask[j] = 1.0
     return order
+
+
+@njit(cache=True, nogil=True)
+def adjacency(order, edges, n_nodes, adj):
+    """``graph_adjacency``: 1 in ``adj`` (zeros) at ``(j, k)`` and ``(k, j)`` for every edge
+    of ``edges`` (``(E, 2)`` node indices, ``n_nodes`` nodes) joining the listed nodes
+    ``order[j]`` and ``order[k]``."""
+    slot = np.full(n_nodes, -1, dtype=np.int64)
+    for j in range(order.shape[0]):
+        slot[order[j]] = j
+    for e in range(edges.shape[0]):
+        a = slot[edges[e, 0]]
+        b = slot[edges[e, 1]]
+        if a >= 0 and b >= 0:
+            adj[a, b] = 1.0
+            adj[b, a] = 1.0

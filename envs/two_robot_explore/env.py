@@ -195,7 +195,7 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore._map_kernels import nearest_nodes
+from envs.two_robot_explore._map_kernels import adjacency, nearest_nodes
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
@@ -647,19 +647,12 @@ class TwoRobotExploreEnv(ParallelEnv):
             return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
         static, last_order, last_adj = self._graph_cache[i]
         rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
-        order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static,
-                              2 * self.frame_radius, nodes, mask)
-        k = len(order)
+        order = nearest_nodes(rel, static, 2 * self.frame_radius, nodes, mask)
         if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)
         if topo.n_edges:
-            slot = np.full(n, -1, dtype=np.int64)
-            slot[order] = np.arange(k)
-            e = slot[topo.edges]
-            e = e[(e >= 0).all(axis=1)]
-            adj[e[:, 0], e[:, 1]] = 1.0
-            adj[e[:, 1], e[:, 0]] = 1.0
+            adjacency(order, topo.edges, n, adj)
         self._graph_cache[i] = (static, order, adj)
         return nodes, mask, adj.copy()
 

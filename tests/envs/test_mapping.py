@@ -201,7 +201,7 @@ def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
     lim = 20.0
     nodes = np.zeros((n_max, 6), np.float32)
     mask = np.zeros(n_max, np.float32)
-    order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static, lim, nodes, mask)
+    order = nearest_nodes(rel, static, lim, nodes, mask)
     want = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
     k = len(want)
     ref_nodes = np.zeros_like(nodes)
@@ -210,3 +210,23 @@ def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
     np.testing.assert_array_equal(order, want)
     np.testing.assert_array_equal(nodes, ref_nodes)
     np.testing.assert_array_equal(mask, (np.arange(n_max) < k).astype(np.float32))
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(0, 80), st.integers(1, 40))
+def test_adjacency_kernel_is_the_numpy_form(seed, n, n_edges, n_max):
+    """Edges between listed nodes only, both directions, parallel edges, any order."""
+    from envs.two_robot_explore._map_kernels import adjacency
+
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)[:n_max]
+    edges = rng.integers(0, n, (n_edges, 2))
+    adj = np.zeros((n_max, n_max), np.float32)
+    adjacency(order, edges, n, adj)
+    slot = np.full(n, -1, dtype=np.int64)
+    slot[order] = np.arange(len(order))
+    e = slot[edges]
+    e = e[(e >= 0).all(axis=1)]
+    ref = np.zeros_like(adj)
+    ref[e[:, 0], e[:, 1]] = 1.0
+    ref[e[:, 1], e[:, 0]] = 1.0
+    np.testing.assert_array_equal(adj, ref)
