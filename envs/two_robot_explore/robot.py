@@ -5,6 +5,11 @@ segments, one dynamic disc per robot, contacts counted), and :class:`Robot` wrap
 turns a ``(v, ω)`` command into body velocities before each physics substep, and keeps the
 robot's odometry in its own start frame. The physics is stepped once per substep for the whole
 space (never per robot).
+
+The per-substep body reads and writes (:meth:`Robot.drive`, :meth:`Robot.true_pose`) call
+chipmunk's getters and setters through pymunk's own cffi binding, as pymunk's ``Body``
+properties do (without their Python layers: a ``__setattr__`` hook, a ``Vec2d`` per read),
+as ``sonar`` does for its casts; a test checks they match the properties.
 """
 
 from __future__ import annotations
@@ -14,7 +19,15 @@ import math
 import numpy as np
 import pymunk
 
+# pymunk's cffi binding of chipmunk (pymunk 7.x), as in sonar.py
+from pymunk._chipmunk_cffi import lib as _lib
+
 from envs.two_robot_explore.config import RobotConfig
+
+_GET_POSITION = _lib.cpBodyGetPosition
+_GET_ANGLE = _lib.cpBodyGetAngle
+_SET_VELOCITY = _lib.cpBodySetVelocity
+_SET_ANGULAR_VELOCITY = _lib.cpBodySetAngularVelocity
 
 MOTOR_FORCE = 2000.0
 """Newtons (and newton-metres) the wheels can exert on the 10 kg disc: full speed in ~4 ms."""
@@ -40,7 +53,8 @@ class Robot:
     """
 
     __slots__ = ("index", "body", "shape", "motor", "joints", "sensor_filter", "start",
-                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true")
+                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true", "_cbody",
+                 "_cmotor")
 
     def __init__(self, index: int, start: np.ndarray, cfg: RobotConfig) -> None:
         self.index = index
@@ -67,6 +81,8 @@ class Robot:
         gear.max_bias = 0.0
         gear.max_force = MOTOR_FORCE
         self.joints = (pivot, gear)
+        self._cbody = self.body._body  # the chipmunk bodies (cffi pointers) of body and motor
+        self._cmotor = self.motor._body
         self.sensor_filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ bit)
         self.start = np.array(start, dtype=np.float64)
         self.odometry = np.zeros(3)
@@ -83,15 +99,14 @@ class Robot:
 
     def drive(self) -> None:
         """Apply the command to the motor body (called before every physics substep)."""
-        a = self.body.angle
-        motor = self.motor
-        motor.velocity = (self._v * math.cos(a), self._v * math.sin(a))
-        motor.angular_velocity = self._w
+        a = _GET_ANGLE(self._cbody)
+        _SET_VELOCITY(self._cmotor, (self._v * math.cos(a), self._v * math.sin(a)))
+        _SET_ANGULAR_VELOCITY(self._cmotor, self._w)
 
     def true_pose(self) -> np.ndarray:
         """``(x, y, heading)`` in the world frame, heading wrapped to ``(-pi, pi]``."""
-        p = self.body.position
-        a = self.body.angle
+        p = _GET_POSITION(self._cbody)
+        a = _GET_ANGLE(self._cbody)
         return np.array([p.x, p.y, math.atan2(math.sin(a), math.cos(a))])
 
     def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:
