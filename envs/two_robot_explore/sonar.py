@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 import pymunk
+from numba import njit
 
 # pymunk's cffi binding of chipmunk (pymunk 7.x); see the module docstring
 from pymunk._chipmunk_cffi import ffi as _ffi
@@ -37,6 +38,25 @@ from envs.two_robot_explore.config import SonarConfig
 
 _QUERY_FIRST = _lib.cpSpaceSegmentQueryFirst
 _NULL = _ffi.NULL
+
+
+@njit(cache=True, nogil=True)
+def _readings(dist, cos_inc, u, noise, k_rays, steep, p_drop, lo, hi, std, reading, truth):
+    """One scan's readings from its ``(S*K,)`` casts (:meth:`Sonar.cast`): per sonar ``k``
+    (rays ``k*K`` to ``(k+1)*K - 1``) ``reading[k]`` is the nearest echo not dropped (ray
+    ``i`` is dropped when ``cos_inc[i] < steep`` and ``u[i] < p_drop``) plus ``noise[k] *
+    std``, ``hi`` without one, and ``truth[k]`` the nearest echo; both clipped to ``[lo,
+    hi]``."""
+    for k in range(noise.shape[0]):
+        best = true = math.inf
+        for i in range(k * k_rays, (k + 1) * k_rays):
+            if dist[i] < true:
+                true = dist[i]
+            if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
+                best = dist[i]
+        r = best + noise[k] * std if best != math.inf else hi
+        reading[k] = lo if r < lo else hi if r > hi else r
+        truth[k] = lo if true < lo else hi if true > hi else true
 
 
 class Sonar:
@@ -155,24 +175,13 @@ class Sonar:
             return self.last
         self._since = 0.0
         dist, cos_inc = self._cast(space, pose, shape_filter)
-        u = rng.random(self._n_rays).tolist()
-        noise = rng.standard_normal(len(self.angles)).tolist()
-        steep, p_drop = self._cos_dropout, cfg.dropout_prob
-        lo, hi, std, k_rays = cfg.min_range, cfg.max_range, cfg.noise_std, self._rays
-        reading = []
-        truth = []
-        for k, z in enumerate(noise):
-            best = true = math.inf
-            for i in range(k * k_rays, (k + 1) * k_rays):
-                if dist[i] < true:
-                    true = dist[i]
-                if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
-                    best = dist[i]
-            r = best + z * std if best != math.inf else hi
-            reading.append(lo if r < lo else hi if r > hi else r)
-            truth.append(lo if true < lo else hi if true > hi else true)
-        self.last = np.array(reading)
-        self.true_last = np.array(truth)
+        u = rng.random(self._n_rays)
+        noise = rng.standard_normal(len(self.angles))
+        self.last = np.empty(len(self.angles))
+        self.true_last = np.empty(len(self.angles))
+        _readings(np.array(dist), np.array(cos_inc), u, noise, self._rays, self._cos_dropout,
+                  cfg.dropout_prob, cfg.min_range, cfg.max_range, cfg.noise_std, self.last,
+                  self.true_last)
         self.last_pose = np.array(pose, dtype=np.float64)
         self.fresh = True
         return self.last
