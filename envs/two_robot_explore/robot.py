@@ -90,7 +90,7 @@ class Robot:
         self.travelled = 0.0
         self._v = 0.0
         self._w = 0.0
-        self._last_true = self.start.copy()
+        self._last_true = tuple(self.start.tolist())  # true pose at the last odometry update
 
     def command(self, v: float, w: float) -> None:
         """Set the forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) for the next step."""
@@ -105,9 +105,13 @@ class Robot:
 
     def true_pose(self) -> np.ndarray:
         """``(x, y, heading)`` in the world frame, heading wrapped to ``(-pi, pi]``."""
+        return np.array(self._pose())
+
+    def _pose(self) -> tuple[float, float, float]:
+        """:meth:`true_pose` as a tuple of floats."""
         p = _GET_POSITION(self._cbody)
         a = _GET_ANGLE(self._cbody)
-        return np.array([p.x, p.y, math.atan2(math.sin(a), math.cos(a))])
+        return p.x, p.y, math.atan2(math.sin(a), math.cos(a))
 
     def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:
         """Integrate this step's true motion, seen in the robot frame, into :attr:`odometry`.
@@ -117,13 +121,14 @@ class Robot:
         ``noise[1] · |dθ| + noise[1] · 0.1 · |d|`` on rotation; with ``noise = (0, 0)`` the
         odometry is the true pose expressed in the start frame.
         """
-        now = self.true_pose()
-        prev = self._last_true
-        self._last_true = now
-        dxw, dyw = now[0] - prev[0], now[1] - prev[1]
-        c, s = math.cos(prev[2]), math.sin(prev[2])
+        # Python floats throughout (the same IEEE arithmetic as numpy scalars, less overhead)
+        x, y, th = self._pose()
+        px, py, pth = self._last_true
+        self._last_true = x, y, th
+        dxw, dyw = x - px, y - py
+        c, s = math.cos(pth), math.sin(pth)
         dx, dy = c * dxw + s * dyw, -s * dxw + c * dyw
-        dth = math.atan2(math.sin(now[2] - prev[2]), math.cos(now[2] - prev[2]))
+        dth = math.atan2(math.sin(th - pth), math.cos(th - pth))
         dist = math.hypot(dx, dy)
         self.travelled += dist
         if noise[0] > 0.0 or noise[1] > 0.0:
@@ -131,7 +136,7 @@ class Robot:
             dx += noise[0] * dist * n[0]
             dy += noise[0] * dist * n[1]
             dth += noise[1] * (abs(dth) + 0.1 * dist) * n[2]
-        ox, oy, oth = self.odometry
+        ox, oy, oth = self.odometry.tolist()
         c, s = math.cos(oth), math.sin(oth)
         th = oth + dth
         self.odometry[0] = ox + c * dx - s * dy
