@@ -381,6 +381,7 @@ class TwoRobotExploreEnv(ParallelEnv):
                                       cfg.mapping.grid_resolution))
         self.shared = SharedMap(self.maps[0].geometry)
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
+        self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self.merge = None
         self.merges = 0
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
@@ -471,6 +472,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         if not isinstance(actions, dict):
             raise TypeError(f"actions must be a dict {{agent: action}}, got "
                             f"{type(actions).__name__}")
+        agents = self.agents
+        if len(actions) == len(agents) and all(a in actions for a in agents):
+            # one action per live agent (the keys are distinct): nothing unknown or missing
+            return [self._parse_action(agent, actions[agent]) for agent in AGENTS]
         unknown = sorted(str(a) for a in actions if a not in self.agents)
         if unknown:
             raise ValueError(f"actions has unknown or finished agents {unknown}; live agents: "
@@ -503,9 +508,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         if arr.shape != (2,):
             raise ValueError(f"action of {agent} must have shape (2,) (v, w), got shape "
                              f"{arr.shape}")
-        if not (math.isfinite(arr[0]) and math.isfinite(arr[1])):
-            raise ValueError(f"action of {agent} must be finite, got {arr.tolist()}")
-        return min(max(float(arr[0]), -1.0), 1.0), min(max(float(arr[1]), -1.0), 1.0)
+        v, w = arr.tolist()
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"action of {agent} must be finite, got {[v, w]}")
+        return min(max(v, -1.0), 1.0), min(max(w, -1.0), 1.0)
 
     def _apply_actions(self, commands: list[tuple[float, float]]) -> None:
         rcfg = self.config.robot
@@ -612,19 +618,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         robot = self.robots[i]
         odo = robot.odometry
         lo, hi = self._obs_low, self._obs_high
-        c, s = math.cos(odo[2]), math.sin(odo[2])
+        ox, oy, oth = odo.tolist()
+        c, s = math.cos(oth), math.sin(oth)
         # clipped as floats, then rounded: the bounds are float32 values, so this is the
         # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
         r = self._odo_bound
-        odometry = np.array([min(max(odo[0], -r), r), min(max(odo[1], -r), r), c, s],
-                            dtype=np.float32)
+        odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graph_obs(i, odo, c, s)
         teammate = np.zeros(5, dtype=np.float32)
         peer = self._peer_pose(i)
         if peer is not None:
-            dx, dy = peer[0] - odo[0], peer[1] - odo[1]
-            dth = peer[2] - odo[2]
+            dx, dy = peer[0] - ox, peer[1] - oy
+            dth = peer[2] - oth
             teammate[:] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
             np.clip(teammate, lo["teammate"], hi["teammate"], out=teammate)
         return {
@@ -687,7 +693,7 @@ class TwoRobotExploreEnv(ParallelEnv):
                 t.translation_error(self.true_merge, at))
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        world_area = self._world.reachable_area
+        world_area = self._world_area
         rot_err, trans_err = self.merge_errors()
         common = {
             "true_coverage": self.oracle.fraction,
@@ -707,16 +713,16 @@ class TwoRobotExploreEnv(ParallelEnv):
             if a not in self.agents:
                 continue
             rmap = self.maps[i]
-            info = dict(common)
-            info.update(
-                own_area_m2=rmap.n_ever * rmap.geometry.resolution ** 2,
-                collisions=self.robots[i].collisions,
-                pose=self.robots[i].true_pose(),
-                odometry=self.robots[i].odometry.copy(),
-                topomap=rmap.topomap,
-                grid=rmap.grid,
-            )
-            out[a] = info
+            robot = self.robots[i]
+            out[a] = {
+                **common,
+                "own_area_m2": rmap.n_ever * rmap.geometry.resolution ** 2,
+                "collisions": robot.collisions,
+                "pose": robot.true_pose(),
+                "odometry": robot.odometry.copy(),
+                "topomap": rmap.topomap,
+                "grid": rmap.grid,
+            }
         return out
 
     # ------------------------------------------------------------------ render, close

@@ -297,7 +297,7 @@ class OracleCoverage:
     @property
     def overlap(self) -> float:
         """Fraction of the smaller robot sweep also swept by the other robot."""
-        small = min(m.n_ever for m in self.sweeps)
+        small = min(self.sweeps[0].n_ever, self.sweeps[1].n_ever)
         return self.both / small if small else 0.0
 
     @property
