@@ -102,15 +102,48 @@ def absorb(states, ever, win, union, reachable):
 
 
 @njit(cache=True, nogil=True)
-def or_into(dst, src, win):
-    """``dst[win] |= src[win]`` (bool); returns how many cells of ``dst`` became true."""
+def or_into(dst, src, r0, r1, c0, c1):
+    """``dst[r0:r1, c0:c1] |= src[r0:r1, c0:c1]`` (bool); returns how many cells of ``dst``
+    became true."""
     n = 0
-    for iy in range(win[0], win[1]):
-        for ix in range(win[2], win[3]):
+    for iy in range(r0, r1):
+        for ix in range(c0, c1):
             if src[iy, ix] and not dst[iy, ix]:
                 dst[iy, ix] = True
                 n += 1
     return n
+
+
+@njit(cache=True, nogil=True)
+def or_patch(dst, patch, r0, c0):
+    """``dst[r0:r0+h, c0:c0+w] |= patch`` (bool, ``patch`` ``h × w``); returns how many cells
+    of ``dst`` became true."""
+    n = 0
+    for a in range(patch.shape[0]):
+        for b in range(patch.shape[1]):
+            if patch[a, b] and not dst[r0 + a, c0 + b]:
+                dst[r0 + a, c0 + b] = True
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def warp_patch(out, src, r0, c0, h, w, ox, oy, res, d_r0, d_c0, x0, y0, src_res,
+               r00, r01, r10, r11, t0, t1):
+    """The resampling loop of :func:`mapping.warp_window`: ``out[a, b]`` (zeros) gets the cell
+    of ``src[r0:r0+h, c0:c0+w]`` (window corner ``x0, y0``, cell size ``src_res``) under the
+    centre of destination cell ``(d_r0 + a, d_c0 + b)`` (grid origin ``ox, oy``, cell size
+    ``res``) moved by the inverse motion ``p -> R p + t``; cells outside the window stay."""
+    du = t0 - x0
+    dv = t1 - y0
+    for a in range(out.shape[0]):
+        y = oy + ((d_r0 + a) + 0.5) * res
+        for b in range(out.shape[1]):
+            x = ox + ((d_c0 + b) + 0.5) * res
+            iu = int(math.floor((r00 * x + r01 * y + du) / src_res))
+            iv = int(math.floor((r10 * x + r11 * y + dv) / src_res))
+            if 0 <= iu < w and 0 <= iv < h:
+                out[a, b] = src[r0 + iv, c0 + iu]
 
 
 NO_UNION = np.zeros((0, 0), dtype=np.bool_)

@@ -278,6 +278,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
+        self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
@@ -541,10 +542,10 @@ class TwoRobotExploreEnv(ParallelEnv):
             rmap = self.maps[i]
             fresh = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
                                    sonar.mount_radius, scfg.max_range, half)
-            self._own_delta[i] = int(fresh[0])
-            if fresh[0]:
-                window = slice(int(fresh[1]), int(fresh[2])), slice(int(fresh[3]), int(fresh[4]))
-                self._shared_delta += self.shared.add(i, rmap, window)
+            n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
+            self._own_delta[i] = n_fresh
+            if n_fresh:
+                self._shared_delta += self.shared.add(i, rmap, (slice(r0, r1), slice(c0, c1)))
             self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
                                                   scfg.max_range, half)
@@ -608,7 +609,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         if t is None:
             return None
         other = self.robots[1 - i].odometry
-        return compose_pose(t if i == 0 else t.inverse(), other)
+        return compose_pose(t if i == 0 else self.shared.inverse, other)
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
         return {a: self._observe_one(i) for i, a in enumerate(AGENTS) if a in self.agents}
@@ -677,7 +678,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         other = None
         if t is not None:
             peer = self.maps[1 - i]
-            other = (peer.states, peer.geometry, compose_pose(t if i == 1 else t.inverse(), pose))
+            other = (peer.states, peer.geometry,
+                     compose_pose(t if i == 1 else self.shared.inverse, pose))
         return self._sampler.image(own.states, own.geometry, pose, other)
 
     # ------------------------------------------------------------------ infos
@@ -687,10 +689,16 @@ class TwoRobotExploreEnv(ParallelEnv):
         t = self.shared.transform
         if t is None:
             return math.nan, math.nan
-        xy = self.maps[1].topomap.xy
+        topo, truth = self.maps[1].topomap, self.true_merge
+        cached = self._merge_errors
+        if cached is not None and cached[0] is t and cached[1] is topo and cached[2] is truth:
+            return cached[3]  # same transform, map and truth: the same errors
+        xy = topo.xy
         at = xy.mean(axis=0) if len(xy) else self.robots[1].odometry[:2]
-        return (math.degrees(t.rotation_error(self.true_merge)),
-                t.translation_error(self.true_merge, at))
+        errors = (math.degrees(t.rotation_error(truth)), t.translation_error(truth, at))
+        # with no nodes the errors are measured at the moving robot: not kept
+        self._merge_errors = (t, topo, truth, errors) if len(xy) else None
+        return errors
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         world_area = self._world_area
