@@ -53,8 +53,7 @@ class Robot:
     """
 
     __slots__ = ("index", "body", "shape", "motor", "joints", "sensor_filter", "start",
-                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true", "_cbody",
-                 "_cmotor")
+                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true")
 
     def __init__(self, index: int, start: np.ndarray, cfg: RobotConfig) -> None:
         self.index = index
@@ -81,8 +80,6 @@ class Robot:
         gear.max_bias = 0.0
         gear.max_force = MOTOR_FORCE
         self.joints = (pivot, gear)
-        self._cbody = self.body._body  # the chipmunk bodies (cffi pointers) of body and motor
-        self._cmotor = self.motor._body
         self.sensor_filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ bit)
         self.start = np.array(start, dtype=np.float64)
         self.odometry = np.zeros(3)
@@ -99,9 +96,11 @@ class Robot:
 
     def drive(self) -> None:
         """Apply the command to the motor body (called before every physics substep)."""
-        a = _GET_ANGLE(self._cbody)
-        _SET_VELOCITY(self._cmotor, (self._v * math.cos(a), self._v * math.sin(a)))
-        _SET_ANGULAR_VELOCITY(self._cmotor, self._w)
+        # Body._body: the chipmunk body (a cffi pointer; not kept here, so a Robot pickles)
+        a = _GET_ANGLE(self.body._body)
+        motor = self.motor._body
+        _SET_VELOCITY(motor, (self._v * math.cos(a), self._v * math.sin(a)))
+        _SET_ANGULAR_VELOCITY(motor, self._w)
 
     def true_pose(self) -> np.ndarray:
         """``(x, y, heading)`` in the world frame, heading wrapped to ``(-pi, pi]``."""
@@ -109,8 +108,9 @@ class Robot:
 
     def _pose(self) -> tuple[float, float, float]:
         """:meth:`true_pose` as a tuple of floats."""
-        p = _GET_POSITION(self._cbody)
-        a = _GET_ANGLE(self._cbody)
+        body = self.body._body
+        p = _GET_POSITION(body)
+        a = _GET_ANGLE(body)
         return p.x, p.y, math.atan2(math.sin(a), math.cos(a))
 
     def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:

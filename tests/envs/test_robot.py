@@ -93,3 +93,14 @@ def test_direct_chipmunk_body_calls_equal_pymunks_properties():
         a = r.body.angle
         np.testing.assert_array_equal(r.true_pose(),
                                       [p.x, p.y, math.atan2(math.sin(a), math.cos(a))])
+
+
+def test_robot_pickles():
+    import pickle
+
+    _, robots, _ = _setup()
+    r = pickle.loads(pickle.dumps(robots[0]))
+    np.testing.assert_array_equal(r.true_pose(), robots[0].true_pose())
+    r.command(0.5, 0.2)
+    r.drive()
+    assert tuple(r.motor.velocity) != (0.0, 0.0)
