@@ -1,7 +1,8 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
-disk): the window a sonar scan can touch, folding the cells it made known into the "ever
-known" masks, and the ``graph_nodes`` observation. Each replaces a dozen small numpy calls
-whose overhead, not arithmetic, was the cost (four grids are updated every env step)."""
+disk): a whole scan's grid update (the grid's sonar model, the window the scan can touch,
+folding the cells it made known into the "ever known" masks), the ``local_map`` crop, and the
+``graph_nodes`` observation. Each replaces a dozen small numpy calls whose overhead, not
+arithmetic, was the cost (four grids are updated every env step)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from topo._grid_kernels import sonar_update
 
 
 @njit(cache=True, nogil=True)
@@ -25,6 +28,28 @@ def scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half, margin):
             lo_x, hi_x = min(lo_x, px), max(hi_x, px)
             lo_y, hi_y = min(lo_y, py), max(hi_y, py)
     return cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin)
+
+
+@njit(cache=True, nogil=True)
+def integrate_scan(log_odds, states, ever, ox, oy, res, x, y, theta, ranges, angles, mount,
+                   max_range, half_cone, hit_half, l_free, l_occ, clamp, threshold, margin,
+                   union, reachable):
+    """One scan into a grid and its "ever known" mask, in one call: the grid's sonar model
+    (``topo._grid_kernels.sonar_update``) with ``ranges + mount`` and ``max_range + mount``
+    (ranges are from the transducers, the model's sensors sit at the centre), then
+    :func:`absorb` over the :func:`scan_window` of reaches ``min(ranges, max_range) + mount``
+    (``margin`` cells around). Returns :func:`absorb`'s counts."""
+    n = ranges.shape[0]
+    shifted = np.empty(n)
+    reach = np.empty(n)
+    for k in range(n):
+        shifted[k] = ranges[k] + mount
+        reach[k] = min(ranges[k], max_range) + mount
+    sonar_update(log_odds, states, ox, oy, res, x, y, theta, shifted, angles, max_range + mount,
+                 half_cone, hit_half, l_free, l_occ, clamp, threshold)
+    h, w = states.shape
+    win = scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half_cone, margin)
+    return absorb(states, ever, win, union, reachable)
 
 
 @njit(cache=True, nogil=True)
@@ -77,19 +102,55 @@ def absorb(states, ever, win, union, reachable):
 
 
 @njit(cache=True, nogil=True)
-def or_into(dst, src, win):
-    """``dst[win] |= src[win]`` (bool); returns how many cells of ``dst`` became true."""
+def or_into(dst, src, r0, r1, c0, c1):
+    """``dst[r0:r1, c0:c1] |= src[r0:r1, c0:c1]`` (bool); returns how many cells of ``dst``
+    became true."""
     n = 0
-    for iy in range(win[0], win[1]):
-        for ix in range(win[2], win[3]):
+    for iy in range(r0, r1):
+        for ix in range(c0, c1):
             if src[iy, ix] and not dst[iy, ix]:
                 dst[iy, ix] = True
                 n += 1
     return n
 
 
+@njit(cache=True, nogil=True)
+def or_patch(dst, patch, r0, c0):
+    """``dst[r0:r0+h, c0:c0+w] |= patch`` (bool, ``patch`` ``h × w``); returns how many cells
+    of ``dst`` became true."""
+    n = 0
+    for a in range(patch.shape[0]):
+        for b in range(patch.shape[1]):
+            if patch[a, b] and not dst[r0 + a, c0 + b]:
+                dst[r0 + a, c0 + b] = True
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def warp_patch(out, src, r0, c0, h, w, ox, oy, res, d_r0, d_c0, x0, y0, src_res,
+               r00, r01, r10, r11, t0, t1):
+    """The resampling loop of :func:`mapping.warp_window`: ``out[a, b]`` (zeros) gets the cell
+    of ``src[r0:r0+h, c0:c0+w]`` (window corner ``x0, y0``, cell size ``src_res``) under the
+    centre of destination cell ``(d_r0 + a, d_c0 + b)`` (grid origin ``ox, oy``, cell size
+    ``res``) moved by the inverse motion ``p -> R p + t``; cells outside the window stay."""
+    du = t0 - x0
+    dv = t1 - y0
+    for a in range(out.shape[0]):
+        y = oy + ((d_r0 + a) + 0.5) * res
+        for b in range(out.shape[1]):
+            x = ox + ((d_c0 + b) + 0.5) * res
+            iu = int(math.floor((r00 * x + r01 * y + du) / src_res))
+            iv = int(math.floor((r10 * x + r11 * y + dv) / src_res))
+            if 0 <= iu < w and 0 <= iv < h:
+                out[a, b] = src[r0 + iv, c0 + iu]
+
+
 NO_UNION = np.zeros((0, 0), dtype=np.bool_)
 """The ``union``/``reachable`` arguments of :func:`absorb` when there is no union to fold into."""
+
+NO_STATES = np.zeros((0, 0), dtype=np.int8)
+"""The ``states2`` argument of :func:`sample_image` when there is no second grid."""
 
 
 @njit(cache=True, nogil=True)
@@ -115,10 +176,54 @@ def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
 
 
 @njit(cache=True, nogil=True)
-def nearest_nodes(rel, dist2, static, lim, nodes, mask):
-    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest by ``dist2`` (stable order:
-    ties by index) get their offsets ``rel`` clipped to ``[-lim, lim]`` and their ``static``
-    features, and a 1 in ``mask``; returns their indices."""
+def sample_image(image, values, offsets, states, ox, oy, res, x, y, theta,
+                 states2, ox2, oy2, res2, x2, y2, theta2):
+    """The ``local_map`` pixels in one pass: ``image`` (``(1, n, n)`` uint8, ``n * n``
+    offsets in row-major order) gets ``values[state]`` of :func:`sample_states`' state of
+    ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of the larger of
+    that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid with its own
+    origin and cell size). The same arithmetic as :func:`sample_states`."""
+    flat = image.reshape(-1)
+    h, w = states.shape
+    inv = 1.0 / res
+    c = math.cos(theta) * inv
+    s = math.sin(theta) * inv
+    u0 = (x - ox) * inv
+    v0 = (y - oy) * inv
+    both = states2.size > 0
+    h2, w2 = states2.shape
+    inv2 = 1.0 / res2
+    c2 = math.cos(theta2) * inv2
+    s2 = math.sin(theta2) * inv2
+    u02 = (x2 - ox2) * inv2
+    v02 = (y2 - oy2) * inv2
+    for k in range(offsets.shape[1]):
+        f = offsets[0, k]
+        g = offsets[1, k]
+        u = u0 + c * f - s * g
+        v = v0 + s * f + c * g
+        st = 0
+        if 0.0 <= u < w and 0.0 <= v < h:
+            st = states[int(v), int(u)]
+        if both:
+            u = u02 + c2 * f - s2 * g
+            v = v02 + s2 * f + c2 * g
+            if 0.0 <= u < w2 and 0.0 <= v < h2:
+                st2 = states2[int(v), int(u)]
+                if st2 > st:
+                    st = st2
+        flat[k] = values[st]
+
+
+@njit(cache=True, nogil=True)
+def nearest_nodes(rel, static, lim, nodes, mask):
+    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest to the robot (by squared
+    distance ``x² + y²`` of their offsets ``rel``; stable order: ties by index) get their
+    offsets clipped to ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``;
+    returns their indices."""
+    dist2 = np.empty(rel.shape[0])
+    for q in range(rel.shape[0]):
+        dist2[q] = rel[q, 0] * rel[q, 0] + rel[q, 1] * rel[q, 1]
     order = np.argsort(dist2, kind="mergesort")[: nodes.shape[0]]
     for j in range(order.shape[0]):
         q = order[j]
@@ -128,3 +233,19 @@ def nearest_nodes(rel, dist2, static, lim, nodes, mask):
             nodes[j, 2 + f] = static[q, f]
         mask[j] = 1.0
     return order
+
+
+@njit(cache=True, nogil=True)
+def adjacency(order, edges, n_nodes, adj):
+    """``graph_adjacency``: 1 in ``adj`` (zeros) at ``(j, k)`` and ``(k, j)`` for every edge
+    of ``edges`` (``(E, 2)`` node indices, ``n_nodes`` nodes) joining the listed nodes
+    ``order[j]`` and ``order[k]``."""
+    slot = np.full(n_nodes, -1, dtype=np.int64)
+    for j in range(order.shape[0]):
+        slot[order[j]] = j
+    for e in range(edges.shape[0]):
+        a = slot[edges[e, 0]]
+        b = slot[edges[e, 1]]
+        if a >= 0 and b >= 0:
+            adj[a, b] = 1.0
+            adj[b, a] = 1.0

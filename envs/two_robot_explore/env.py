@@ -195,10 +195,9 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore._map_kernels import nearest_nodes
+from envs.two_robot_explore._map_kernels import adjacency, nearest_nodes
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
-    LOCAL_MAP_VALUES,
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
@@ -279,6 +278,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
+        self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
@@ -382,6 +382,7 @@ class TwoRobotExploreEnv(ParallelEnv):
                                       cfg.mapping.grid_resolution))
         self.shared = SharedMap(self.maps[0].geometry)
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
+        self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self.merge = None
         self.merges = 0
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
@@ -472,6 +473,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         if not isinstance(actions, dict):
             raise TypeError(f"actions must be a dict {{agent: action}}, got "
                             f"{type(actions).__name__}")
+        agents = self.agents
+        if len(actions) == len(agents) and all(a in actions for a in agents):
+            # one action per live agent (the keys are distinct): nothing unknown or missing
+            return [self._parse_action(agent, actions[agent]) for agent in AGENTS]
         unknown = sorted(str(a) for a in actions if a not in self.agents)
         if unknown:
             raise ValueError(f"actions has unknown or finished agents {unknown}; live agents: "
@@ -504,9 +509,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         if arr.shape != (2,):
             raise ValueError(f"action of {agent} must have shape (2,) (v, w), got shape "
                              f"{arr.shape}")
-        if not (math.isfinite(arr[0]) and math.isfinite(arr[1])):
-            raise ValueError(f"action of {agent} must be finite, got {arr.tolist()}")
-        return min(max(float(arr[0]), -1.0), 1.0), min(max(float(arr[1]), -1.0), 1.0)
+        v, w = arr.tolist()
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"action of {agent} must be finite, got {[v, w]}")
+        return min(max(v, -1.0), 1.0), min(max(w, -1.0), 1.0)
 
     def _apply_actions(self, commands: list[tuple[float, float]]) -> None:
         rcfg = self.config.robot
@@ -536,10 +542,10 @@ class TwoRobotExploreEnv(ParallelEnv):
             rmap = self.maps[i]
             fresh = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
                                    sonar.mount_radius, scfg.max_range, half)
-            self._own_delta[i] = int(fresh[0])
-            if fresh[0]:
-                window = slice(int(fresh[1]), int(fresh[2])), slice(int(fresh[3]), int(fresh[4]))
-                self._shared_delta += self.shared.add(i, rmap, window)
+            n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
+            self._own_delta[i] = n_fresh
+            if n_fresh:
+                self._shared_delta += self.shared.add(i, rmap, (slice(r0, r1), slice(c0, c1)))
             self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
                                                   scfg.max_range, half)
@@ -603,7 +609,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         if t is None:
             return None
         other = self.robots[1 - i].odometry
-        return compose_pose(t if i == 0 else t.inverse(), other)
+        return compose_pose(t if i == 0 else self.shared.inverse, other)
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
         return {a: self._observe_one(i) for i, a in enumerate(AGENTS) if a in self.agents}
@@ -613,19 +619,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         robot = self.robots[i]
         odo = robot.odometry
         lo, hi = self._obs_low, self._obs_high
-        c, s = math.cos(odo[2]), math.sin(odo[2])
+        ox, oy, oth = odo.tolist()
+        c, s = math.cos(oth), math.sin(oth)
         # clipped as floats, then rounded: the bounds are float32 values, so this is the
         # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
         r = self._odo_bound
-        odometry = np.array([min(max(odo[0], -r), r), min(max(odo[1], -r), r), c, s],
-                            dtype=np.float32)
+        odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graph_obs(i, odo, c, s)
         teammate = np.zeros(5, dtype=np.float32)
         peer = self._peer_pose(i)
         if peer is not None:
-            dx, dy = peer[0] - odo[0], peer[1] - odo[1]
-            dth = peer[2] - odo[2]
+            dx, dy = peer[0] - ox, peer[1] - oy
+            dth = peer[2] - oth
             teammate[:] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
             np.clip(teammate, lo["teammate"], hi["teammate"], out=teammate)
         return {
@@ -648,19 +654,12 @@ class TwoRobotExploreEnv(ParallelEnv):
             return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
         static, last_order, last_adj = self._graph_cache[i]
         rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
-        order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static,
-                              2 * self.frame_radius, nodes, mask)
-        k = len(order)
+        order = nearest_nodes(rel, static, 2 * self.frame_radius, nodes, mask)
         if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)
         if topo.n_edges:
-            slot = np.full(n, -1, dtype=np.int64)
-            slot[order] = np.arange(k)
-            e = slot[topo.edges]
-            e = e[(e >= 0).all(axis=1)]
-            adj[e[:, 0], e[:, 1]] = 1.0
-            adj[e[:, 1], e[:, 0]] = 1.0
+            adjacency(order, topo.edges, n, adj)
         self._graph_cache[i] = (static, order, adj)
         return nodes, mask, adj.copy()
 
@@ -673,16 +672,15 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._graph_cache[i] = (static, None, None)
 
     def _local_map(self, i: int) -> np.ndarray:
-        size = self.config.mapping.local_map_size
         pose = self.robots[i].odometry
         own = self.maps[i]
-        st = self._sampler.sample(own.states, own.geometry, pose)
         t = self.shared.transform
+        other = None
         if t is not None:
-            other = self.maps[1 - i]
-            moved = compose_pose(t if i == 1 else t.inverse(), pose)
-            self._sampler.sample(other.states, other.geometry, moved, out=st)
-        return LOCAL_MAP_VALUES.take(st).reshape(1, size, size)
+            peer = self.maps[1 - i]
+            other = (peer.states, peer.geometry,
+                     compose_pose(t if i == 1 else self.shared.inverse, pose))
+        return self._sampler.image(own.states, own.geometry, pose, other)
 
     # ------------------------------------------------------------------ infos
     def merge_errors(self) -> tuple[float, float]:
@@ -691,13 +689,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         t = self.shared.transform
         if t is None:
             return math.nan, math.nan
-        xy = self.maps[1].topomap.xy
+        topo, truth = self.maps[1].topomap, self.true_merge
+        cached = self._merge_errors
+        if cached is not None and cached[0] is t and cached[1] is topo and cached[2] is truth:
+            return cached[3]  # same transform, map and truth: the same errors
+        xy = topo.xy
         at = xy.mean(axis=0) if len(xy) else self.robots[1].odometry[:2]
-        return (math.degrees(t.rotation_error(self.true_merge)),
-                t.translation_error(self.true_merge, at))
+        errors = (math.degrees(t.rotation_error(truth)), t.translation_error(truth, at))
+        # with no nodes the errors are measured at the moving robot: not kept
+        self._merge_errors = (t, topo, truth, errors) if len(xy) else None
+        return errors
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        world_area = self._world.reachable_area
+        world_area = self._world_area
         rot_err, trans_err = self.merge_errors()
         common = {
             "true_coverage": self.oracle.fraction,
@@ -717,16 +721,16 @@ class TwoRobotExploreEnv(ParallelEnv):
             if a not in self.agents:
                 continue
             rmap = self.maps[i]
-            info = dict(common)
-            info.update(
-                own_area_m2=rmap.n_ever * rmap.geometry.resolution ** 2,
-                collisions=self.robots[i].collisions,
-                pose=self.robots[i].true_pose(),
-                odometry=self.robots[i].odometry.copy(),
-                topomap=rmap.topomap,
-                grid=rmap.grid,
-            )
-            out[a] = info
+            robot = self.robots[i]
+            out[a] = {
+                **common,
+                "own_area_m2": rmap.n_ever * rmap.geometry.resolution ** 2,
+                "collisions": robot.collisions,
+                "pose": robot.true_pose(),
+                "odometry": robot.odometry.copy(),
+                "topomap": rmap.topomap,
+                "grid": rmap.grid,
+            }
         return out
 
     # ------------------------------------------------------------------ render, close

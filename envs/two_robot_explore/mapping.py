@@ -26,12 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from envs.two_robot_explore._map_kernels import (
+    NO_STATES,
     NO_UNION,
-    absorb,
     cell_box,
+    integrate_scan,
     or_into,
+    or_patch,
+    sample_image,
     sample_states,
-    scan_window,
+    warp_patch,
 )
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
@@ -75,10 +78,11 @@ def geometry_of(grid: OccupancyGrid) -> Geometry:
 
 
 def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
-                window: tuple[slice, slice], transform: Rigid2D
+                window: tuple[slice, slice], transform: Rigid2D,
+                inverse: Rigid2D | None = None
                 ) -> tuple[tuple[slice, slice], np.ndarray] | None:
     """Nearest-cell resampling of ``src_mask[window]`` into ``dst`` through ``transform``
-    (src frame → dst frame).
+    (src frame → dst frame; ``inverse``: ``transform.inverse()`` if the caller has it).
 
     Returns ``(dst_window, values)``: the slices of ``dst`` covered by the moved window and the
     resampled values there (``False``/0 outside the source window); ``None`` if the window
@@ -95,21 +99,13 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
     if dwin is None:
         return None
     drs, dcs = dwin
-    dres = dst.resolution
-    xs = dst.origin[0] + (np.arange(dcs.start, dcs.stop) + 0.5) * dres
-    ys = dst.origin[1] + (np.arange(drs.start, drs.stop) + 0.5) * dres
-    inv = transform.inverse()
+    inv = transform.inverse() if inverse is None else inverse
     r, t = inv.R, inv.T
-    # source coordinates of every destination cell centre, relative to the window corner
-    u = (r[0, 0] * xs[None, :] + r[0, 1] * ys[:, None] + (t[0] - x0)) / sres
-    v = (r[1, 0] * xs[None, :] + r[1, 1] * ys[:, None] + (t[1] - y0)) / sres
-    iu = np.floor(u).astype(np.intp)
-    iv = np.floor(v).astype(np.intp)
-    h, w = rs.stop - rs.start, cs.stop - cs.start
-    ok = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
-    patch = src_mask[window]
-    out = np.zeros(ok.shape, dtype=src_mask.dtype)
-    out[ok] = patch[iv[ok], iu[ok]]
+    # the source cell under every destination cell centre, compiled
+    out = np.zeros((drs.stop - drs.start, dcs.stop - dcs.start), dtype=src_mask.dtype)
+    warp_patch(out, src_mask, rs.start, cs.start, rs.stop - rs.start, cs.stop - cs.start,
+               dst.origin[0], dst.origin[1], dst.resolution, drs.start, dcs.start, x0, y0, sres,
+               r[0, 0], r[0, 1], r[1, 0], r[1, 1], t[0], t[1])
     return dwin, out
 
 
@@ -131,12 +127,13 @@ class RobotMap:
         topomap: the latest extracted ``topo.TopoMap`` (own frame).
     """
 
-    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
+    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap", "_cells")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float) -> None:
         self.grid = OccupancyGrid(resolution=resolution, extent=extent)
         self.geometry = geometry_of(self.grid)
         self.states = self.grid.states()
+        self._cells = self.grid._states  # the grid's writable states, which integrate updates
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
         self.n_ever = 0
         self.bbox: list[int] | None = None
@@ -154,19 +151,20 @@ class RobotMap:
         counts ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: how many cells became known
         for the first time and their bounding box (all zero if none).
         """
-        # the env's scans are valid by construction: the grid's checks would double the cost
-        self.grid.update_valid(pose, ranges + mount_radius, angles, max_range + mount_radius,
-                               half_cone)
-        g = self.geometry
-        reach = np.minimum(ranges, max_range) + mount_radius
-        win = scan_window(g.origin[0], g.origin[1], g.resolution, g.shape[0], g.shape[1],
-                          float(pose[0]), float(pose[1]), float(pose[2]), reach, angles,
-                          half_cone, _MARGIN_CELLS)
-        counts = absorb(self.states, self.ever, win, union, reachable)
+        # one compiled call: the grid's update (OccupancyGrid.update_valid: the env's scans are
+        # valid by construction, the grid's checks would double the cost), the scan's window
+        # and the "ever known" bookkeeping
+        grid, g = self.grid, self.geometry
+        m = grid.model
+        counts = integrate_scan(grid.log_odds, self._cells, self.ever, g.origin[0], g.origin[1],
+                                g.resolution, float(pose[0]), float(pose[1]), float(pose[2]),
+                                ranges, angles, mount_radius, max_range, half_cone,
+                                (m.hit_width or grid.resolution) / 2.0, m.l_free, m.l_occupied,
+                                m.clamp, m.threshold, _MARGIN_CELLS, union, reachable)
         n = int(counts[0])
         if n:
             self.n_ever += n
-            r0, r1, c0, c1 = (int(v) for v in counts[1:5])
+            r0, r1, c0, c1 = counts[1:5].tolist()
             if self.bbox is None:
                 self.bbox = [r0, r1, c0, c1]
             else:
@@ -203,15 +201,31 @@ class SharedMap:
         ever: ``(H, W)`` bool cells known in the shared map, robot 0's geometry.
         count: ``ever.sum()`` kept incrementally.
         transform: the merge transform in use (B → A), ``None`` until a merge is accepted.
+        inverse: ``transform.inverse()`` (A → B), kept with it (``None`` likewise).
     """
 
-    __slots__ = ("geometry", "ever", "count", "transform")
+    __slots__ = ("geometry", "ever", "count", "_transform", "_inverse")
 
     def __init__(self, geometry: Geometry) -> None:
         self.geometry = geometry
         self.ever = np.zeros(geometry.shape, dtype=bool)
         self.count = 0
-        self.transform: Rigid2D | None = None
+        self.transform = None
+
+    @property
+    def transform(self) -> Rigid2D | None:
+        """The merge transform in use (B → A); setting it also sets :attr:`inverse`."""
+        return self._transform
+
+    @transform.setter
+    def transform(self, value: Rigid2D | None) -> None:
+        self._transform = value
+        self._inverse = None if value is None else value.inverse()
+
+    @property
+    def inverse(self) -> Rigid2D | None:
+        """``transform.inverse()`` (A → B), ``None`` before a merge."""
+        return self._inverse
 
     @property
     def area(self) -> float:
@@ -225,19 +239,16 @@ class SharedMap:
             return 0
         if index == 0:
             rs, cs = window
-            new = or_into(self.ever, robot_map.ever,
-                          np.array([rs.start, rs.stop, cs.start, cs.stop], dtype=np.int64))
+            new = or_into(self.ever, robot_map.ever, rs.start, rs.stop, cs.start, cs.stop)
         else:
             if self.transform is None:
                 return 0
             res = warp_window(self.geometry, robot_map.geometry, robot_map.ever, window,
-                              self.transform)
+                              self.transform, self.inverse)
             if res is None:
                 return 0
-            dwin, vals = res
-            dst = self.ever[dwin]
-            new = int(np.count_nonzero(vals & ~dst))
-            dst |= vals
+            (rs, cs), vals = res
+            new = or_patch(self.ever, vals, rs.start, cs.start)
         self.count += new
         return new
 
@@ -294,7 +305,7 @@ class OracleCoverage:
     @property
     def overlap(self) -> float:
         """Fraction of the smaller robot sweep also swept by the other robot."""
-        small = min(m.n_ever for m in self.sweeps)
+        small = min(self.sweeps[0].n_ever, self.sweeps[1].n_ever)
         return self.both / small if small else 0.0
 
     @property
@@ -308,7 +319,7 @@ class OracleCoverage:
         cells the team swept for the first time."""
         counts = self.sweeps[index].integrate(pose, true_ranges, angles, mount_radius,
                                               max_range, half_cone, self.union, self.reachable)
-        both, new, covered = (int(v) for v in counts[5:])
+        both, new, covered = counts[5:].tolist()
         self.both += both
         self.count += new
         self.covered += covered
@@ -342,6 +353,23 @@ class LocalMapSampler:
         sample_states(out, states, self._offsets, geometry.origin[0], geometry.origin[1],
                       geometry.resolution, float(pose[0]), float(pose[1]), float(pose[2]))
         return out
+
+    def image(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
+              other: tuple[np.ndarray, Geometry, np.ndarray] | None = None) -> np.ndarray:
+        """The ``(1, size, size)`` uint8 ``local_map``: :data:`LOCAL_MAP_VALUES` of
+        :meth:`sample`'s states, with ``other`` = ``(states, geometry, pose)`` of a second
+        grid of the cell-wise maximum of both samples (as ``sample(..., out=...)``); one
+        compiled pass, a fresh array."""
+        img = np.empty((1, self.size, self.size), dtype=np.uint8)
+        if other is None:
+            states2, g2, pose2 = NO_STATES, geometry, pose
+        else:
+            states2, g2, pose2 = other
+        sample_image(img, LOCAL_MAP_VALUES, self._offsets, states, geometry.origin[0],
+                     geometry.origin[1], geometry.resolution, float(pose[0]), float(pose[1]),
+                     float(pose[2]), states2, g2.origin[0], g2.origin[1], g2.resolution,
+                     float(pose2[0]), float(pose2[1]), float(pose2[2]))
+        return img
 
 
 def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:

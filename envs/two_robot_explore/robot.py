@@ -5,6 +5,11 @@ segments, one dynamic disc per robot, contacts counted), and :class:`Robot` wrap
 turns a ``(v, ω)`` command into body velocities before each physics substep, and keeps the
 robot's odometry in its own start frame. The physics is stepped once per substep for the whole
 space (never per robot).
+
+The per-substep body reads and writes (:meth:`Robot.drive`, :meth:`Robot.true_pose`) call
+chipmunk's getters and setters through pymunk's own cffi binding, as pymunk's ``Body``
+properties do (without their Python layers: a ``__setattr__`` hook, a ``Vec2d`` per read),
+as ``sonar`` does for its casts; a test checks they match the properties.
 """
 
 from __future__ import annotations
@@ -14,7 +19,15 @@ import math
 import numpy as np
 import pymunk
 
+# pymunk's cffi binding of chipmunk (pymunk 7.x), as in sonar.py
+from pymunk._chipmunk_cffi import lib as _lib
+
 from envs.two_robot_explore.config import RobotConfig
+
+_GET_POSITION = _lib.cpBodyGetPosition
+_GET_ANGLE = _lib.cpBodyGetAngle
+_SET_VELOCITY = _lib.cpBodySetVelocity
+_SET_ANGULAR_VELOCITY = _lib.cpBodySetAngularVelocity
 
 MOTOR_FORCE = 2000.0
 """Newtons (and newton-metres) the wheels can exert on the 10 kg disc: full speed in ~4 ms."""
@@ -74,7 +87,7 @@ class Robot:
         self.travelled = 0.0
         self._v = 0.0
         self._w = 0.0
-        self._last_true = self.start.copy()
+        self._last_true = tuple(self.start.tolist())  # true pose at the last odometry update
 
     def command(self, v: float, w: float) -> None:
         """Set the forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) for the next step."""
@@ -83,16 +96,22 @@ class Robot:
 
     def drive(self) -> None:
         """Apply the command to the motor body (called before every physics substep)."""
-        a = self.body.angle
-        motor = self.motor
-        motor.velocity = (self._v * math.cos(a), self._v * math.sin(a))
-        motor.angular_velocity = self._w
+        # Body._body: the chipmunk body (a cffi pointer; not kept here, so a Robot pickles)
+        a = _GET_ANGLE(self.body._body)
+        motor = self.motor._body
+        _SET_VELOCITY(motor, (self._v * math.cos(a), self._v * math.sin(a)))
+        _SET_ANGULAR_VELOCITY(motor, self._w)
 
     def true_pose(self) -> np.ndarray:
         """``(x, y, heading)`` in the world frame, heading wrapped to ``(-pi, pi]``."""
-        p = self.body.position
-        a = self.body.angle
-        return np.array([p.x, p.y, math.atan2(math.sin(a), math.cos(a))])
+        return np.array(self._pose())
+
+    def _pose(self) -> tuple[float, float, float]:
+        """:meth:`true_pose` as a tuple of floats."""
+        body = self.body._body
+        p = _GET_POSITION(body)
+        a = _GET_ANGLE(body)
+        return p.x, p.y, math.atan2(math.sin(a), math.cos(a))
 
     def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:
         """Integrate this step's true motion, seen in the robot frame, into :attr:`odometry`.
@@ -102,13 +121,14 @@ class Robot:
         ``noise[1] · |dθ| + noise[1] · 0.1 · |d|`` on rotation; with ``noise = (0, 0)`` the
         odometry is the true pose expressed in the start frame.
         """
-        now = self.true_pose()
-        prev = self._last_true
-        self._last_true = now
-        dxw, dyw = now[0] - prev[0], now[1] - prev[1]
-        c, s = math.cos(prev[2]), math.sin(prev[2])
+        # Python floats throughout (the same IEEE arithmetic as numpy scalars, less overhead)
+        x, y, th = self._pose()
+        px, py, pth = self._last_true
+        self._last_true = x, y, th
+        dxw, dyw = x - px, y - py
+        c, s = math.cos(pth), math.sin(pth)
         dx, dy = c * dxw + s * dyw, -s * dxw + c * dyw
-        dth = math.atan2(math.sin(now[2] - prev[2]), math.cos(now[2] - prev[2]))
+        dth = math.atan2(math.sin(th - pth), math.cos(th - pth))
         dist = math.hypot(dx, dy)
         self.travelled += dist
         if noise[0] > 0.0 or noise[1] > 0.0:
@@ -116,7 +136,7 @@ class Robot:
             dx += noise[0] * dist * n[0]
             dy += noise[0] * dist * n[1]
             dth += noise[1] * (abs(dth) + 0.1 * dist) * n[2]
-        ox, oy, oth = self.odometry
+        ox, oy, oth = self.odometry.tolist()
         c, s = math.cos(oth), math.sin(oth)
         th = oth + dth
         self.odometry[0] = ox + c * dx - s * dy

@@ -19,7 +19,10 @@ The casts call chipmunk's ``cpSpaceSegmentQueryFirst`` through pymunk's own cffi
 function ``Space.segment_query_first`` wraps, with the same arguments): the wrapper's Python
 (a fresh query struct, a shape lookup, two ``Vec2d`` and a result tuple per ray) cost two
 thirds of every cast, and the env casts 48 rays per step. A test checks both find the same
-echoes (pymunk is pinned to the 7.x series whose binding this uses).
+echoes (pymunk is pinned to the 7.x series whose binding this uses). The rays' end points are
+computed by a compiled loop into an array that cffi also views as the ``cpVect`` structs the
+query takes, and the hits are turned into ranges and readings by compiled loops: per ray only
+the chipmunk call and the reading of its result are Python.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import math
 
 import numpy as np
 import pymunk
+from numba import njit
 
 # pymunk's cffi binding of chipmunk (pymunk 7.x); see the module docstring
 from pymunk._chipmunk_cffi import ffi as _ffi
@@ -37,6 +41,59 @@ from envs.two_robot_explore.config import SonarConfig
 
 _QUERY_FIRST = _lib.cpSpaceSegmentQueryFirst
 _NULL = _ffi.NULL
+
+
+@njit(cache=True, nogil=True)
+def _ray_ends(x, y, c, s, length, local_dir, ends, dirs):
+    """World directions ``dirs`` and end points ``ends`` (``length`` from ``(x, y)``) of the
+    rays ``local_dir`` (robot frame) of a robot at heading ``(cos, sin) = (c, s)``."""
+    for i in range(local_dir.shape[0]):
+        lc = local_dir[i, 0]
+        ls = local_dir[i, 1]
+        dx = c * lc - s * ls
+        dy = s * lc + c * ls
+        dirs[i, 0] = dx
+        dirs[i, 1] = dy
+        ends[i, 0] = x + length * dx
+        ends[i, 1] = y + length * dy
+
+
+@njit(cache=True, nogil=True)
+def _echoes(alpha, nx, ny, dirs, length, mount):
+    """:meth:`Sonar.cast`'s distances from the transducers and incidence cosines, from each
+    ray's hit fraction ``alpha`` (``inf``: no hit) and surface normal ``(nx, ny)``."""
+    n = alpha.shape[0]
+    dist = np.empty(n)
+    cos_inc = np.empty(n)
+    for i in range(n):
+        if alpha[i] == math.inf:
+            dist[i] = math.inf
+            cos_inc[i] = 1.0
+        else:
+            dist[i] = alpha[i] * length - mount
+            cos_inc[i] = abs(nx[i] * dirs[i, 0] + ny[i] * dirs[i, 1])
+    return dist, cos_inc
+
+
+@njit(cache=True, nogil=True)
+def _readings(alpha, nx, ny, dirs, length, mount, u, noise, k_rays, steep, p_drop, lo, hi, std,
+              reading, truth):
+    """One scan's readings from its casts (:func:`_echoes` of them): per sonar ``k`` (rays
+    ``k*K`` to ``(k+1)*K - 1``) ``reading[k]`` is the nearest echo not dropped (ray ``i`` is
+    dropped when its incidence cosine is below ``steep`` and ``u[i] < p_drop``) plus
+    ``noise[k] * std``, ``hi`` without one, and ``truth[k]`` the nearest echo; both clipped
+    to ``[lo, hi]``."""
+    dist, cos_inc = _echoes(alpha, nx, ny, dirs, length, mount)
+    for k in range(noise.shape[0]):
+        best = true = math.inf
+        for i in range(k * k_rays, (k + 1) * k_rays):
+            if dist[i] < true:
+                true = dist[i]
+            if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
+                best = dist[i]
+        r = best + noise[k] * std if best != math.inf else hi
+        reading[k] = lo if r < lo else hi if r > hi else r
+        truth[k] = lo if true < lo else hi if true > hi else true
 
 
 class Sonar:
@@ -59,8 +116,8 @@ class Sonar:
 
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "true_last",
                  "last_pose", "fresh",
-                 "_local_dir", "_local_dirs", "_length", "_cos_dropout", "_since", "_n_rays",
-                 "_rays", "_info", "_filter", "_filter_of")
+                 "_local_dir", "_length", "_cos_dropout", "_since", "_n_rays", "_rays",
+                 "_info", "_filter", "_filter_of", "_ends", "_dirs", "_end_structs")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -73,7 +130,6 @@ class Sonar:
         self._n_rays = self.ray_angles.size
         ra = self.ray_angles.ravel()
         self._local_dir = np.stack([np.cos(ra), np.sin(ra)], axis=1)
-        self._local_dirs = [tuple(d) for d in self._local_dir.tolist()]
         self._length = self.mount_radius + cfg.max_range
         self._cos_dropout = math.cos(math.radians(cfg.dropout_incidence))
         self.last = np.full(len(self.angles), cfg.max_range)
@@ -83,6 +139,14 @@ class Sonar:
         self._since = math.inf
         # the one query result struct every cast of this sonar writes into
         self._info = _ffi.new("cpSegmentQueryInfo *")
+        # each scan's ray directions and end points (written by _ray_ends; both arrays live as
+        # long as the sonar, never reallocated), the ends also seen by cffi as the cpVect
+        # structs passed to chipmunk (from_buffer checks the size: a row is a cpVect's two
+        # doubles), so no Python arithmetic or tuple conversion happens per ray
+        self._ends = np.zeros((self._n_rays, 2))
+        self._dirs = np.zeros((self._n_rays, 2))
+        ends = _ffi.from_buffer("cpVect[]", self._ends)
+        self._end_structs = [ends[i] for i in range(self._n_rays)]
         self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
         self._filter = None
 
@@ -106,35 +170,38 @@ class Sonar:
              shape_filter: pymunk.ShapeFilter) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free ray casts: ``(S*K,)`` hit distances from the transducers (``inf`` =
         nothing within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
-        dist, cos_inc = self._cast(space, pose, shape_filter)
-        return np.asarray(dist), np.asarray(cos_inc)
+        alpha, nx, ny = self._cast(space, pose, shape_filter)
+        return _echoes(np.array(alpha), np.array(nx), np.array(ny), self._dirs, self._length,
+                       self.mount_radius)
 
     def _cast(self, space: pymunk.Space, pose: np.ndarray,
-              shape_filter: pymunk.ShapeFilter) -> tuple[list[float], list[float]]:
-        # plain floats and lists: per ray this is a chipmunk call plus a few multiplications
+              shape_filter: pymunk.ShapeFilter) -> tuple[list[float], list[float], list[float]]:
+        """Per ray the hit fraction of its length (``inf``: no hit) and the surface normal
+        ``(nx, ny)`` (0 without a hit); leaves the rays' world directions in ``_dirs``."""
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
-        c, s = math.cos(th), math.sin(th)
-        length = self._length
-        mount = self.mount_radius
+        _ray_ends(x, y, math.cos(th), math.sin(th), self._length, self._local_dir, self._ends,
+                  self._dirs)
         # the filter and the start as C structs once per scan, not converted on every ray
         if shape_filter is not self._filter_of:
             self._filter_of = shape_filter
             self._filter = _ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
         start = _ffi.new("cpVect *", (x, y))[0]
-        cspace, info, query, null, flt = space._space, self._info, _QUERY_FIRST, _NULL, self._filter
-        dist: list[float] = []
-        cos_inc: list[float] = []
-        for lc, ls in self._local_dirs:
-            dx = c * lc - s * ls
-            dy = s * lc + c * ls
-            if query(cspace, start, (x + length * dx, y + length * dy), 0.0, flt, info) == null:
-                dist.append(math.inf)
-                cos_inc.append(1.0)
+        cspace, info, query, flt = space._space, self._info, _QUERY_FIRST, self._filter
+        inf = math.inf
+        alpha: list[float] = []
+        nx: list[float] = []
+        ny: list[float] = []
+        for end in self._end_structs:
+            if query(cspace, start, end, 0.0, flt, info) == _NULL:
+                alpha.append(inf)
+                nx.append(0.0)
+                ny.append(0.0)
             else:
-                dist.append(info.alpha * length - mount)
+                alpha.append(info.alpha)
                 n = info.normal
-                cos_inc.append(abs(n.x * dx + n.y * dy))
-        return dist, cos_inc
+                nx.append(n.x)
+                ny.append(n.y)
+        return alpha, nx, ny
 
     def measure(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter,
                 rng: np.random.Generator, travelled: float = 0.0) -> np.ndarray:
@@ -154,25 +221,14 @@ class Sonar:
             self.fresh = False
             return self.last
         self._since = 0.0
-        dist, cos_inc = self._cast(space, pose, shape_filter)
-        u = rng.random(self._n_rays).tolist()
-        noise = rng.standard_normal(len(self.angles)).tolist()
-        steep, p_drop = self._cos_dropout, cfg.dropout_prob
-        lo, hi, std, k_rays = cfg.min_range, cfg.max_range, cfg.noise_std, self._rays
-        reading = []
-        truth = []
-        for k, z in enumerate(noise):
-            best = true = math.inf
-            for i in range(k * k_rays, (k + 1) * k_rays):
-                if dist[i] < true:
-                    true = dist[i]
-                if dist[i] < best and not (cos_inc[i] < steep and u[i] < p_drop):
-                    best = dist[i]
-            r = best + z * std if best != math.inf else hi
-            reading.append(lo if r < lo else hi if r > hi else r)
-            truth.append(lo if true < lo else hi if true > hi else true)
-        self.last = np.array(reading)
-        self.true_last = np.array(truth)
+        alpha, nx, ny = self._cast(space, pose, shape_filter)
+        u = rng.random(self._n_rays)
+        noise = rng.standard_normal(len(self.angles))
+        self.last = np.empty(len(self.angles))
+        self.true_last = np.empty(len(self.angles))
+        _readings(np.array(alpha), np.array(nx), np.array(ny), self._dirs, self._length,
+                  self.mount_radius, u, noise, self._rays, self._cos_dropout, cfg.dropout_prob,
+                  cfg.min_range, cfg.max_range, cfg.noise_std, self.last, self.true_last)
         self.last_pose = np.array(pose, dtype=np.float64)
         self.fresh = True
         return self.last

@@ -61,6 +61,53 @@ def test_window_landing_outside_is_none():
     assert warp_window(G, G, _random_mask(2), FULL, Rigid2D(0.0, (100.0, 0.0))) is None
 
 
+def _warp_numpy(dst, src, src_mask, window, transform):
+    """warp_window's resampling as numpy array arithmetic (its form before the kernel)."""
+    rs, cs = window
+    sres = src.resolution
+    x0, y0 = src.origin[0] + cs.start * sres, src.origin[1] + rs.start * sres
+    x1, y1 = src.origin[0] + cs.stop * sres, src.origin[1] + rs.stop * sres
+    dwin = dst.window(transform.apply(np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])), 1)
+    if dwin is None:
+        return None
+    drs, dcs = dwin
+    xs = dst.origin[0] + (np.arange(dcs.start, dcs.stop) + 0.5) * dst.resolution
+    ys = dst.origin[1] + (np.arange(drs.start, drs.stop) + 0.5) * dst.resolution
+    inv = transform.inverse()
+    r, t = inv.R, inv.T
+    iu = np.floor((r[0, 0] * xs[None, :] + r[0, 1] * ys[:, None] + (t[0] - x0)) / sres)
+    iv = np.floor((r[1, 0] * xs[None, :] + r[1, 1] * ys[:, None] + (t[1] - y0)) / sres)
+    iu, iv = iu.astype(np.intp), iv.astype(np.intp)
+    ok = (iu >= 0) & (iu < cs.stop - cs.start) & (iv >= 0) & (iv < rs.stop - rs.start)
+    out = np.zeros(ok.shape, dtype=src_mask.dtype)
+    out[ok] = src_mask[window][iv[ok], iu[ok]]
+    return dwin, out
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), theta=st.floats(-math.pi, math.pi),
+       tx=st.floats(-3.0, 3.0), ty=st.floats(-3.0, 3.0))
+def test_warp_window_is_the_numpy_form(seed, theta, tx, ty):
+    """Bit for bit, any window and motion, bool masks and int8 states, another cell size."""
+    rng = np.random.default_rng(seed)
+    src = Geometry((-2.5, -1.5), 0.1, (50, 45))
+    r0, c0 = int(rng.integers(0, 40)), int(rng.integers(0, 35))
+    win = (slice(r0, r0 + int(rng.integers(1, 11))), slice(c0, c0 + int(rng.integers(1, 11))))
+    t = Rigid2D(theta, (tx, ty))
+    for dst in (G, Geometry((-2.0, -3.0), 0.15, (40, 30))):
+        for mask in (rng.random(src.shape) < 0.4,
+                     rng.integers(0, 3, src.shape).astype(np.int8)):
+            got = warp_window(dst, src, mask, win, t)
+            want = _warp_numpy(dst, src, mask, win, t)
+            assert (got is None) == (want is None)
+            if got is not None:
+                assert got[0] == want[0]
+                assert got[1].dtype == want[1].dtype
+                np.testing.assert_array_equal(got[1], want[1])
+            if got is not None:
+                assert warp_window(dst, src, mask, win, t, t.inverse())[0] == got[0]
+
+
 @settings(max_examples=40, deadline=None)
 @given(theta=st.floats(-math.pi, math.pi), x=st.floats(-1.0, 1.0), y=st.floats(-1.0, 1.0))
 def test_local_map_puts_what_is_ahead_at_the_top(theta, x, y):
@@ -201,7 +248,7 @@ def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
     lim = 20.0
     nodes = np.zeros((n_max, 6), np.float32)
     mask = np.zeros(n_max, np.float32)
-    order = nearest_nodes(rel, np.einsum("ij,ij->i", rel, rel), static, lim, nodes, mask)
+    order = nearest_nodes(rel, static, lim, nodes, mask)
     want = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
     k = len(want)
     ref_nodes = np.zeros_like(nodes)
@@ -210,3 +257,23 @@ def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
     np.testing.assert_array_equal(order, want)
     np.testing.assert_array_equal(nodes, ref_nodes)
     np.testing.assert_array_equal(mask, (np.arange(n_max) < k).astype(np.float32))
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(0, 80), st.integers(1, 40))
+def test_adjacency_kernel_is_the_numpy_form(seed, n, n_edges, n_max):
+    """Edges between listed nodes only, both directions, parallel edges, any order."""
+    from envs.two_robot_explore._map_kernels import adjacency
+
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)[:n_max]
+    edges = rng.integers(0, n, (n_edges, 2))
+    adj = np.zeros((n_max, n_max), np.float32)
+    adjacency(order, edges, n, adj)
+    slot = np.full(n, -1, dtype=np.int64)
+    slot[order] = np.arange(len(order))
+    e = slot[edges]
+    e = e[(e >= 0).all(axis=1)]
+    ref = np.zeros_like(adj)
+    ref[e[:, 0], e[:, 1]] = 1.0
+    ref[e[:, 1], e[:, 0]] = 1.0
+    np.testing.assert_array_equal(adj, ref)

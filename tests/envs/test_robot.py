@@ -75,3 +75,32 @@ def test_robots_never_leave_free_space_and_walls_stop_them():
                 assert world.is_free(p[None])[0]
                 assert _segment_distance(p, world.segments) > cfg.radius - 0.03
     assert sum(r.collisions for r in robots) > 0  # random driving does bump into walls
+
+
+def test_direct_chipmunk_body_calls_equal_pymunks_properties():
+    """drive and true_pose call chipmunk's getters/setters directly: the same values as
+    pymunk's Body properties."""
+    _, robots, space = _setup()
+    r = robots[0]
+    for k in range(20):
+        r.command(0.5, 0.3 * (-1) ** k)
+        r.drive()
+        a = r.body.angle
+        assert tuple(r.motor.velocity) == (0.5 * math.cos(a), 0.5 * math.sin(a))
+        assert r.motor.angular_velocity == 0.3 * (-1) ** k
+        space.step(0.025)
+        p = r.body.position
+        a = r.body.angle
+        np.testing.assert_array_equal(r.true_pose(),
+                                      [p.x, p.y, math.atan2(math.sin(a), math.cos(a))])
+
+
+def test_robot_pickles():
+    import pickle
+
+    _, robots, _ = _setup()
+    r = pickle.loads(pickle.dumps(robots[0]))
+    np.testing.assert_array_equal(r.true_pose(), robots[0].true_pose())
+    r.command(0.5, 0.2)
+    r.drive()
+    assert tuple(r.motor.velocity) != (0.0, 0.0)
