@@ -1,11 +1,13 @@
 """Fingerprint of ``two_robot_explore_v0``'s output, step by step: for checking that a speed
 change leaves the env bit-identical.
 
-Runs seeds 0, 1, 2 for ``--steps`` steps each under a fixed action sequence (a new random
+Runs seeds 0, 1, 2 and 4 for ``--steps`` steps each under a fixed action sequence (a new random
 command every 10 steps) and prints a running SHA-256 of everything the env returns —
 observations, rewards, terminations, truncations, the scalar infos (but ``merge_time_s``, a
 wall time) and both robots' topological maps (positions, kinds, paths, lengths, polylines) —
-every 100 steps. Run it on two checkouts and diff::
+every 100 steps. Seeds 0–2 accept no merge within 1000 steps; seed 4 merges from step 399, so
+the code that runs once the maps are fused (the warped shared map, the teammate observation,
+``local_map`` from both grids) is covered too. Run it on two checkouts and diff::
 
     python benchmarks/env_hash.py > /tmp/before.txt      # on main
     python benchmarks/env_hash.py > /tmp/after.txt       # on your branch
@@ -68,7 +70,7 @@ def fingerprint(seed: int, steps: int, every: int = 100):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1000, help="steps per seed")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 4])
     args = parser.parse_args()
     for seed in args.seeds:
         for step, digest in fingerprint(seed, args.steps):
