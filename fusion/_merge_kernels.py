@@ -268,7 +268,7 @@ def _moved_cells(c, s, ox, oy, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx, my, 
 
 @njit(cache=True, nogil=True)
 def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv_cell, tol,
-                   loose_kind, min_pairs):
+                   loose_kind, min_pairs, landed):
     """Score each hypothesis after one closed-form fit step, updating it in place (``cos_t``,
     ``sin_t``: the cosine and sine of ``theta``, as :func:`pair_motions` gives them).
 
@@ -281,7 +281,8 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
     cell's nearest compatible A node, −1 per B node (not of ``loose_kind``) with none, landing
     on an A path far from any A node (A went there and saw no such place). A soft, refitted
     count: the right hypothesis of a pair sharing few nodes lands them tightly, chance
-    alignments of corridor lattices land more nodes loosely.
+    alignments of corridor lattices land more nodes loosely. ``landed[h]`` becomes the number of
+    B nodes hypothesis ``h`` paired before its refit.
     """
     n_h = theta.shape[0]
     n_b = B.shape[0]
@@ -312,6 +313,7 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
                 sc += bx[b] * ax[a] + by[b] * ay[a]
                 ss += bx[b] * ay[a] - by[b] * ax[a]
                 n += 1
+        landed[h] = n
         if n < min_pairs:
             continue  # scored 0, not refitted
         # centred cross sums from the raw ones

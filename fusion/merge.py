@@ -17,7 +17,9 @@ merge built from the maps' structure:
    while a hard count within the loose coarse tolerance preferred chance alignments of the
    corridor lattice landing 6–8 nodes loosely (thousands of hypotheses cost 1–2 ms).
 4. **Candidates**: the ``path_pool`` best *distinct* hypotheses (non-maximum suppression on angle
-   and on where B's centroid lands) are re-ranked with their **path evidence** (how many metres of
+   and on where B's centroid lands), and the ``sparse_pool`` best of those landing only 3 B nodes
+   tightly (pairs sharing 3 nodes, kept apart so that the many chance 3-node landings do not
+   crowd the coarse ranking), are re-ranked with their **path evidence** (how many metres of
    each map's paths lie on the other's, and how many run beside them: rasters of the distance to
    each map's paths), the ``candidates`` best refined by gated nearest-compatible-node SVD fits,
    and the ``scored`` most matched fully scored (:class:`MergeEvidence`): soft one-to-one matches
@@ -103,9 +105,22 @@ class MergeConfig:
             ``candidates`` best are refined (96 rather than 24: at σ = 0.15 m the right
             alignment was found for 62.5% instead of 59.2% of 20–40% overlap pairs, seed 100;
             64 does as well as 96, 48 lost a pair).
+        sparse_pool: the best distinct hypotheses landing ``min_inliers`` but fewer than 4 B
+            nodes on A nodes (the coarse score refits and ranks those with 4 or more), joined to
+            the ``path_pool`` for the re-ranking: pairs sharing exactly 3 nodes (their right
+            hypothesis, scored ~2.9, would rank among the chance 3-node landings of corridor
+            lattices, and those crowd the right ones of other pairs out of a shared pool: 3
+            in the pool was +1.3 points at σ = 0.05 m, 20–40%, −1.4 at σ = 0.15 m, 40–60%).
+            16 (with the ties of ``scored`` below): search misses of seed 100 (best wrong,
+            refined truth scoring higher) 25 → 8, ceiling at 20–40% 84.2 → 90.1 (σ = 0.05 m)
+            and 66.4 → 69.7 (σ = 0.15 m), success at the default rule +1.3 points (σ = 0.05 m,
+            20–40%), false accepts unchanged; 8 found fewer, 32 no more successes (a higher
+            ceiling, more to score). 0 switches it off.
         candidates: distinct hypotheses refined (24: the refitted coarse score ranks the right
-            one high enough that 48 found no more).
-        scored: of those, how many (the most matched after refinement) are fully scored.
+            one high enough that 48 found no more), best re-ranked gain first.
+        scored: of those, how many (the most matched after refinement; ties to the better
+            re-ranked gain: the right hypothesis of a small overlap often ties at 3–4 matched
+            nodes with chance ones) are fully scored.
         distinct_angle_deg, distinct_distance: two alignments are distinct when their angles
             differ by at least ``distinct_angle_deg`` or they put B's centroid at least
             ``distinct_distance`` apart.
@@ -130,6 +145,7 @@ class MergeConfig:
     coarse_tolerance: float = 0.7
     max_hypotheses: int = 1500
     path_pool: int = 64
+    sparse_pool: int = 16
     candidates: int = 24
     scored: int = 20
     distinct_angle_deg: float = 10.0
@@ -149,7 +165,7 @@ class MergeConfig:
         check_real(self.exhaustive_step_deg, "exhaustive_step_deg", low=0.0, high=360.0)
         check_real(self.min_score, "min_score")
         check_real(self.min_margin, "min_margin", low=0.0, low_inclusive=True)
-        for name, low in (("knn", 0), ("max_hypotheses", 1), ("path_pool", 1),
+        for name, low in (("knn", 0), ("max_hypotheses", 1), ("path_pool", 1), ("sparse_pool", 0),
                           ("candidates", 1), ("icp_max_iter", 1), ("scored", 1),
                           ("min_inliers", 3), ("multistart_starts", 1)):
             check_int(getattr(self, name), name, low=low)
@@ -224,14 +240,18 @@ noise level, overlap 20–80%, seed 0; before the path evidence → now), succes
 57.7/88.1/96.7 (oracle 80.3/95.8/100). False accepts on 4500 no-overlap pairs (seed 9000, half
 ``"disjoint"``, half ``"other_world"``; maps of 5–15, 15–60 and 60–80 nodes × noise 0.05, 0.15
 and 0.3 m, 500 per cell): 20 (0.44%; were 29): 5/1500 for 5–15 nodes, 10/1500 for 15–60,
-5/1500 for 60–80; the worst cell 6/500 (15–60 nodes, σ = 0.15 m).
+5/1500 for 60–80; the worst cell 6/500 (15–60 nodes, σ = 0.15 m). With the sparse pool
+(``MergeConfig.sparse_pool``, the same weights): seed 0 σ = 0.05 m 85.1/94.1/100, σ = 0.15 m
+60.1/86.8/94.9; seed 7 80.3/99.3/99.3 and 59.2/88.1/96.7; false accepts unchanged (20 of seed
+9000, 21 of seed 9007).
 
 What is left: at 20–40% overlap and σ = 0.15 m the right alignment is found for 70% of the
 seed-0 pairs (oracle 84.5%) but a third of those score too low to be told from the best chance
 alignment of a no-overlap pair: their evidence (3–6 shared nodes, 35–55 m of agreeing paths)
 is what the strongest chance alignments of corridor lattices also show, feature by feature.
 Measured and not kept: a regression refit on the bests alone (more false accepts at equal
-success), 3-pair coarse hypotheses (+1.3 points at σ = 0.05 m, −1.4 at σ = 0.15 m), the path
+success), 3-pair coarse hypotheses in the one ranking (+1.3 points at σ = 0.05 m, −1.4 at
+σ = 0.15 m; pooled apart they are kept: ``sparse_pool``), the path
 fit both ways or iterated 6 times, the length of A's paths inside B's hull that B does not
 have (no separation)."""
 
@@ -595,9 +615,18 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
 
 
 _COARSE_MIN_PAIRS = 4
-"""The coarse score refits and scores only hypotheses landing at least this many B nodes on A
-nodes (3, like ``min_inliers``, measured +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4 at
-σ = 0.15 m, 40–60%, seed 100, and 7% more time: not kept)."""
+"""The coarse ranking holds the hypotheses landing at least this many B nodes on A nodes (3 in
+the one ranking, like ``min_inliers``, measured +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4
+at σ = 0.15 m, 40–60%, seed 100, and 7% more time: not kept); those landing ``min_inliers`` to
+this − 1 are refitted and scored too, and pooled apart (``MergeConfig.sparse_pool``)."""
+
+
+_SPARSE_MIN = 0.7
+"""A hypothesis of the ``sparse_pool`` must land its few nodes tightly: a coarse score of at
+least this per landed node (mean distance ≲ 0.27 m at ``eps`` 0.5; the right ones of seed 100
+score 0.89–1.0 per node at σ ≤ 0.15 m). Without it a chance 3-node alignment (σ = 0.3 m,
+15–60 nodes) was one more false accept of the 4500 of seed 9007; with it as many as before on
+the tuning and held-out no-overlap seeds, at the same success."""
 
 
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
@@ -618,19 +647,29 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     theta, tx, ty, cos_t, sin_t = K.pair_motions(pa.xy, pa.pair_i, pa.pair_j, pb.xy, b_i, b_j,
                                                  hyp_p, hyp_q)
     table, x0, y0, inv_cell = _hit_grid(pa, cfg.coarse_tolerance, cfg.eps)
+    landed = np.zeros(len(theta), dtype=np.int64)
+    min_pairs = max(cfg.min_inliers, _COARSE_MIN_PAIRS)
+    reserve = cfg.sparse_pool if cfg.min_inliers < min_pairs else 0
     coarse = K.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
                               y0, inv_cell, cfg.eps, int(NodeKind.DEAD_END),
-                              max(cfg.min_inliers, _COARSE_MIN_PAIRS))
+                              cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
-    ranked = np.argsort(-coarse, kind="stable")
+    few = landed < min_pairs  # ranked with the unscored ones (0) here, and pooled apart
+    ranked = np.argsort(np.where(few, 0.0, -coarse), kind="stable")
     chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
                                cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
+    if reserve:  # the best distinct ones landing only min_inliers..3 nodes: sparse_pool
+        small = np.flatnonzero(few & (coarse > _SPARSE_MIN * landed))
+        small = small[np.argsort(-coarse[small], kind="stable")]
+        chosen = K.select_distinct(np.concatenate([chosen, small]), theta, cx, cy,
+                                   math.radians(cfg.distinct_angle_deg), cfg.distinct_distance,
+                                   len(chosen) + reserve)
     if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
         w = CONFIDENCE_WEIGHTS
         paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
         gain = coarse[chosen] + paths @ _PATH_WEIGHTS / (w["closeness"] + w["inliers"])
-        chosen = chosen[np.sort(np.argsort(-gain, kind="stable")[:cfg.candidates])]
+        chosen = chosen[np.argsort(-gain, kind="stable")[:cfg.candidates]]  # best first
     th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
     gates = np.array([cfg.coarse_tolerance, cfg.eps])
     counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,

@@ -273,7 +273,7 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     """The refitted coarse score (fusion._merge_kernels.refined_scores): a hypothesis 0.5° and
     0.1 m off the motion that made B from A lands on it after one fit, every B node exactly on
     its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
-    scored 0."""
+    scored 0. ``landed`` counts the nodes each paired before its refit."""
     from fusion import _merge_kernels as K
     from fusion.merge import _hit_grid, _prepare
 
@@ -285,8 +285,11 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
     tx = np.array([truth.T[0] + 0.1, truth.T[0]])
     ty = np.array([truth.T[1] - 0.05, truth.T[1]])
+    landed = np.full(2, -1, dtype=np.int64)
     scores = K.refined_scores(theta, tx, ty, np.cos(theta), np.sin(theta), a.xy, b.xy,
-                              b.kinds.astype(np.int64), table, x0, y0, inv_cell, cfg.eps, 1, 4)
+                              b.kinds.astype(np.int64), table, x0, y0, inv_cell, cfg.eps, 1, 4,
+                              landed)
+    assert landed[0] == a.n_nodes and 0 <= landed[1] < 4
     assert theta[0] == pytest.approx(truth.theta, abs=1e-9)
     assert [tx[0], ty[0]] == pytest.approx(truth.T.tolist(), abs=1e-9)
     assert scores[0] == pytest.approx(a.n_nodes)
@@ -377,6 +380,26 @@ def test_path_evidence_follows_polylines():
 def test_path_pool_must_be_a_positive_integer():
     with pytest.raises(ValueError, match="path_pool must be >= 1, got 0"):
         MergeConfig(path_pool=0)
+
+
+def test_sparse_pool_must_be_a_non_negative_integer():
+    assert MergeConfig(sparse_pool=0).sparse_pool == 0
+    with pytest.raises(ValueError, match="sparse_pool must be >= 0, got -1"):
+        MergeConfig(sparse_pool=-1)
+
+
+def test_sparse_pool_finds_a_pair_sharing_three_nodes():
+    """Maps sharing exactly 3 nodes: the right hypothesis lands 3 B nodes, fewer than the
+    coarse ranking holds; the sparse pool carries it to the candidates (the best alignment is
+    right), without it (``sparse_pool=0``) a chance alignment of the lattice wins."""
+    p = make_pair(np.random.default_rng(11), overlap=0.25, nodes=(30, 30),
+                  config=SyntheticConfig(noise=0.05))
+    assert len(p.correspondences) == 3
+    rot, move = errors(merge_maps(p.map_a, p.map_b).transform, p.transform, p.map_b)
+    assert rot < 2.0 and move < 0.3
+    rot, move = errors(merge_maps(p.map_a, p.map_b, config={"sparse_pool": 0}).transform,
+                       p.transform, p.map_b)
+    assert rot > 5.0 or move > 1.0
 
 
 def test_final_fit_uses_the_paths(monkeypatch):
