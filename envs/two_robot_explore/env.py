@@ -556,20 +556,31 @@ class TwoRobotExploreEnv(ParallelEnv):
                 self._cache_graph(i)
 
     def _fuse(self) -> None:
+        try_grids = self._merge_due()
+        if try_grids is None:
+            return
+        self._install_merge(run_merge(self.maps[0].topomap, self.maps[1].topomap,
+                                      self.config.mapping.merge_method, self.maps[0].grid,
+                                      self.maps[1].grid, try_grids=try_grids))
+
+    def _merge_due(self) -> bool | None:
+        """``None`` if no merge is due this step, else whether it also tries the grids (and
+        then counts it as tried)."""
         mcfg = self.config.mapping
         if not mcfg.merge_every or mcfg.merge_method == "none" or self.steps % mcfg.merge_every:
-            return
-        map_a, map_b = self.maps[0].topomap, self.maps[1].topomap
-        if map_a.n_edges == 0 or map_b.n_edges == 0:
-            return
+            return None
+        if self.maps[0].topomap.n_edges == 0 or self.maps[1].topomap.n_edges == 0:
+            return None
         known = self.maps[0].n_ever + self.maps[1].n_ever
         try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
                          and self.shared.transform is None
                          and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
         if try_grids:
             self._grid_tried_at = known
-        result = run_merge(map_a, map_b, mcfg.merge_method, self.maps[0].grid, self.maps[1].grid,
-                           try_grids=try_grids)
+        return try_grids
+
+    def _install_merge(self, result) -> None:
+        """Keep a merge's result; an accepted new transform re-warps the shared map."""
         self.merge = result
         self.merges += 1
         self.merge_time_s = float(result.time_s)
