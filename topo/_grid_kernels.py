@@ -28,17 +28,48 @@ def _bounds(lo_x, hi_x, lo_y, hi_y, x, y, reach, axis, beta):
 
 
 @njit(cache=True, nogil=True)
+def _span(dy, e1x, e1y, e2x, e2y, reach):
+    """``[lo, hi]`` of the offsets ``dx`` for which ``(dx, dy)`` lies in the cone sector of
+    edges ``e1`` (clockwise) and ``e2`` within ``reach``: the two edge half-planes (a cone of
+    half-width ≤ 90° is their intersection) and the disc. An edge nearly parallel to the row
+    sets no bound (its bound would be ill-conditioned); ``lo > hi`` when the row misses."""
+    rr = reach * reach - dy * dy
+    if rr < 0.0:
+        return 1.0, -1.0
+    hi = math.sqrt(rr)
+    lo = -hi
+    # e1 × p ≥ 0: e1y · dx ≤ e1x · dy
+    if e1y > 1e-3:
+        hi = min(hi, e1x * dy / e1y)
+    elif e1y < -1e-3:
+        lo = max(lo, e1x * dy / e1y)
+    # e2 × p ≤ 0: e2y · dx ≥ e2x · dy
+    if e2y > 1e-3:
+        lo = max(lo, e2x * dy / e2y)
+    elif e2y < -1e-3:
+        hi = min(hi, e2x * dy / e2y)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
 def sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges, angles, max_range, beta,
                  half, l_free, l_occ, clamp, threshold):
-    """Apply the sonar-cone inverse model of one scan in place; returns cells changed."""
+    """Apply the sonar-cone inverse model of one scan in place; returns cells changed.
+
+    Each row of a cone's bounding box is visited only over :func:`_span`'s columns, widened
+    by one cell each side (the cone test below, unchanged, still decides every cell: the span
+    only skips cells that cannot pass it)."""
     h, w = log_odds.shape
     cos_beta = math.cos(beta)
+    sin_beta = math.sin(beta)
     changed = 0
     for k in range(ranges.shape[0]):
         r = ranges[k]
         axis = theta + angles[k]
         ux = math.cos(axis)
         uy = math.sin(axis)
+        e1x, e1y = ux * cos_beta + uy * sin_beta, uy * cos_beta - ux * sin_beta
+        e2x, e2y = ux * cos_beta - uy * sin_beta, uy * cos_beta + ux * sin_beta
         echo = r < max_range
         reach_free = r - half if echo else max_range
         reach = r + half if echo else max_range
@@ -49,7 +80,12 @@ def sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges, angles, max
         r1 = min(int(math.floor((hi_y - oy) / res)), h - 1)
         for iy in range(r0, r1 + 1):
             dy = oy + (iy + 0.5) * res - y
-            for ix in range(c0, c1 + 1):
+            lo, hi = _span(dy, e1x, e1y, e2x, e2y, reach + res)
+            if lo > hi:
+                continue
+            a = max(c0, int(math.floor((x + lo - ox) / res - 0.5)) - 1)
+            b = min(c1, int(math.ceil((x + hi - ox) / res - 0.5)) + 1)
+            for ix in range(a, b + 1):
                 dx = ox + (ix + 0.5) * res - x
                 d = math.sqrt(dx * dx + dy * dy)
                 if ux * dx + uy * dy < cos_beta * d:

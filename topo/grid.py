@@ -14,7 +14,8 @@ beyond stay as they were. A reading ``r ≥ max_range`` is "no echo" and only fr
 ``max_range``. Log-odds are clamped to ``±clamp``; a cell is free below ``−threshold``, occupied
 above ``+threshold``, unknown between (:class:`CellState`, the one encoding table).
 
-Speed: one compiled loop (numba) visits, per sonar, only the bounding box of its cone sector and
+Speed: one compiled loop (numba) visits, per sonar, only the cells of each row of its cone
+sector's bounding box that the sector's edges and arc can reach (plus one each side), and
 tests each cell centre exactly (distance from the sensor, angle to the axis), so a scan costs
 the same whatever the grid size. The state of touched cells is kept up to date, so
 :meth:`states` is free. Cones are applied one after another: a cell inside two overlapping cones
