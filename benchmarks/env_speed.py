@@ -9,9 +9,15 @@ to that floor. The env casts through chipmunk's ``cpSpaceSegmentQueryFirst`` dir
 ``Space.segment_query_first`` (what the env called before, and the issue's definition when it
 was written) is printed beside it.
 
+The host's speed drifts by ±10 % over minutes (the floor alone has read 4,500–5,800 steps/s
+on one machine in a day), and an env's speed depends on its world and the robots' paths, so the
+section "Seeds" measures, for each of seeds 0–4 (its own world), the env and both floors one
+right after the other on that world and prints each seed's ratios and their median: the ratio
+to read against the target.
+
 Usage::
 
-    python benchmarks/env_speed.py                 # defaults, ~1 min
+    python benchmarks/env_speed.py                 # defaults, ~1.5 min
     python benchmarks/env_speed.py --soak 100000   # plus a 100k-step memory/free-space soak
 
 Stage timings wrap the env's hooks with ``time.perf_counter`` (a few % overhead, so the
@@ -223,6 +229,24 @@ def soak(steps: int, seed: int = 1) -> None:
                   f"{rate:,.0f} |", flush=True)
 
 
+def seeds_table(steps: int, seeds: tuple[int, ...] = (0, 1, 2, 3, 4)) -> None:
+    """Per seed: the env at defaults for ``steps`` steps, then both floors on its world and
+    start poses (back to back, so host drift cancels in the ratios); the medians last."""
+    print(f"\n## Seeds (defaults, {steps:,} steps each; floors on the same world right after)")
+    print("| seed | env steps/s | pymunk-API floor | ratio | chipmunk floor | ratio |")
+    print("|---|---|---|---|---|---|")
+    ratios = []
+    for seed in seeds:
+        env_sps, par = run_env(steps, seed)
+        public = run_floor(par, steps, seed, public=True)
+        floor = run_floor(par, steps, seed)
+        ratios.append((env_sps.wall, env_sps.wall / public.wall, env_sps.wall / floor.wall))
+        print(f"| {seed} | {env_sps.wall:,.0f} | {public.wall:,.0f} | {ratios[-1][1]:.2f} | "
+              f"{floor.wall:,.0f} | {ratios[-1][2]:.2f} |")
+    env_med, pub_med, floor_med = (float(np.median(col)) for col in zip(*ratios, strict=True))
+    print(f"| **median** | {env_med:,.0f} | | **{pub_med:.2f}** | | {floor_med:.2f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="steps per measurement")
@@ -249,6 +273,8 @@ def main() -> None:
     for label, sps in rows:
         print(f"| {label} | {sps.wall:,.0f} | {sps.wall / floor.wall:.2f} | {sps.cpu:,.0f} | "
               f"{sps.cpu / floor.cpu:.2f} |")
+
+    seeds_table(args.steps)
 
     print("\n## Per-stage breakdown (defaults)")
     stages, whole = breakdown(args.steps)
