@@ -108,8 +108,9 @@ class ThreadedMappingEnv(TwoRobotExploreEnv):
             return
         grids = [m.grid.copy() if try_grids else None for m in self.maps]
         fut = self._pool.submit(run_merge, self.maps[0].topomap, self.maps[1].topomap,
-                                self.config.mapping.merge_method, *grids, try_grids=try_grids)
-        self._later(fut, self._install_merge)
+                                self.config.mapping.merge_method, *grids, try_grids=try_grids,
+                                in_use=self.shared.transform)
+        self._later(fut, lambda found: self._install_merge(*found))
 
 
 def run(make, steps: int, seed: int = 0) -> tuple[float, float, float]:

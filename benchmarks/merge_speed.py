@@ -135,11 +135,11 @@ def _env_merge_calls(steps: int) -> list[dict]:
     calls: list[dict] = []
     run_merge = env_module.run_merge
 
-    def recording(map_a, map_b, method, grid_a=None, grid_b=None, try_grids=False):
+    def recording(map_a, map_b, method, grid_a=None, grid_b=None, try_grids=False, **kwargs):
         grids = [GridSnapshot(np.array(g.states()), float(g.resolution),
                               tuple(np.asarray(g.origin, dtype=float))) for g in (grid_a, grid_b)]
         calls.append({"maps": (map_a, map_b), "grids": grids, "try_grids": try_grids})
-        return run_merge(map_a, map_b, method, grid_a, grid_b, try_grids=try_grids)
+        return run_merge(map_a, map_b, method, grid_a, grid_b, try_grids=try_grids, **kwargs)
 
     env_module.run_merge = recording
     try:

@@ -26,6 +26,10 @@ more evidence — every wall cell — so this method aligns them directly:
    at the best rotation) by a factor ``min_margin`` — symmetric buildings are rejected rather
    than merged wrongly.
 
+:func:`hybrid_merge` puts the structural merge first and this alignment second (what the
+environment runs); :func:`recheck` re-runs both for maps already merged, to replace or refute
+the transform in use as the maps grow.
+
 All inputs are duck-typed grids: :class:`topo.OccupancyGrid` or :class:`fusion.pairs.GridSnapshot`
 (anything with cell-state codes — ``states()`` or ``states`` — ``resolution`` and ``origin``).
 """
@@ -82,8 +86,10 @@ class GridMergeConfig:
 
 @dataclass(frozen=True, slots=True)
 class GridMergeResult:
-    """What :func:`merge_grids` found: ``transform`` (B → A), ``accepted``, ``score`` and the
-    numbers behind the decision; ``reason`` when rejected."""
+    """What :func:`merge_grids` found: ``transform`` (B → A; the best alignment even when
+    rejected), ``accepted``, ``score`` and the numbers behind the decision; ``reason`` when
+    rejected; ``centre``: B's wall centroid (B's frame), where alignments are compared (``None``
+    when nothing could be aligned)."""
 
     transform: Rigid2D
     accepted: bool
@@ -94,6 +100,7 @@ class GridMergeResult:
     margin: float
     time_s: float
     reason: str | None = None
+    centre: np.ndarray | None = None
 
 
 def _states(grid: Any) -> np.ndarray:
@@ -359,7 +366,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
         reasons.append(f"ambiguous: a distinct alignment scores {rival:.1f} against "
                        f"{score:.1f} (margin {margin:.2f} < min_margin={cfg.min_margin})")
     return GridMergeResult(estimate, not reasons, score, overlap, agree, conflict, margin,
-                           time.perf_counter() - t0, "; ".join(reasons) or None)
+                           time.perf_counter() - t0, "; ".join(reasons) or None, centre)
 
 
 HYBRID_EPS = 0.6
@@ -375,6 +382,36 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     :class:`fusion.MergeResult` (``method="hybrid"``). An accepted grid alignment fuses the
     topological maps at nodes within :data:`HYBRID_EPS`; a double rejection keeps the
     structural result with both reasons."""
+    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config)[0]
+
+
+def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
+            config: GridMergeConfig | None = None) -> tuple[Any, str | None]:
+    """:func:`hybrid_merge` (grids tried) for maps already merged by ``in_use``, and whether
+    the grids now refute ``in_use``: ``(result, None)``, or with the result rejected and the
+    grids' best alignment clearly different from ``in_use`` (``distinct_deg`` / ``distinct_m``
+    at B's wall centroid) — the evidence no longer supports it though nothing is confident
+    enough to replace it — ``(result, why)``, ``why`` also appended to the result's reason.
+
+    An accepted result (the same alignment refined, or a distinct one) is for the caller to
+    use instead. This is how a merge accepted early on small, self-similar maps (a building's
+    180°-turned or shifted copy of a room row) gets undone once the maps have grown."""
+    cfg = config or GridMergeConfig()
+    result, grid = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg)
+    if result.accepted or grid is None or grid.centre is None:
+        return result, None
+    if not _distinct(grid.transform, in_use, grid.centre, cfg):
+        return result, None
+    why = (f"the grids refute the transform in use: their best alignment is "
+           f"{math.degrees(grid.transform.rotation_error(in_use)):.0f}° / "
+           f"{grid.transform.translation_error(in_use, at=grid.centre):.1f} m from it")
+    return dataclasses.replace(result, reason=f"{result.reason}; {why}"), why
+
+
+def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
+            config: GridMergeConfig | None) -> tuple[Any, GridMergeResult | None]:
+    """:func:`hybrid_merge`'s result and the grid alignment behind it (``None`` if the grids
+    were not tried)."""
     from scipy.spatial import cKDTree
 
     from fusion.merge import MergeResult, fuse_maps, merge_maps
@@ -385,16 +422,17 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
         # sonar topological maps fool the structural merge now and then: the grids must agree
         why = check_with_grids(grid_a, grid_b, topo.transform, config)
         if why is None:
-            return dataclasses.replace(topo, method="hybrid", time_s=time.perf_counter() - t0)
+            return dataclasses.replace(topo, method="hybrid",
+                                       time_s=time.perf_counter() - t0), None
         topo = dataclasses.replace(topo, accepted=False, merged=map_a,
                                    reason=f"structural merge refuted by the grids: {why}")
     if not try_grids:
-        return dataclasses.replace(topo, method="hybrid", time_s=time.perf_counter() - t0)
+        return dataclasses.replace(topo, method="hybrid", time_s=time.perf_counter() - t0), None
     grid = merge_grids(grid_a, grid_b, config)
     if not grid.accepted:
         return dataclasses.replace(
             topo, method="hybrid", time_s=time.perf_counter() - t0,
-            reason=f"topology: {topo.reason}; grids: {grid.reason}")
+            reason=f"topology: {topo.reason}; grids: {grid.reason}"), grid
     moved = grid.transform.apply(map_b.xy)
     matches = np.empty((0, 2), dtype=np.int64)
     if map_a.n_nodes and map_b.n_nodes:
@@ -408,4 +446,4 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     merged = fuse_maps(map_a, map_b, grid.transform, matches, HYBRID_EPS)
     return MergeResult(transform=grid.transform, accepted=True, score=grid.margin,
                        matches=matches, merged=merged, method="hybrid",
-                       time_s=time.perf_counter() - t0, reason=None, evidence=None)
+                       time_s=time.perf_counter() - t0, reason=None, evidence=None), grid

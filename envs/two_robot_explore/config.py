@@ -266,12 +266,13 @@ class MappingConfig:
         merge_every: merge the two topological maps every this many steps (``0`` never).
         merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, or ``"none"``
             (:data:`MERGE_METHODS`).
-        grid_merge_every: with ``"hybrid"``, the (slower, ~25–60 ms) occupancy-grid alignment
-            is tried on merge steps that are multiples of this, until a transform is in use;
-            ``0`` never. A multiple of ``merge_every`` (unused when ``merge_every`` is 0).
-        grid_merge_growth: after a rejected grid alignment, the next one waits (beyond
+        grid_merge_every: with ``"hybrid"``, the (slower, ~25–100 ms) occupancy-grid alignment
+            runs on merge steps that are multiples of this: to find a merge, and once one is in
+            use to re-examine it (replace or drop it, see the env's manual); ``0`` never. A
+            multiple of ``merge_every`` (unused when ``merge_every`` is 0).
+        grid_merge_growth: after a grid alignment, the next one waits (beyond
             ``grid_merge_every``) until the two robots' maps together know this fraction more
-            cells: the same maps would only be rejected again. ``0`` retries on schedule.
+            cells: the same maps would only give the same answer. ``0`` runs on schedule.
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).

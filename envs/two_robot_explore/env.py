@@ -74,13 +74,18 @@ sonar grids) is re-extracted every ``mapping.topo_every`` steps.
 
 Merging (``mapping.merge_method``): ``"hybrid"`` (default) runs the structural global merge
 ``fusion.merge_maps(method="auto")`` on the two topological maps every ``merge_every`` steps
-and, while no merge has been accepted, every ``grid_merge_every`` steps also the occupancy-grid
-alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, the costly
-part; after a rejection it is retried only once the maps have grown by ``grid_merge_growth``,
-20 %), which is what succeeds on most sonar map pairs: sonar topological maps of the same place
-differ too much for the structural merge to be confident. Both refuse ambiguous alignments
-(the procedural buildings are lattices of rooms). Other values run one ``fusion.merge_maps``
-method; ``"none"`` never merges.
+and every ``grid_merge_every`` steps also the occupancy-grid alignment
+``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, the costly part; only
+once the maps have grown by ``grid_merge_growth``, 20 %, since its last run), which is what
+succeeds on most sonar map pairs: sonar topological maps of the same place differ too much for
+the structural merge to be confident. Both refuse ambiguous alignments (the procedural
+buildings are lattices of rooms), yet small maps of a self-similar building can be confidently
+wrong (a room row turned 180° or shifted onto its twin), so the grid alignment keeps running
+after a merge is accepted (``fusion.grid_merge.recheck``): an accepted alignment replaces the
+transform in use (refined, or a different one), and a rejected one whose best alignment is
+clearly different from the transform in use drops it (info ``merge_drops``): the shared map is
+robot 0's cells alone again until the next accepted merge. Other values run one
+``fusion.merge_maps`` method; ``"none"`` never merges.
 
 ## Rewards
 
@@ -90,8 +95,9 @@ Team reward (both robots get it), every step:
     robot) − time_penalty
 
 The shared map is robot 0's known cells plus robot 1's moved by the latest accepted merge
-transform. When a new merge changes the transform the shared map is rebuilt and the change of
-its area (possibly negative: a wrong merge overlaps what it should not) enters the reward.
+transform. When a new merge changes the transform, or the transform is dropped, the shared map
+is rebuilt and the change of its area (possibly negative: a wrong merge overlaps what it should
+not, a dropped one takes robot 1's cells out) enters the reward.
 ``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
 ``true_coverage``); ``"individual"`` gives each robot its own new area and its own contacts.
 
@@ -128,7 +134,8 @@ mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot's 
 swept by the other), ``collisions``, ``merge_accepted`` (a transform is in use),
 ``merge_rotation_error_deg`` / ``merge_translation_error_m`` (of the transform in use against
 ground truth, translation error measured at the centroid of robot 1's map; NaN before a
-merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``pose`` (true world pose),
+merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``merge_drops`` (merges
+dropped because the grids refuted them, see Maps), ``pose`` (true world pose),
 ``odometry``, ``topomap`` (own ``topo.TopoMap``), ``grid`` (own ``topo.OccupancyGrid``, live:
 do not modify), ``merge`` (the last ``fusion.MergeResult`` or ``None``).
 
@@ -385,6 +392,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self.merge = None
         self.merges = 0
+        self.merge_drops = 0
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self.merge_time_s = math.nan
         self.steps = 0
@@ -559,9 +567,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         try_grids = self._merge_due()
         if try_grids is None:
             return
-        self._install_merge(run_merge(self.maps[0].topomap, self.maps[1].topomap,
-                                      self.config.mapping.merge_method, self.maps[0].grid,
-                                      self.maps[1].grid, try_grids=try_grids))
+        self._install_merge(*run_merge(self.maps[0].topomap, self.maps[1].topomap,
+                                       self.config.mapping.merge_method, self.maps[0].grid,
+                                       self.maps[1].grid, try_grids=try_grids,
+                                       in_use=self.shared.transform))
 
     def _merge_due(self) -> bool | None:
         """``None`` if no merge is due this step, else whether it also tries the grids (and
@@ -573,14 +582,14 @@ class TwoRobotExploreEnv(ParallelEnv):
             return None
         known = self.maps[0].n_ever + self.maps[1].n_ever
         try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
-                         and self.shared.transform is None
                          and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
         if try_grids:
             self._grid_tried_at = known
         return try_grids
 
-    def _install_merge(self, result) -> None:
-        """Keep a merge's result; an accepted new transform re-warps the shared map."""
+    def _install_merge(self, result, refuted: str | None = None) -> None:
+        """Keep a merge's result; an accepted new transform re-warps the shared map, and one
+        the grids ``refuted`` (why, from ``run_merge``) is dropped: robot 0's map alone."""
         self.merge = result
         self.merges += 1
         self.merge_time_s = float(result.time_s)
@@ -588,6 +597,9 @@ class TwoRobotExploreEnv(ParallelEnv):
                                 or not result.transform.allclose(self.shared.transform)):
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
                                                       result.transform)
+        elif refuted is not None and self.shared.transform is not None:
+            self.merge_drops += 1
+            self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1], None)
 
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:
@@ -725,6 +737,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             "merge_translation_error_m": trans_err,
             "merge_time_s": self.merge_time_s,
             "merges": self.merges,
+            "merge_drops": self.merge_drops,
             "merge": self.merge,
         }
         out = {}

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -252,15 +253,16 @@ class SharedMap:
         self.count += new
         return new
 
-    def rebuild(self, map_0: RobotMap, map_1: RobotMap, transform: Rigid2D) -> int:
-        """Start over with a new merge transform; returns the change of the known cell count
-        (negative if the new transform overlaps more)."""
+    def rebuild(self, map_0: RobotMap, map_1: RobotMap, transform: Rigid2D | None) -> int:
+        """Start over with a new merge transform (``None``: robot 0's map alone, the merge
+        dropped); returns the change of the known cell count (negative if the new transform
+        overlaps more, or robot 1's cells leave)."""
         before = self.count
         self.transform = transform
         self.ever[...] = map_0.ever
         self.count = map_0.n_ever
         win = map_1.known_window()
-        if win is not None:
+        if win is not None and transform is not None:
             self.add(1, map_1, win)
         return self.count - before
 
@@ -380,14 +382,19 @@ def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:
 
 
 def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
-              grid_b: OccupancyGrid | None = None, try_grids: bool = False):
+              grid_b: OccupancyGrid | None = None, try_grids: bool = False,
+              in_use: Rigid2D | None = None) -> tuple[Any, str | None]:
     """The one place fusion is called: ``fusion.grid_merge.hybrid_merge`` for ``"hybrid"``
-    (the grids are aligned only when ``try_grids``), else
-    ``fusion.merge_maps(map_a, map_b, method=method)``."""
+    (the grids are aligned only when ``try_grids``; with ``in_use``, the transform the env
+    uses now, ``fusion.grid_merge.recheck``), else ``fusion.merge_maps(map_a, map_b,
+    method=method)``. Returns the ``MergeResult`` and why the grids refute ``in_use``
+    (``None``: they do not, or were not asked)."""
     if method == "hybrid":
-        from fusion.grid_merge import hybrid_merge
+        from fusion.grid_merge import hybrid_merge, recheck
 
-        return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids)
+        if try_grids and in_use is not None:
+            return recheck(map_a, map_b, grid_a, grid_b, in_use)
+        return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids), None
     from fusion.merge import merge_maps
 
-    return merge_maps(map_a, map_b, method=method)
+    return merge_maps(map_a, map_b, method=method), None

@@ -209,3 +209,45 @@ def test_rejected_grid_alignment_waits_for_the_maps_to_grow(monkeypatch, growth,
         assert len(calls) >= 5  # on schedule: every 10 steps while the maps are non-empty
     else:
         assert len(calls) == 1  # the maps never grow 11-fold in 200 steps
+
+
+def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
+    """Once merged, the grid alignment keeps running: its accepted alignment replaces the
+    transform in use, and a rejected one far from it drops it (robot 0's map alone again)."""
+    import fusion.grid_merge as gm
+    from fusion import Rigid2D
+
+    par = two_robot_explore_v0.parallel_env(
+        **{**SMALL, "max_cycles": 400},
+        mapping={"merge_every": 5, "grid_merge_every": 10, "grid_merge_growth": 0.0})
+    real = gm.merge_grids
+    calls = []
+
+    def scripted(grid_a, grid_b, config=None):
+        # 1st: the truth, accepted; 2nd: the truth turned 2°, accepted; then: far off, rejected
+        res = real(grid_a, grid_b, config)
+        n = len(calls)
+        calls.append(n)
+        turn = Rigid2D.from_degrees([0.0, 2.0][n] if n < 2 else 90.0, (0.0, 0.0) if n < 2
+                                    else (5.0, 0.0))
+        return dataclasses.replace(res, transform=turn @ par.true_merge, accepted=n < 2,
+                                   reason=None if n < 2 else "test", centre=np.zeros(2))
+
+    monkeypatch.setattr(gm, "merge_grids", scripted)
+    par.reset(seed=3)
+    seen = []
+    while par.agents and len(calls) < 4:
+        _, rewards, _, _, infos = par.step({a: np.array([0.8, 0.3]) for a in par.agents})
+        seen.append((len(calls), par.shared.transform, infos["robot_0"], rewards["robot_0"]))
+    assert len(calls) == 4, "the grid alignment did not keep running after the merge"
+    in_use = {n: t for n, t, _, _ in seen}
+    assert in_use[1].allclose(par.true_merge)
+    assert math.degrees(in_use[2].rotation_error(par.true_merge)) == pytest.approx(2.0)
+    # the third alignment is rejected and 90° / 5 m away: the merge is dropped
+    assert in_use[3] is None and par.shared.transform is None
+    info, reward = next((i, r) for n, _, i, r in seen if n == 3)
+    assert info["merge_drops"] == 1 and not info["merge_accepted"]
+    assert reward < 0  # robot 1's cells left the shared map at that step
+    assert "the grids refute the transform in use" in info["merge"].reason
+    assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
+    assert par._observe_one(0)["teammate"][4] == 0.0

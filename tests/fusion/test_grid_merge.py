@@ -10,11 +10,18 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from fusion import Rigid2D
-from fusion.grid_merge import GridMergeConfig, check_with_grids, hybrid_merge, merge_grids
+from fusion.grid_merge import (
+    GridMergeConfig,
+    check_with_grids,
+    hybrid_merge,
+    merge_grids,
+    recheck,
+)
 from fusion.pairs import GridSnapshot
 from topo import TopoMap
 
 RES = 0.1
+TINY = TopoMap.from_arrays([[0, 0], [1, 0]], [[0, 1]])  # too small for the structural merge
 
 
 def plan(seed: int = 0) -> np.ndarray:
@@ -95,11 +102,10 @@ def test_nothing_known_is_a_reason_not_an_error():
 
 def test_hybrid_falls_back_to_the_grids_and_fuses_the_maps():
     a, b, truth = overlapping_views(90.0)
-    tiny = TopoMap.from_arrays([[0, 0], [1, 0]], [[0, 1]])  # too small for the structural merge
-    res = hybrid_merge(tiny, tiny, a, b)
+    res = hybrid_merge(TINY, TINY, a, b)
     assert res.accepted and res.method == "hybrid"
     assert math.degrees(res.transform.rotation_error(truth)) < 1.0
-    rejected = hybrid_merge(tiny, tiny, a, b, try_grids=False)
+    rejected = hybrid_merge(TINY, TINY, a, b, try_grids=False)
     assert not rejected.accepted
 
 
@@ -129,6 +135,29 @@ def test_grids_refute_a_wrong_transform():
     assert check_with_grids(a, b, truth) is None
     why = check_with_grids(a, b, Rigid2D.from_degrees(90.0) @ truth)
     assert why is not None and "wall agreement" in why
+
+
+def test_recheck_replaces_a_wrong_transform_in_use_the_grids_disprove():
+    a, b, truth = overlapping_views(90.0)
+    for in_use in (truth, Rigid2D.from_degrees(180.0, (6.0, -3.0)) @ truth):
+        res, refuted = recheck(TINY, TINY, a, b, in_use)
+        assert res.accepted and refuted is None  # the caller installs res.transform
+        assert math.degrees(res.transform.rotation_error(truth)) < 1.0
+
+
+def test_recheck_refutes_a_transform_the_grids_no_longer_support():
+    """A symmetric room: no alignment is confident, but every good one is far from a transform
+    that shifts the room by 4 m, so that one is refuted; one of the room's own symmetries is
+    kept (nothing clearly better)."""
+    s = np.zeros((120, 120), np.int8)
+    s[18:102, 28:92] = 2
+    s[20:100, 30:90] = 1
+    g = GridSnapshot(s, RES, (0.0, 0.0))
+    res, refuted = recheck(TINY, TINY, g, g, Rigid2D(0.0, (4.0, 0.0)))
+    assert not res.accepted
+    assert refuted is not None and refuted.startswith("the grids refute the transform in use")
+    assert refuted in res.reason
+    assert recheck(TINY, TINY, g, g, merge_grids(g, g).transform)[1] is None
 
 
 def _pooled_numpy(states: np.ndarray, fine: float, res: float):
