@@ -1,0 +1,123 @@
+"""Merges inside the env loop: how long each episode runs on a wrong merge transform, and what
+the grid alignment costs once a merge is in use.
+
+    python benchmarks/merge_in_loop.py [--explorer frontier] [--worlds 20] [--size 20]
+        [--steps 3000]
+
+For each seed ``0..worlds-1`` (its own procedural ``size`` m building) one episode of
+``--steps`` steps with a scripted team (``agents.scripted``), defaults otherwise. Every step
+with a transform in use is checked against the truth (``env.merge_errors()``): **wrong** is
+more than 5° or 1 m off at robot 1's map centroid — a merge that puts robot 1's rooms on the
+wrong rooms. Per episode: the first step merged, steps merged, steps wrong (and the first
+wrong transform's errors), transforms installed (each accepted merge that changed the one in
+use), merges dropped (``info["merge_drops"]``), steps to 95 % true coverage (``-`` if not
+reached). The summary adds the grid alignment's calls and seconds with no transform in use
+(searching) and with one (re-examining it, ``fusion.grid_merge.recheck``), per env step.
+
+Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the same seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import fusion.grid_merge as grid_merge  # noqa: E402
+from agents.base import run_episode  # noqa: E402
+from agents.scripted import EXPLORERS, make_team  # noqa: E402
+from envs import two_robot_explore_v0  # noqa: E402
+
+WRONG_DEG, WRONG_M = 5.0, 1.0
+
+
+class _GridClock:
+    """Wraps ``fusion.grid_merge.merge_grids`` to count calls and seconds, split by whether
+    the env had a transform in use at the time."""
+
+    def __init__(self) -> None:
+        self.env = None
+        self.calls = {"before": 0, "after": 0}
+        self.seconds = {"before": 0.0, "after": 0.0}
+        self._real = grid_merge.merge_grids
+        grid_merge.merge_grids = self
+
+    def __call__(self, grid_a, grid_b, config=None):
+        t0 = time.perf_counter()
+        out = self._real(grid_a, grid_b, config)
+        key = "after" if self.env.shared.transform is not None else "before"
+        self.calls[key] += 1
+        self.seconds[key] += time.perf_counter() - t0
+        return out
+
+
+def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock) -> dict:
+    env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)})
+    clock.env = env
+    row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,
+           "installs": 0, "t95": None}
+    last = [None]
+
+    def watch(k, _obs, _rewards, infos):
+        t = env.shared.transform
+        cov = next(iter(infos.values()))["true_coverage"] if infos else 0.0
+        if row["t95"] is None and cov >= 0.95:
+            row["t95"] = k
+        if t is None:
+            last[0] = None
+            return
+        row["merged"] += 1
+        row["first"] = row["first"] or k
+        if t is not last[0]:
+            row["installs"] += 1
+            last[0] = t
+        rot, trans = env.merge_errors()
+        if rot > WRONG_DEG or trans > WRONG_M:
+            row["wrong"] += 1
+            row["first_wrong"] = row["first_wrong"] or f"step {k}: {rot:.0f}° / {trans:.1f} m"
+
+    out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
+    row.update(steps=out["steps"], drops=env.merge_drops)
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--explorer", choices=sorted(EXPLORERS), default="frontier")
+    parser.add_argument("--worlds", type=int, default=20)
+    parser.add_argument("--size", type=float, default=20.0)
+    parser.add_argument("--steps", type=int, default=3000)
+    args = parser.parse_args()
+    clock = _GridClock()
+    print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m, "
+          f"{args.steps} steps\n")
+    print("| seed | first merged | steps merged | steps wrong | first wrong | installs | "
+          "drops | T95 |")
+    print("|---|---|---|---|---|---|---|---|")
+    rows = []
+    t0 = time.perf_counter()
+    for seed in range(args.worlds):
+        r = episode(seed, args.explorer, args.steps, args.size, clock)
+        rows.append(r)
+        print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
+              f"{r['first_wrong'] or ''} | {r['installs']} | {r['drops']} | "
+              f"{r['t95'] or '-'} |", flush=True)
+    wall = time.perf_counter() - t0
+    steps = sum(r["steps"] for r in rows)
+    merged = sum(r["merged"] for r in rows)
+    wrong = sum(r["wrong"] for r in rows)
+    print(f"\nmerged in {sum(r['first'] is not None for r in rows)} of {len(rows)} episodes; "
+          f"a wrong transform in use in {sum(r['wrong'] > 0 for r in rows)}; steps wrong / "
+          f"merged: {wrong} / {merged} ({wrong / max(merged, 1):.1%}); drops "
+          f"{sum(r['drops'] for r in rows)}")
+    for key, label in (("before", "with no transform in use"), ("after", "with one in use")):
+        print(f"grid alignments {label}: {clock.calls[key]} calls, "
+              f"{clock.seconds[key]:.1f} s = {clock.seconds[key] / steps * 1e6:.0f} µs per env "
+              f"step ({clock.seconds[key] / wall:.1%} of the run's {wall:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
