@@ -100,7 +100,7 @@ class GridMergeResult:
     margin: float
     time_s: float
     reason: str | None = None
-    centre: np.ndarray | None = None
+    centre: tuple[float, float] | None = None
 
 
 def _states(grid: Any) -> np.ndarray:
@@ -366,7 +366,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
         reasons.append(f"ambiguous: a distinct alignment scores {rival:.1f} against "
                        f"{score:.1f} (margin {margin:.2f} < min_margin={cfg.min_margin})")
     return GridMergeResult(estimate, not reasons, score, overlap, agree, conflict, margin,
-                           time.perf_counter() - t0, "; ".join(reasons) or None, centre)
+                           time.perf_counter() - t0, "; ".join(reasons) or None,
+                           (float(centre[0]), float(centre[1])))
 
 
 HYBRID_EPS = 0.6

@@ -231,7 +231,7 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
         turn = Rigid2D.from_degrees([0.0, 2.0][n] if n < 2 else 90.0, (0.0, 0.0) if n < 2
                                     else (5.0, 0.0))
         return dataclasses.replace(res, transform=turn @ par.true_merge, accepted=n < 2,
-                                   reason=None if n < 2 else "test", centre=np.zeros(2))
+                                   reason=None if n < 2 else "test", centre=(0.0, 0.0))
 
     monkeypatch.setattr(gm, "merge_grids", scripted)
     par.reset(seed=3)
