@@ -255,6 +255,9 @@ success), 3-pair coarse hypotheses in the one ranking (+1.3 points at σ = 0.05 
 fit both ways or iterated 6 times, the length of A's paths inside B's hull that B does not
 have (no separation)."""
 
+_SCORE_WEIGHTS = tuple(CONFIDENCE_WEIGHTS.values())
+"""The weights of :data:`CONFIDENCE_WEIGHTS` in order (:attr:`MergeEvidence.score`)."""
+
 
 @dataclass(frozen=True, slots=True)
 class MergeEvidence:
@@ -313,28 +316,27 @@ class MergeEvidence:
     path_agree: float = 0.0
     path_off: float = 0.0
 
+    def _feature_values(self) -> tuple[float, ...]:
+        """The inputs of :attr:`score`, in the order of :data:`CONFIDENCE_WEIGHTS`."""
+        return (1.0, self.closeness, float(self.inliers), float(self.matched_edges),
+                float(self.conflicts), float(self.crossings), float(self.branches_agree),
+                float(self.branches_disagree), float(self.near_misses),
+                math.log(max(1, self.n_a * self.n_b)), self.likelihood, self.path_agree,
+                self.path_off)
+
     def features(self) -> dict[str, float]:
         """The inputs of :attr:`score`, by the names of :data:`CONFIDENCE_WEIGHTS`."""
-        return {
-            "bias": 1.0,
-            "closeness": self.closeness,
-            "inliers": float(self.inliers),
-            "matched_edges": float(self.matched_edges),
-            "conflicts": float(self.conflicts),
-            "crossings": float(self.crossings),
-            "branches_agree": float(self.branches_agree),
-            "branches_disagree": float(self.branches_disagree),
-            "near_misses": float(self.near_misses),
-            "log_pairs": math.log(max(1, self.n_a * self.n_b)),
-            "likelihood": self.likelihood,
-            "path_agree": self.path_agree,
-            "path_off": self.path_off,
-        }
+        return dict(zip(CONFIDENCE_WEIGHTS, self._feature_values(), strict=True))
 
     @property
     def score(self) -> float:
-        """Log-odds that the alignment is right: ``Σ CONFIDENCE_WEIGHTS[f] × features()[f]``."""
-        return float(sum(CONFIDENCE_WEIGHTS[k] * v for k, v in self.features().items()))
+        """Log-odds that the alignment is right: ``Σ CONFIDENCE_WEIGHTS[f] × features()[f]``,
+        summed in that order (a plain loop: a dict and a generator cost ~6 µs a score, and
+        scores are read ~7 times a merge)."""
+        total = 0.0
+        for w, v in zip(_SCORE_WEIGHTS, self._feature_values(), strict=True):
+            total += w * v
+        return float(total)
 
     @property
     def confidence(self) -> float:
