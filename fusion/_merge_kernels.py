@@ -977,3 +977,30 @@ def nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell):
             near[n, 0], near[n, 1] = bx, by
             n += 1
     return idx[:n], near[:n]
+
+
+@njit(cache=True, nogil=True)
+def fit_points(a_xy, b_xy, matches, seg, pts, pts_w, path_weight, theta, tx, ty, gate, field,
+               x0, y0, cell):
+    """What the least-squares fit of ``fusion.merge._least_squares`` pairs: ``(P, Q, w)``, the
+    matched B nodes ``b_xy[matches[:, 1]]`` onto ``a_xy[matches[:, 0]]`` (weight 1 each), then,
+    when ``path_weight > 0``, the points ``pts`` that :func:`nearest_on_paths` finds within
+    ``gate`` of the segments ``seg`` (moved by ``(theta, tx, ty)``) onto their nearest segment
+    points, ``path_weight × pts_w`` each: the rows ``np.vstack`` and ``np.concatenate`` gave."""
+    n = matches.shape[0]
+    idx = np.empty(0, dtype=np.int64)
+    near = np.empty((0, 2))
+    if path_weight > 0.0:
+        idx, near = nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell)
+    m = n + idx.shape[0]
+    P = np.empty((m, 2))
+    Q = np.empty((m, 2))
+    w = np.ones(m)
+    for k in range(n):
+        P[k, 0], P[k, 1] = b_xy[matches[k, 1], 0], b_xy[matches[k, 1], 1]
+        Q[k, 0], Q[k, 1] = a_xy[matches[k, 0], 0], a_xy[matches[k, 0], 1]
+    for k in range(idx.shape[0]):
+        P[n + k, 0], P[n + k, 1] = pts[idx[k], 0], pts[idx[k], 1]
+        Q[n + k, 0], Q[n + k, 1] = near[k, 0], near[k, 1]
+        w[n + k] = path_weight * pts_w[idx[k]]
+    return P, Q, w

@@ -229,6 +229,15 @@ def icp_svd(
     M = as_points(M, "M", min_points=2)
     D = as_points(D, "D", min_points=2)
     _check_options(tau, max_iter, rel_tol, max_distance, trim, init)
+    return icp_checked(M, D, tau, max_iter, init, rel_tol, max_distance, trim)
+
+
+def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
+                init: Rigid2D | None, rel_tol: float | None, max_distance: float | None,
+                trim: float | None) -> IcpResult:
+    """:func:`icp_svd` without its argument checks, for callers whose inputs are valid by
+    construction (``M``, ``D``: finite float64 ``(N, 2)`` arrays of at least 2 points; options
+    within :func:`icp_svd`'s ranges): the checks cost 7 µs, a quarter of a small refinement."""
     m_moments, d_moments = spread(M), spread(D)
     degenerate = _degeneracy(m_moments, "M") or _degeneracy(d_moments, "D")
 

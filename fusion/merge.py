@@ -56,7 +56,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import degeneracy, icp_svd, rigid_fit
+from fusion.icp import degeneracy, icp_checked, icp_svd, rigid_fit
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -527,13 +527,9 @@ def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: flo
     """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
     B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
     paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
-    P, Q = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]]
-    w = np.ones(len(P))
-    if PATH_FIT_WEIGHT > 0.0:
-        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL,
-                                       pa.field, *pa.field_origin, PATH_CELL)
-        P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
-        w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
+    P, Q, w = K.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
+                           PATH_FIT_WEIGHT, theta, t[0], t[1], PATH_TOL, pa.field,
+                           *pa.field_origin, PATH_CELL)
     return rigid_fit(P, Q, w)
 
 
@@ -546,8 +542,8 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
     best = start
     if start.evidence.inliers >= 2:
         trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))
-        icp = icp_svd(pa.xy, pb.xy, tau=None, rel_tol=1e-9, max_iter=cfg.icp_max_iter,
-                      init=start.transform, max_distance=cfg.eps, trim=trim)
+        icp = icp_checked(pa.xy, pb.xy, None, cfg.icp_max_iter, start.transform, 1e-9,
+                          cfg.eps, trim)  # the maps' nodes were checked by merge_maps
         ev = _evaluate(pa, pb, icp.transform.theta, icp.transform.T, cfg)
         best = max((best, ev), key=_Eval.key)
     theta, t, moved = best.theta, best.t, False

@@ -59,7 +59,7 @@ class Rigid2D:
             raise TypeError(f"T must be a numeric 2-vector, got {type(T).__name__}") from exc
         if t.shape != (2,):
             raise ValueError(f"T must be a 2-vector (t_x, t_y), got shape {t.shape}")
-        if not np.all(np.isfinite(t)):
+        if not (math.isfinite(t[0]) and math.isfinite(t[1])):  # np.isfinite: 2 µs more
             raise ValueError(f"T must be finite, got {t.tolist()}")
         self._theta = float(wrap_angle(theta))
         self._T = t
