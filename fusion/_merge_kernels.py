@@ -677,6 +677,22 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
 
 
 @njit(cache=True, nogil=True)
+def matched_pairs(match_b):
+    """``(K, 2)`` pairs ``(match_b[b], b)`` of the B nodes ``b`` with a match (``match_b[b] >= 0``,
+    :func:`evidence`), ``b`` ascending: ``np.column_stack`` of ``np.flatnonzero``'s rows."""
+    n = 0
+    for b in range(match_b.shape[0]):
+        n += match_b[b] >= 0
+    out = np.empty((n, 2), dtype=np.int64)
+    k = 0
+    for b in range(match_b.shape[0]):
+        if match_b[b] >= 0:
+            out[k, 0], out[k, 1] = match_b[b], b
+            k += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
 def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
                    b_margin, b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol,
                    min_sin, near_miss):

@@ -464,6 +464,7 @@ class _Eval:
 
 
 _BRANCH_TOL = math.radians(25.0)
+_LOOSE_KIND = int(NodeKind.DEAD_END)  # the kind that makes no conflicts (frontier artefacts)
 _MIN_CROSSING_SIN = 0.5  # paths within 30° of parallel are one corridor seen twice
 _FEATURE_COLUMNS = {"closeness": 0, "inliers": 1, "matched_edges": 2, "conflicts": 3,
                    "crossings": 4, "branches_agree": 5, "branches_disagree": 6,
@@ -504,21 +505,22 @@ def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.n
 
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
               cfg: MergeConfig) -> _Eval:
+    """The full evidence (:class:`MergeEvidence`) and matches of B moved by ``(theta, t)``."""
+    theta_, tx, ty = float(theta), float(t[0]), float(t[1])
     match_b = np.empty(len(pb.xy), dtype=np.int64)
     d2_b = np.empty(len(pb.xy))
-    f = K.evidence(*_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
-                   KIND_COMPATIBLE, int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
-                   cfg.near_miss, match_b, d2_b)
-    b_idx = np.flatnonzero(match_b >= 0)
-    matches = np.column_stack([match_b[b_idx], b_idx]).astype(np.int64)
-    n = len(b_idx)
+    f = K.evidence(*_evidence_args(pa, pb), theta_, tx, ty, cfg.eps, KIND_COMPATIBLE,
+                   _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss, match_b,
+                   d2_b).tolist()  # Python floats: cheaper to read one by one
+    matches = K.matched_pairs(match_b)
+    n = len(matches)
     collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
-    agree, off = _path_evidence(pa, pb, np.array([float(theta)]), np.array([float(t[0])]),
-                                np.array([float(t[1])]))[0]
-    ev = MergeEvidence(n, float(f[0]), int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
+    agree, off = _path_evidence(pa, pb, np.array([theta_]), np.array([tx]),
+                                np.array([ty]))[0].tolist()
+    ev = MergeEvidence(n, f[0], int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
                        int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
-                       len(pb.xy), likelihood=float(f[_LIKELIHOOD].max()),
-                       path_agree=float(agree), path_off=float(off))
+                       len(pb.xy), likelihood=max(f[_LIKELIHOOD]), path_agree=agree,
+                       path_off=off)
     return _Eval(float(wrap_angle(theta)), np.asarray(t, dtype=np.float64), matches, ev)
 
 
@@ -649,7 +651,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     min_pairs = max(cfg.min_inliers, _COARSE_MIN_PAIRS)
     reserve = cfg.sparse_pool if cfg.min_inliers < min_pairs else 0
     coarse = K.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
-                              y0, inv_cell, cfg.eps, int(NodeKind.DEAD_END),
+                              y0, inv_cell, cfg.eps, _LOOSE_KIND,
                               cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
@@ -675,7 +677,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
     th, txc, tyc = th[keep], txc[keep], tyc[keep]
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
-                                int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
+                                _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
     scores = _scores(features, _path_evidence(pa, pb, th, txc, tyc), len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
