@@ -863,6 +863,23 @@ def map_numbers(xy, edges, ends, eps, pad, pad2):
 
 
 @njit(cache=True, nogil=True)
+def map_fields(xy, edges, pieces, knn, min_dist, step, eps, reach, cell):
+    """Everything ``fusion.merge._prepare`` computes of a map in compiled code, in one call:
+    :func:`node_pairs` (``near, i, j, length``), :func:`path_samples` of the path pieces
+    ``pieces`` (``pts, w``), :func:`map_numbers`' ``margin`` and the raster's origin
+    ``(x0, y0)``, the :func:`path_field` raster (``ceil(extent / cell) + 1`` cells a side, as
+    ``math.ceil``) and :func:`branch_slots` (``node, slot, d, degree``)."""
+    near, i, j, length = node_pairs(xy, edges, knn, min_dist)
+    pts, w = path_samples(pieces, step)
+    margin, x0, y0, x1, y1 = map_numbers(xy, edges, pieces.reshape(-1, 2), eps, reach, cell)
+    nx = math.ceil((x1 - x0) / cell) + 1
+    ny = math.ceil((y1 - y0) / cell) + 1
+    field = path_field(pieces, x0, y0, cell, ny, nx, reach)
+    node, slot, d, degree = branch_slots(xy, edges, xy.shape[0])
+    return near, i, j, length, pts, w, margin, x0, y0, field, node, slot, d, degree
+
+
+@njit(cache=True, nogil=True)
 def branch_slots(xy, edges, n):
     """The paths leaving each of the ``n`` nodes, in order of node (stable): ``(node, slot, d)``
     — the node, its path's place among its node's, and the vector to the path's other end

@@ -415,16 +415,12 @@ class _Prepared:
 def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
-    near, i, j, length = K.node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
     pieces = _segments(m)
-    pts, w = K.path_samples(pieces, PATH_STEP)
-    margin, x0, y0, x1, y1 = K.map_numbers(xy, edges, pieces.reshape(-1, 2), cfg.eps,
-                                           PATH_REACH, PATH_CELL)
-    nx = math.ceil((x1 - x0) / PATH_CELL) + 1
-    ny = math.ceil((y1 - y0) / PATH_CELL) + 1
-    field = K.path_field(pieces, x0, y0, PATH_CELL, ny, nx, PATH_REACH)
+    near, i, j, length, pts, w, margin, x0, y0, field, *slots = K.map_fields(
+        xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP, cfg.eps,
+        PATH_REACH, PATH_CELL)
     return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(xy, edges), pieces, pts, w, field, (x0, y0))
+                     _branches(len(xy), *slots), pieces, pts, w, field, (x0, y0))
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -439,10 +435,11 @@ def _segments(m: TopoMap) -> np.ndarray:
     return K.polyline_chords(pts, sizes, PATH_CHORD)
 
 
-def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """``(n, max degree)`` angle of each path leaving each node (toward its other end)."""
-    node, slot, d, degree = K.branch_slots(xy, edges, len(xy))
-    out = np.full((len(xy), max(1, degree)), np.nan)
+def _branches(n: int, node: np.ndarray, slot: np.ndarray, d: np.ndarray,
+              degree: int) -> np.ndarray:
+    """``(n, max degree)`` angle of each path leaving each node (toward its other end), from
+    :func:`fusion._merge_kernels.branch_slots`."""
+    out = np.full((n, max(1, degree)), np.nan)
     if len(node):  # numpy's arctan2 (numba's differs in the last bit), on the same layout
         out[node, slot] = np.arctan2(d[:, 1], d[:, 0])
     return out
