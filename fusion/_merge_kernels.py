@@ -253,6 +253,26 @@ def paint_nearest(table, x0, y0, cell, points, p_kind, radius, compat):
 
 
 @njit(cache=True, nogil=True)
+def hit_table(points, p_kind, edges, tol, path_tol, compat, like):
+    """The raster of ``fusion.merge._hit_grid`` (cells ``tol / 2`` wide, entries of
+    ``like``'s dtype): ``(table, x0, y0, 1 / cell)``, ``table[iy, ix, :-1]`` painted by
+    :func:`paint_nearest` (``-1`` elsewhere) and ``table[iy, ix, -1]`` its bits and
+    :data:`ON_PATH` within ~``path_tol`` of the paths ``edges`` (:func:`paint_segments`). The
+    extent as numpy computed it: ``lo = min − tol − cell``, ``ceil((max − lo + tol) / cell) + 2``
+    cells."""
+    cell = tol / 2.0
+    x0, x1, y0, y1 = _bbox(points)
+    x0, y0 = x0 - tol - cell, y0 - tol - cell
+    nx = int(math.ceil((x1 - x0 + tol) / cell) + 2)
+    ny = int(math.ceil((y1 - y0 + tol) / cell) + 2)
+    table = np.full((ny, nx, compat.shape[1] + 1), -1, dtype=like.dtype)
+    table[:, :, -1] = 0
+    paint_nearest(table, x0, y0, cell, points, p_kind, tol, compat)
+    paint_segments(table[:, :, -1], x0, y0, cell, points, edges, path_tol, 1 << ON_PATH)
+    return table, x0, y0, 1.0 / cell
+
+
+@njit(cache=True, nogil=True)
 def _moved_cells(c, s, ox, oy, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx, my, cell):
     """The points ``(bx, by)`` moved by ``(c, s, ox, oy)`` into raster coordinates (``mx``,
     ``my``) and the flat index of their raster cell's first entry (``-1`` outside): a loop
@@ -865,8 +885,9 @@ def map_numbers(xy, edges, ends, eps, pad, pad2):
 @njit(cache=True, nogil=True)
 def map_fields(xy, edges, pieces, knn, min_dist, step, eps, reach, cell):
     """Everything ``fusion.merge._prepare`` computes of a map in compiled code, in one call:
-    :func:`node_pairs` (``near, i, j, length``), :func:`path_samples` of the path pieces
-    ``pieces`` (``pts, w``), :func:`map_numbers`' ``margin`` and the raster's origin
+    :func:`node_pairs` (``near, i, j, length``; then the pairs in both orientations sorted
+    by length, stably, as :func:`pair_candidates` reads B's), :func:`path_samples` of the
+    path pieces ``pieces`` (``pts, w``), :func:`map_numbers`' ``margin`` and the raster's origin
     ``(x0, y0)``, the :func:`path_field` raster (``ceil(extent / cell) + 1`` cells a side, as
     ``math.ceil``) and :func:`branch_slots` (``node, slot, d, degree``)."""
     near, i, j, length = node_pairs(xy, edges, knn, min_dist)
@@ -876,7 +897,13 @@ def map_fields(xy, edges, pieces, knn, min_dist, step, eps, reach, cell):
     ny = math.ceil((y1 - y0) / cell) + 1
     field = path_field(pieces, x0, y0, cell, ny, nx, reach)
     node, slot, d, degree = branch_slots(xy, edges, xy.shape[0])
-    return near, i, j, length, pts, w, margin, x0, y0, field, node, slot, d, degree
+    # both orientations of the pairs, by length (stable): what a merge reads of its map B
+    both_i = np.concatenate((i, j))
+    both_j = np.concatenate((j, i))
+    both_len = np.concatenate((length, length))
+    order = np.argsort(both_len, kind="mergesort")
+    return (near, i, j, length, both_i[order], both_j[order], both_len[order], pts, w, margin,
+            x0, y0, field, node, slot, d, degree)
 
 
 @njit(cache=True, nogil=True)

@@ -403,6 +403,9 @@ class _Prepared:
     pair_i: np.ndarray
     pair_j: np.ndarray
     pair_len: np.ndarray
+    both_i: np.ndarray  # the pairs in both orientations, by length (stable): B's hypotheses
+    both_j: np.ndarray
+    both_len: np.ndarray
     margin: np.ndarray  # (E,) fraction of each path within eps of its ends
     branches: np.ndarray  # (n, max degree) direction of each path leaving a node, nan padded
     segments: np.ndarray  # (S, 4) straight pieces of the paths (_segments)
@@ -416,11 +419,12 @@ def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
     pieces = _segments(m)
-    near, i, j, length, pts, w, margin, x0, y0, field, *slots = K.map_fields(
-        xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP, cfg.eps,
-        PATH_REACH, PATH_CELL)
-    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(len(xy), *slots), pieces, pts, w, field, (x0, y0))
+    near, i, j, length, both_i, both_j, both_len, pts, w, margin, x0, y0, field, *slots = (
+        K.map_fields(xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP,
+                     cfg.eps, PATH_REACH, PATH_CELL))
+    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, both_i, both_j,
+                     both_len, margin, _branches(len(xy), *slots), pieces, pts, w, field,
+                     (x0, y0))
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -596,19 +600,16 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
     :data:`~fusion._merge_kernels.NEAR_ANY_NODE` (within ~``tol`` of an A node) and
     :data:`~fusion._merge_kernels.ON_PATH` (within ~``path_tol`` of an A path).
     Returns ``(table, x0, y0, 1 / cell)``."""
-    cell = tol / 2.0
-    lo = pa.xy.min(axis=0) - tol - cell
-    shape = (np.ceil((pa.xy.max(axis=0) - lo + tol) / cell) + 2).astype(np.int64)
     # a small dtype keeps the table in cache (int16: scoring twice faster at 60 nodes than
     # int32; int8 another ~10%)
     n = len(pa.xy)
-    dtype = np.int8 if n < 127 else np.int16 if n < 32767 else np.int32  # iinfo costs 10 µs
-    table = np.full((shape[1], shape[0], len(NodeKind) + 1), -1, dtype=dtype)
-    table[:, :, -1] = 0
-    K.paint_nearest(table, lo[0], lo[1], cell, pa.xy, pa.kinds, tol, KIND_COMPATIBLE)
-    K.paint_segments(table[:, :, -1], lo[0], lo[1], cell, pa.xy, pa.edges, path_tol,
-                     1 << K.ON_PATH)
-    return table, float(lo[0]), float(lo[1]), 1.0 / cell
+    like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32  # iinfo costs 10 µs
+    return K.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, KIND_COMPATIBLE, like)
+
+
+_INT8, _INT16, _INT32 = (np.empty(0, dtype=t) for t in (np.int8, np.int16, np.int32))
+"""Empty arrays of the :func:`_hit_grid` table's dtypes (a compiled kernel takes an array's
+dtype, not a dtype)."""
 
 
 _COARSE_MIN_PAIRS = 4
@@ -627,13 +628,9 @@ the tuning and held-out no-overlap seeds, at the same success."""
 
 
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
-    b_i = np.concatenate([pb.pair_i, pb.pair_j])
-    b_j = np.concatenate([pb.pair_j, pb.pair_i])
-    b_len = np.concatenate([pb.pair_len, pb.pair_len])
-    order = np.argsort(b_len, kind="stable")
-    b_i, b_j = b_i[order], b_j[order]
+    b_i, b_j = pb.both_i, pb.both_j
     hyp_p, hyp_q, weight = K.pair_candidates(pa.kinds, pa.pair_i, pa.pair_j, pa.pair_len,
-                                             pb.kinds, b_i, b_j, b_len[order],
+                                             pb.kinds, b_i, b_j, pb.both_len,
                                              cfg.pair_tolerance, KIND_COMPATIBLE)
     n_hyp = len(hyp_p)
     if n_hyp == 0:
