@@ -364,6 +364,40 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
 
 
 @njit(cache=True, nogil=True)
+def centroid_image(cos_t, sin_t, tx, ty, px, py):
+    """``(cx, cy)``: the point ``(px, py)`` moved by each motion ``(cos_t, sin_t, tx, ty)``
+    (``c px − s py + tx``, ``s px + c py + ty``, evaluated as numpy does it elementwise)."""
+    cx = np.empty(cos_t.shape[0])
+    cy = np.empty(cos_t.shape[0])
+    for h in range(cos_t.shape[0]):
+        cx[h] = cos_t[h] * px - sin_t[h] * py + tx[h]
+        cy[h] = sin_t[h] * px + cos_t[h] * py + ty[h]
+    return cx, cy
+
+
+@njit(cache=True, nogil=True)
+def coarse_ranking(coarse, landed, min_pairs, sparse_min):
+    """``(ranked, sparse)``: the hypotheses by coarse score, best first, those landing fewer
+    than ``min_pairs`` B nodes ranked as scoring 0 (``np.argsort(np.where(few, 0.0, -coarse),
+    kind="stable")``); and those few landing them tightly (``coarse > sparse_min × landed``),
+    best first (stable). Stable sorts, so the same orders as numpy's."""
+    key = np.empty(coarse.shape[0])
+    n_sparse = 0
+    for h in range(coarse.shape[0]):
+        few = landed[h] < min_pairs
+        key[h] = 0.0 if few else -coarse[h]
+        n_sparse += few and coarse[h] > sparse_min * landed[h]
+    sparse = np.empty(n_sparse, dtype=np.int64)
+    k = 0
+    for h in range(coarse.shape[0]):
+        if landed[h] < min_pairs and coarse[h] > sparse_min * landed[h]:
+            sparse[k] = h
+            k += 1
+    sparse = sparse[np.argsort(-coarse[sparse], kind="mergesort")]
+    return np.argsort(key, kind="mergesort"), sparse
+
+
+@njit(cache=True, nogil=True)
 def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
     """Greedy non-maximum suppression: walk ``order`` (best first) and keep up to ``k``
     hypotheses whose angle differs by ``>= min_angle`` or whose image of B's centroid
@@ -445,6 +479,17 @@ def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
             tx[h] = sqx - (c * spx - s * spy)
             ty[h] = sqy - (s * spx + c * spy)
     return counts
+
+
+@njit(cache=True, nogil=True)
+def refine_most_matched(theta, tx, ty, chosen, A, a_kind, B, b_kind, compat, gates, keep):
+    """:func:`refine_batch` of the hypotheses ``chosen`` (copies), then the ``keep`` of them
+    with the most pairs at the last gate (ties to the earlier in ``chosen``; a stable sort),
+    in the order of ``chosen``: ``(theta, tx, ty)`` arrays."""
+    th, txc, tyc = theta[chosen], tx[chosen], ty[chosen]
+    counts = refine_batch(th, txc, tyc, A, a_kind, B, b_kind, compat, gates)
+    best = np.sort(np.argsort(-counts, kind="mergesort")[:keep])
+    return th[best], txc[best], tyc[best]
 
 
 @njit(cache=True, nogil=True)

@@ -560,8 +560,8 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
 
 def _centroid_image(theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
                     centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    c, s = np.cos(theta), np.sin(theta)
-    return c * centre[0] - s * centre[1] + tx, s * centre[0] + c * centre[1] + ty
+    """Where each motion ``(theta, tx, ty)`` puts the point ``centre``: ``(cx, cy)``."""
+    return K.centroid_image(np.cos(theta), np.sin(theta), tx, ty, centre[0], centre[1])
 
 
 def _runner_up(best: _Eval, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
@@ -649,13 +649,11 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
                               cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
-    few = landed < min_pairs  # ranked with the unscored ones (0) here, and pooled apart
-    ranked = np.argsort(np.where(few, 0.0, -coarse), kind="stable")
+    # those landing fewer than min_pairs are ranked with the unscored ones (0), and pooled apart
+    ranked, small = K.coarse_ranking(coarse, landed, min_pairs, _SPARSE_MIN)
     chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
                                cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
     if reserve:  # the best distinct ones landing only min_inliers..3 nodes: sparse_pool
-        small = np.flatnonzero(few & (coarse > _SPARSE_MIN * landed))
-        small = small[np.argsort(-coarse[small], kind="stable")]
         chosen = K.select_distinct(np.concatenate([chosen, small]), theta, cx, cy,
                                    math.radians(cfg.distinct_angle_deg), cfg.distinct_distance,
                                    len(chosen) + reserve)
@@ -664,12 +662,9 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
         paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
         gain = coarse[chosen] + paths @ _PATH_WEIGHTS / (w["closeness"] + w["inliers"])
         chosen = chosen[np.argsort(-gain, kind="stable")[:cfg.candidates]]  # best first
-    th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
-    gates = np.array([cfg.coarse_tolerance, cfg.eps])
-    counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,
-                            gates)
-    keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
-    th, txc, tyc = th[keep], txc[keep], tyc[keep]
+    th, txc, tyc = K.refine_most_matched(theta, tx, ty, chosen, pa.xy, pa.kinds, pb.xy, pb.kinds,
+                                         KIND_COMPATIBLE,
+                                         np.array([cfg.coarse_tolerance, cfg.eps]), cfg.scored)
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
                                 _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
