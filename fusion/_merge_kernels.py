@@ -398,6 +398,28 @@ def coarse_ranking(coarse, landed, min_pairs, sparse_min):
 
 
 @njit(cache=True, nogil=True)
+def best_by_gain(chosen, coarse, path_score, scale, k):
+    """The ``k`` of the hypotheses ``chosen`` with the highest ``coarse + path_score / scale``
+    (``path_score`` one per chosen), best first (a stable sort: numpy's order)."""
+    gain = np.empty(chosen.shape[0])
+    for m in range(chosen.shape[0]):
+        gain[m] = -(coarse[chosen[m]] + path_score[m] / scale)
+    return chosen[np.argsort(gain, kind="mergesort")[:k]]
+
+
+@njit(cache=True, nogil=True)
+def best_distinct_score(scores, gap, cx, cy, px, py, min_angle, min_dist):
+    """The best of ``scores`` whose alignment is distinct from one at ``(px, py)``: an angle
+    ``gap`` of at least ``min_angle``, or an image ``(cx, cy)`` at least ``min_dist`` from it
+    (``math.hypot`` is the C library's, as ``np.hypot``); ``-inf`` if none is."""
+    best = -np.inf
+    for h in range(scores.shape[0]):
+        if gap[h] >= min_angle or math.hypot(cx[h] - px, cy[h] - py) >= min_dist:
+            best = max(best, scores[h])
+    return best
+
+
+@njit(cache=True, nogil=True)
 def select_distinct(order, theta, cx, cy, min_angle, min_dist, k):
     """Greedy non-maximum suppression: walk ``order`` (best first) and keep up to ``k``
     hypotheses whose angle differs by ``>= min_angle`` or whose image of B's centroid

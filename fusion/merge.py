@@ -489,6 +489,9 @@ def _path_evidence(pa: _Prepared, pb: _Prepared, theta: np.ndarray, tx: np.ndarr
                             PATH_TOL, PATH_OFF, PATH_REACH, both)
 
 
+_FEATURE_COLS = list(_FEATURE_COLUMNS.values())
+_FEATURE_WEIGHTS = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
+"""The columns of :data:`_FEATURE_COLUMNS` and their score weights (:func:`_scores`)."""
 _PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["path_off"]])
 """Score weights of the columns of :func:`_path_evidence` (``path_agree``, ``path_off``)."""
 
@@ -496,10 +499,8 @@ _PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["
 def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
     """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features
     and of :func:`_path_evidence`."""
-    cols = list(_FEATURE_COLUMNS.values())
-    w = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
-    return (features[:, cols] @ w + const
+    return (features[:, _FEATURE_COLS] @ _FEATURE_WEIGHTS + const
             + CONFIDENCE_WEIGHTS["likelihood"] * features[:, _LIKELIHOOD].max(axis=1)
             + paths @ _PATH_WEIGHTS)
 
@@ -577,9 +578,8 @@ def _runner_up(best: _Eval, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
     p = best.transform.apply(centre)
     cx, cy = _centroid_image(theta, tx, ty, centre)
     gap = np.abs(np.angle(np.exp(1j * (theta - best.theta))))
-    distinct = ((gap >= math.radians(cfg.distinct_angle_deg))
-                | (np.hypot(cx - p[0], cy - p[1]) >= cfg.distinct_distance))
-    return float(scores[distinct].max()) if distinct.any() else -math.inf
+    return K.best_distinct_score(scores, gap, cx, cy, p[0], p[1],
+                                 math.radians(cfg.distinct_angle_deg), cfg.distinct_distance)
 
 
 def _runner_up_of(best: _Eval, others: list[_Eval], b_xy: np.ndarray, cfg: MergeConfig) -> float:
@@ -660,8 +660,8 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
         w = CONFIDENCE_WEIGHTS
         paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
-        gain = coarse[chosen] + paths @ _PATH_WEIGHTS / (w["closeness"] + w["inliers"])
-        chosen = chosen[np.argsort(-gain, kind="stable")[:cfg.candidates]]  # best first
+        chosen = K.best_by_gain(chosen, coarse, paths @ _PATH_WEIGHTS,
+                                w["closeness"] + w["inliers"], cfg.candidates)  # best first
     th, txc, tyc = K.refine_most_matched(theta, tx, ty, chosen, pa.xy, pa.kinds, pb.xy, pb.kinds,
                                          KIND_COMPATIBLE,
                                          np.array([cfg.coarse_tolerance, cfg.eps]), cfg.scored)
