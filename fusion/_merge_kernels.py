@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from fusion._icp_kernels import spread
+
 
 @njit(cache=True, nogil=True)
 def node_pairs(xy, edges, knn, min_dist):
@@ -777,6 +779,30 @@ def matched_pairs(match_b):
             out[k, 0], out[k, 1] = match_b[b], b
             k += 1
     return out
+
+
+@njit(cache=True, nogil=True)
+def evaluation(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
+               b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin, near_miss,
+               a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b_field, b_x0, b_y0, inv_cell, tol,
+               off, cap):
+    """One alignment's evidence in one call (``fusion.merge._evaluate``): ``(features,
+    matches, (path_agree, path_off), moments)`` — :func:`evidence`'s features, its matches
+    (:func:`matched_pairs`), :func:`path_agreement` both ways, and the
+    :func:`fusion._icp_kernels.spread` of the matched A nodes (zeros with fewer than 3)."""
+    match_b = np.empty(B.shape[0], dtype=np.int64)
+    d2_b = np.empty(B.shape[0])
+    f = evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
+                 b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin,
+                 near_miss, match_b, d2_b)
+    matches = matched_pairs(match_b)
+    paths = path_agreement(np.array([theta]), np.array([tx]), np.array([ty]), a_pts, a_w,
+                           a_field, a_x0, a_y0, b_pts, b_w, b_field, b_x0, b_y0, inv_cell, tol,
+                           off, cap, True)
+    moments = (0.0, 0.0, 0.0, 0.0, 0.0)
+    if matches.shape[0] >= 3:
+        moments = spread(A[matches[:, 0]])
+    return f, matches, (paths[0, 0], paths[0, 1]), moments
 
 
 @njit(cache=True, nogil=True)

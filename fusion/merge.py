@@ -56,7 +56,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import degeneracy, icp_checked, icp_svd, rigid_fit
+from fusion.icp import degeneracy, icp_checked, icp_svd, moments_degeneracy, rigid_fit
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -480,13 +480,18 @@ def _evidence_args(pa: _Prepared, pb: _Prepared) -> tuple:
             pb.edges, pb.margin, pb.branches)
 
 
+def _path_args(pa: _Prepared, pb: _Prepared) -> tuple:
+    """What :func:`fusion._merge_kernels.path_agreement` reads of the two maps, and its
+    constants."""
+    return (pa.path_pts, pa.path_w, pa.field, *pa.field_origin, pb.path_pts, pb.path_w, pb.field,
+            *pb.field_origin, 1.0 / PATH_CELL, PATH_TOL, PATH_OFF, PATH_REACH)
+
+
 def _path_evidence(pa: _Prepared, pb: _Prepared, theta: np.ndarray, tx: np.ndarray,
                    ty: np.ndarray, both: bool = True) -> np.ndarray:
     """``(H, 2)`` :attr:`MergeEvidence.path_agree` and ``path_off`` of each hypothesis (without
     ``both``, twice what B's paths alone give: the quick estimate the re-ranking uses)."""
-    return K.path_agreement(theta, tx, ty, pa.path_pts, pa.path_w, pa.field, *pa.field_origin,
-                            pb.path_pts, pb.path_w, pb.field, *pb.field_origin, 1.0 / PATH_CELL,
-                            PATH_TOL, PATH_OFF, PATH_REACH, both)
+    return K.path_agreement(theta, tx, ty, *_path_args(pa, pb), both)
 
 
 _FEATURE_COLS = list(_FEATURE_COLUMNS.values())
@@ -508,17 +513,13 @@ def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.n
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
               cfg: MergeConfig) -> _Eval:
     """The full evidence (:class:`MergeEvidence`) and matches of B moved by ``(theta, t)``."""
-    theta_, tx, ty = float(theta), float(t[0]), float(t[1])
-    match_b = np.empty(len(pb.xy), dtype=np.int64)
-    d2_b = np.empty(len(pb.xy))
-    f = K.evidence(*_evidence_args(pa, pb), theta_, tx, ty, cfg.eps, KIND_COMPATIBLE,
-                   _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss, match_b,
-                   d2_b).tolist()  # Python floats: cheaper to read one by one
-    matches = K.matched_pairs(match_b)
+    f, matches, (agree, off), moments = K.evaluation(
+        *_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
+        KIND_COMPATIBLE, _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss,
+        *_path_args(pa, pb))
+    f = f.tolist()  # Python floats: cheaper to read one by one
     n = len(matches)
-    collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
-    agree, off = _path_evidence(pa, pb, np.array([theta_]), np.array([tx]),
-                                np.array([ty]))[0].tolist()
+    collinear = n < 3 or moments_degeneracy(moments, "matches", 1e-3) is not None
     ev = MergeEvidence(n, f[0], int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
                        int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
                        len(pb.xy), likelihood=max(f[_LIKELIHOOD]), path_agree=agree,
