@@ -739,18 +739,19 @@ def decide(evidence: MergeEvidence, config: MergeConfig | None = None) -> str | 
     """
     cfg = _DEFAULT_CONFIG if config is None else config_from(MergeConfig, config)
     e = evidence
+    score = e.score  # a sum of 13 products: once
     reasons = []
     if e.inliers < cfg.min_inliers:
         reasons.append(f"too few matched nodes: {e.inliers} < min_inliers={cfg.min_inliers}")
     if e.collinear:
         reasons.append("matched nodes are collinear: rotation not determined")
-    if e.score < cfg.min_score:
-        reasons.append(f"weak evidence: score {e.score:.2f} < min_score={cfg.min_score} "
+    if score < cfg.min_score:
+        reasons.append(f"weak evidence: score {score:.2f} < min_score={cfg.min_score} "
                        f"({e.inliers} matches, {e.matched_edges} matched paths, "
                        f"{e.conflicts} conflicts, {e.crossings} crossings, rmse {e.rmse:.2f} m)")
-    if e.runner_up > e.score - cfg.min_margin:
+    if e.runner_up > score - cfg.min_margin:
         reasons.append(f"ambiguous: a distinct alignment scores {e.runner_up:.2f} against "
-                       f"{e.score:.2f} (margin < min_margin={cfg.min_margin})")
+                       f"{score:.2f} (margin < min_margin={cfg.min_margin})")
     return "; ".join(reasons) or None
 
 
