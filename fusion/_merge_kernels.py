@@ -1164,3 +1164,49 @@ def fit_points(a_xy, b_xy, matches, seg, pts, pts_w, path_weight, theta, tx, ty,
         Q[n + k, 0], Q[n + k, 1] = near[k, 0], near[k, 1]
         w[n + k] = path_weight * pts_w[idx[k]]
     return P, Q, w
+
+
+@njit(cache=True, nogil=True)
+def fused_graph(node, first, xy, kinds, edges, lengths, rank_of_kind, kind_of_rank):
+    """The map ``fusion.merge.fuse_maps`` builds once its nodes are grouped (``node[i]``: the
+    fused node of input node ``i``; ``first[c]``: the lowest input node of fused node ``c``,
+    :func:`components_by_first`): ``(xy, kinds, edges, lengths)`` — each fused node at
+    ``xy[first[c]]``, of the kind of lowest ``rank_of_kind`` among its nodes (``kind_of_rank``
+    back to a kind, int8); each path joining two fused nodes once (its first listing; none
+    within one node), ends in ascending order, its length at least the new straight line
+    (``sqrt(dx² + dy²)``, as ``np.linalg.norm``). What ``np.minimum.at``, ``np.sort`` by row
+    and ``np.unique(..., return_index=True)`` gave."""
+    n_out = first.shape[0]
+    best = np.full(n_out, 99, dtype=np.int64)
+    for i in range(node.shape[0]):
+        best[node[i]] = min(best[node[i]], rank_of_kind[kinds[i]])
+    out_xy = np.empty((n_out, 2))
+    out_kinds = np.empty(n_out, dtype=np.int8)
+    for c in range(n_out):
+        out_xy[c, 0], out_xy[c, 1] = xy[first[c], 0], xy[first[c], 1]
+        out_kinds[c] = kind_of_rank[best[c]]
+    m = edges.shape[0]
+    u = np.empty(m, dtype=np.int64)
+    v = np.empty(m, dtype=np.int64)
+    key = np.empty(m, dtype=np.int64)
+    width = max(n_out, 1)
+    for k in range(m):
+        a, b = node[edges[k, 0]], node[edges[k, 1]]
+        u[k], v[k] = min(a, b), max(a, b)
+        key[k] = u[k] * width + v[k]
+    order = np.argsort(key, kind="mergesort")  # stable: each key's first listing leads its run
+    take = np.zeros(m, dtype=np.bool_)
+    for r in range(m):
+        k = order[r]
+        take[k] = u[k] != v[k] and (r == 0 or key[order[r - 1]] != key[k])
+    out_edges = np.empty((take.sum(), 2), dtype=np.int64)
+    out_lengths = np.empty(take.sum())
+    j = 0
+    for k in range(m):
+        if take[k]:
+            out_edges[j, 0], out_edges[j, 1] = u[k], v[k]
+            dx = out_xy[u[k], 0] - out_xy[v[k], 0]
+            dy = out_xy[u[k], 1] - out_xy[v[k], 1]
+            out_lengths[j] = max(lengths[k], math.sqrt(dx * dx + dy * dy))
+            j += 1
+    return out_xy, out_kinds, out_edges, out_lengths

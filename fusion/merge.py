@@ -775,24 +775,11 @@ def fuse_maps(map_a: TopoMap, map_b: TopoMap, transform: Rigid2D, matches: np.nd
     rows = np.concatenate([matches[:, 0], close[:, 0]])
     cols = np.concatenate([matches[:, 1] + n_a, close[:, 1]])
     node, first = K.components_by_first(n, rows, cols)
-    n_out = len(first)
-    kinds = np.concatenate([map_a.kinds, map_b.kinds]).astype(np.int64)
-    rank = _RANK_OF_KIND[kinds]
-    best = np.full(n_out, 99, dtype=np.int64)
-    np.minimum.at(best, node, rank)
-    out_xy = xy[first]
-    edges = np.concatenate([map_a.edges, map_b.edges + n_a]).astype(np.int64)
-    lengths = np.concatenate([map_a.lengths, map_b.lengths])
-    e = np.sort(node[edges], axis=1) if len(edges) else np.empty((0, 2), dtype=np.int64)
-    keep = e[:, 0] != e[:, 1]
-    e, lengths = e[keep], lengths[keep]
-    _, uniq = np.unique(e[:, 0] * max(n_out, 1) + e[:, 1], return_index=True)
-    uniq = np.sort(uniq)
-    e, lengths = e[uniq], lengths[uniq]
-    straight = np.linalg.norm(out_xy[e[:, 0]] - out_xy[e[:, 1]], axis=1) if len(e) else lengths
+    fields = K.fused_graph(node, first, xy, np.concatenate([map_a.kinds, map_b.kinds]),
+                           np.concatenate([map_a.edges, map_b.edges + n_a]).astype(np.int64),
+                           np.concatenate([map_a.lengths, map_b.lengths]).astype(np.float64),
+                           _RANK_OF_KIND, _KIND_OF_RANK)
     # Built directly: every field is valid by construction (from_arrays re-parses each kind).
-    fields = (out_xy, _KIND_OF_RANK[best].astype(np.int8), e.reshape(-1, 2).astype(np.int64),
-              np.maximum(lengths, straight).astype(np.float64))
     for f in fields:
         f.setflags(write=False)
     return TopoMap(*fields)
