@@ -385,20 +385,41 @@ def coarse_ranking(coarse, landed, min_pairs, sparse_min):
     than ``min_pairs`` B nodes ranked as scoring 0 (``np.argsort(np.where(few, 0.0, -coarse),
     kind="stable")``); and those few landing them tightly (``coarse > sparse_min × landed``),
     best first (stable). Stable sorts, so the same orders as numpy's."""
-    key = np.empty(coarse.shape[0])
-    n_sparse = 0
-    for h in range(coarse.shape[0]):
+    n_h = coarse.shape[0]
+    key = np.empty(n_h)
+    n_sparse = n_neg = n_zero = 0
+    for h in range(n_h):
         few = landed[h] < min_pairs
         key[h] = 0.0 if few else -coarse[h]
         n_sparse += few and coarse[h] > sparse_min * landed[h]
+        n_neg += key[h] < 0.0
+        n_zero += key[h] == 0.0
     sparse = np.empty(n_sparse, dtype=np.int64)
     k = 0
-    for h in range(coarse.shape[0]):
+    for h in range(n_h):
         if landed[h] < min_pairs and coarse[h] > sparse_min * landed[h]:
             sparse[k] = h
             k += 1
     sparse = sparse[np.argsort(-coarse[sparse], kind="mergesort")]
-    return np.argsort(key, kind="mergesort"), sparse
+    # the stable order by key: the negative keys sorted, the zeros (most hypotheses) in index
+    # order as a stable sort leaves them, the positive keys sorted (two small sorts, not one)
+    neg = np.empty(n_neg, dtype=np.int64)
+    pos = np.empty(n_h - n_neg - n_zero, dtype=np.int64)
+    ranked = np.empty(n_h, dtype=np.int64)
+    i_neg = i_zero = i_pos = 0
+    for h in range(n_h):
+        if key[h] < 0.0:
+            neg[i_neg] = h
+            i_neg += 1
+        elif key[h] == 0.0:
+            ranked[n_neg + i_zero] = h
+            i_zero += 1
+        else:
+            pos[i_pos] = h
+            i_pos += 1
+    ranked[:n_neg] = neg[np.argsort(key[neg], kind="mergesort")]
+    ranked[n_neg + n_zero:] = pos[np.argsort(key[pos], kind="mergesort")]
+    return ranked, sparse
 
 
 @njit(cache=True, nogil=True)
