@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from fusion._icp_kernels import spread
+
 
 @njit(cache=True, nogil=True)
 def node_pairs(xy, edges, knn, min_dist):
@@ -253,6 +255,26 @@ def paint_nearest(table, x0, y0, cell, points, p_kind, radius, compat):
 
 
 @njit(cache=True, nogil=True)
+def hit_table(points, p_kind, edges, tol, path_tol, compat, like):
+    """The raster of ``fusion.merge._hit_grid`` (cells ``tol / 2`` wide, entries of
+    ``like``'s dtype): ``(table, x0, y0, 1 / cell)``, ``table[iy, ix, :-1]`` painted by
+    :func:`paint_nearest` (``-1`` elsewhere) and ``table[iy, ix, -1]`` its bits and
+    :data:`ON_PATH` within ~``path_tol`` of the paths ``edges`` (:func:`paint_segments`). The
+    extent as numpy computed it: ``lo = min − tol − cell``, ``ceil((max − lo + tol) / cell) + 2``
+    cells."""
+    cell = tol / 2.0
+    x0, x1, y0, y1 = _bbox(points)
+    x0, y0 = x0 - tol - cell, y0 - tol - cell
+    nx = int(math.ceil((x1 - x0 + tol) / cell) + 2)
+    ny = int(math.ceil((y1 - y0 + tol) / cell) + 2)
+    table = np.full((ny, nx, compat.shape[1] + 1), -1, dtype=like.dtype)
+    table[:, :, -1] = 0
+    paint_nearest(table, x0, y0, cell, points, p_kind, tol, compat)
+    paint_segments(table[:, :, -1], x0, y0, cell, points, edges, path_tol, 1 << ON_PATH)
+    return table, x0, y0, 1.0 / cell
+
+
+@njit(cache=True, nogil=True)
 def _moved_cells(c, s, ox, oy, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx, my, cell):
     """The points ``(bx, by)`` moved by ``(c, s, ox, oy)`` into raster coordinates (``mx``,
     ``my``) and the flat index of their raster cell's first entry (``-1`` outside): a loop
@@ -294,25 +316,27 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
     ax, ay = A[:, 0].copy(), A[:, 1].copy()
     mx, my = np.empty(n_b), np.empty(n_b)
     cell = np.empty(n_b, dtype=np.int64)
+    pair_b = np.empty(n_b, dtype=np.int64)
+    pair_a = np.empty(n_b, dtype=np.int64)
     out = np.zeros(n_h)
     for h in range(n_h):
         c, s = cos_t[h], sin_t[h]
         _moved_cells(c, s, tx[h] - x0, ty[h] - y0, bx, by, x_hi, y_hi, inv_cell, nx, depth, mx,
                      my, cell)
         n = 0
+        for b in range(n_b):  # the pairs listed without branches (20% faster than branching
+            a = flat[max(cell[b], 0) + b_kind[b]]  # on each node), then summed in order
+            pair_b[n], pair_a[n] = b, a
+            n += (cell[b] >= 0) & (a >= 0)
         spx = spy = sqx = sqy = sc = ss = 0.0
-        for b in range(n_b):
-            if cell[b] < 0:
-                continue
-            a = flat[cell[b] + b_kind[b]]
-            if a >= 0:
-                spx += bx[b]
-                spy += by[b]
-                sqx += ax[a]
-                sqy += ay[a]
-                sc += bx[b] * ax[a] + by[b] * ay[a]
-                ss += bx[b] * ay[a] - by[b] * ax[a]
-                n += 1
+        for m in range(n):
+            b, a = pair_b[m], pair_a[m]
+            spx += bx[b]
+            spy += by[b]
+            sqx += ax[a]
+            sqy += ay[a]
+            sc += bx[b] * ax[a] + by[b] * ay[a]
+            ss += bx[b] * ay[a] - by[b] * ax[a]
         landed[h] = n
         if n < min_pairs:
             continue  # scored 0, not refitted
@@ -341,6 +365,83 @@ def refined_scores(theta, tx, ty, cos_t, sin_t, A, B, b_kind, table, x0, y0, inv
                     score -= 1.0
         out[h] = score
     return out
+
+
+@njit(cache=True, nogil=True)
+def centroid_image(cos_t, sin_t, tx, ty, px, py):
+    """``(cx, cy)``: the point ``(px, py)`` moved by each motion ``(cos_t, sin_t, tx, ty)``
+    (``c px − s py + tx``, ``s px + c py + ty``, evaluated as numpy does it elementwise)."""
+    cx = np.empty(cos_t.shape[0])
+    cy = np.empty(cos_t.shape[0])
+    for h in range(cos_t.shape[0]):
+        cx[h] = cos_t[h] * px - sin_t[h] * py + tx[h]
+        cy[h] = sin_t[h] * px + cos_t[h] * py + ty[h]
+    return cx, cy
+
+
+@njit(cache=True, nogil=True)
+def coarse_ranking(coarse, landed, min_pairs, sparse_min):
+    """``(ranked, sparse)``: the hypotheses by coarse score, best first, those landing fewer
+    than ``min_pairs`` B nodes ranked as scoring 0 (``np.argsort(np.where(few, 0.0, -coarse),
+    kind="stable")``); and those few landing them tightly (``coarse > sparse_min × landed``),
+    best first (stable). Stable sorts, so the same orders as numpy's."""
+    n_h = coarse.shape[0]
+    key = np.empty(n_h)
+    n_sparse = n_neg = n_zero = 0
+    for h in range(n_h):
+        few = landed[h] < min_pairs
+        key[h] = 0.0 if few else -coarse[h]
+        n_sparse += few and coarse[h] > sparse_min * landed[h]
+        n_neg += key[h] < 0.0
+        n_zero += key[h] == 0.0
+    sparse = np.empty(n_sparse, dtype=np.int64)
+    k = 0
+    for h in range(n_h):
+        if landed[h] < min_pairs and coarse[h] > sparse_min * landed[h]:
+            sparse[k] = h
+            k += 1
+    sparse = sparse[np.argsort(-coarse[sparse], kind="mergesort")]
+    # the stable order by key: the negative keys sorted, the zeros (most hypotheses) in index
+    # order as a stable sort leaves them, the positive keys sorted (two small sorts, not one)
+    neg = np.empty(n_neg, dtype=np.int64)
+    pos = np.empty(n_h - n_neg - n_zero, dtype=np.int64)
+    ranked = np.empty(n_h, dtype=np.int64)
+    i_neg = i_zero = i_pos = 0
+    for h in range(n_h):
+        if key[h] < 0.0:
+            neg[i_neg] = h
+            i_neg += 1
+        elif key[h] == 0.0:
+            ranked[n_neg + i_zero] = h
+            i_zero += 1
+        else:
+            pos[i_pos] = h
+            i_pos += 1
+    ranked[:n_neg] = neg[np.argsort(key[neg], kind="mergesort")]
+    ranked[n_neg + n_zero:] = pos[np.argsort(key[pos], kind="mergesort")]
+    return ranked, sparse
+
+
+@njit(cache=True, nogil=True)
+def best_by_gain(chosen, coarse, path_score, scale, k):
+    """The ``k`` of the hypotheses ``chosen`` with the highest ``coarse + path_score / scale``
+    (``path_score`` one per chosen), best first (a stable sort: numpy's order)."""
+    gain = np.empty(chosen.shape[0])
+    for m in range(chosen.shape[0]):
+        gain[m] = -(coarse[chosen[m]] + path_score[m] / scale)
+    return chosen[np.argsort(gain, kind="mergesort")[:k]]
+
+
+@njit(cache=True, nogil=True)
+def best_distinct_score(scores, gap, cx, cy, px, py, min_angle, min_dist):
+    """The best of ``scores`` whose alignment is distinct from one at ``(px, py)``: an angle
+    ``gap`` of at least ``min_angle``, or an image ``(cx, cy)`` at least ``min_dist`` from it
+    (``math.hypot`` is the C library's, as ``np.hypot``); ``-inf`` if none is."""
+    best = -np.inf
+    for h in range(scores.shape[0]):
+        if gap[h] >= min_angle or math.hypot(cx[h] - px, cy[h] - py) >= min_dist:
+            best = max(best, scores[h])
+    return best
 
 
 @njit(cache=True, nogil=True)
@@ -425,6 +526,17 @@ def refine_batch(theta, tx, ty, A, a_kind, B, b_kind, compat, gates):
             tx[h] = sqx - (c * spx - s * spy)
             ty[h] = sqy - (s * spx + c * spy)
     return counts
+
+
+@njit(cache=True, nogil=True)
+def refine_most_matched(theta, tx, ty, chosen, A, a_kind, B, b_kind, compat, gates, keep):
+    """:func:`refine_batch` of the hypotheses ``chosen`` (copies), then the ``keep`` of them
+    with the most pairs at the last gate (ties to the earlier in ``chosen``; a stable sort),
+    in the order of ``chosen``: ``(theta, tx, ty)`` arrays."""
+    th, txc, tyc = theta[chosen], tx[chosen], ty[chosen]
+    counts = refine_batch(th, txc, tyc, A, a_kind, B, b_kind, compat, gates)
+    best = np.sort(np.argsort(-counts, kind="mergesort")[:keep])
+    return th[best], txc[best], tyc[best]
 
 
 @njit(cache=True, nogil=True)
@@ -677,6 +789,46 @@ def evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
 
 
 @njit(cache=True, nogil=True)
+def matched_pairs(match_b):
+    """``(K, 2)`` pairs ``(match_b[b], b)`` of the B nodes ``b`` with a match (``match_b[b] >= 0``,
+    :func:`evidence`), ``b`` ascending: ``np.column_stack`` of ``np.flatnonzero``'s rows."""
+    n = 0
+    for b in range(match_b.shape[0]):
+        n += match_b[b] >= 0
+    out = np.empty((n, 2), dtype=np.int64)
+    k = 0
+    for b in range(match_b.shape[0]):
+        if match_b[b] >= 0:
+            out[k, 0], out[k, 1] = match_b[b], b
+            k += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def evaluation(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
+               b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin, near_miss,
+               a_pts, a_w, a_field, a_x0, a_y0, b_pts, b_w, b_field, b_x0, b_y0, inv_cell, tol,
+               off, cap):
+    """One alignment's evidence in one call (``fusion.merge._evaluate``): ``(features,
+    matches, (path_agree, path_off), moments)`` — :func:`evidence`'s features, its matches
+    (:func:`matched_pairs`), :func:`path_agreement` both ways, and the
+    :func:`fusion._icp_kernels.spread` of the matched A nodes (zeros with fewer than 3)."""
+    match_b = np.empty(B.shape[0], dtype=np.int64)
+    d2_b = np.empty(B.shape[0])
+    f = evidence(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges, b_margin,
+                 b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol, min_sin,
+                 near_miss, match_b, d2_b)
+    matches = matched_pairs(match_b)
+    paths = path_agreement(np.array([theta]), np.array([tx]), np.array([ty]), a_pts, a_w,
+                           a_field, a_x0, a_y0, b_pts, b_w, b_field, b_x0, b_y0, inv_cell, tol,
+                           off, cap, True)
+    moments = (0.0, 0.0, 0.0, 0.0, 0.0)
+    if matches.shape[0] >= 3:
+        moments = spread(A[matches[:, 0]])
+    return f, matches, (paths[0, 0], paths[0, 1]), moments
+
+
+@njit(cache=True, nogil=True)
 def evidence_batch(A, a_kind, a_edges, a_margin, a_near, a_branch, B, b_kind, b_edges,
                    b_margin, b_branch, theta, tx, ty, eps, compat, loose_kind, branch_tol,
                    min_sin, near_miss):
@@ -732,8 +884,14 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
     distance from each cell centre to the nearest segment ``seg[k] = (x1, y1, x2, y2)``, capped
     at ``reach²``.
     Each segment visits only the cells of its bounding box (grown by ``reach``) that lie within
-    ``reach`` of its line."""
+    ``reach`` of its line. A segment's rows are laid out first (their extents and starting
+    values do not depend on each other, so their divisions overlap), then walked: 40% faster
+    than one row after the other, the same arithmetic."""
     d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
+    row_ix0 = np.empty(ny, dtype=np.int64)  # each row's cells [ix0, ix1), first x and t
+    row_ix1 = np.empty(ny, dtype=np.int64)
+    row_px = np.empty(ny)
+    row_t = np.empty(ny)
     for k in range(seg.shape[0]):
         ux, uy, wx, wy = seg[k, 0], seg[k, 1], seg[k, 2], seg[k, 3]
         vx, vy = wx - ux, wy - uy
@@ -750,15 +908,19 @@ def path_field(seg, x0, y0, cell, ny, nx, reach):
                 e1 = ux + ((py - uy) * vx - band) / vy
                 e2 = ux + ((py - uy) * vx + band) / vy
                 lo, hi = max(lo, min(e1, e2)), min(hi, max(e1, e2))
-            elif abs(py - uy) > reach:
-                continue
             ix0 = max(0, int(math.floor((lo - x0) / cell - 0.5)))
             ix1 = min(nx, int(math.ceil((hi - x0) / cell - 0.5)) + 1)
-            # along the row, the projection t and the offsets change linearly with x
+            if vy == 0.0 and abs(py - uy) > reach:  # a horizontal segment's far rows: none
+                ix1 = ix0
             px = x0 + (ix0 + 0.5) * cell
-            t = ((px - ux) * vx + (py - uy) * vy) * inv_ll
-            dt = cell * vx * inv_ll
-            for ix in range(ix0, ix1):
+            row_ix0[iy], row_ix1[iy], row_px[iy] = ix0, ix1, px
+            row_t[iy] = ((px - ux) * vx + (py - uy) * vy) * inv_ll
+        # along a row, the projection t and the offsets change linearly with x
+        dt = cell * vx * inv_ll
+        for iy in range(iy0, iy1):
+            py = y0 + (iy + 0.5) * cell
+            px, t = row_px[iy], row_t[iy]
+            for ix in range(row_ix0[iy], row_ix1[iy]):
                 tc = min(1.0, max(0.0, t))
                 dx, dy = ux + tc * vx - px, uy + tc * vy - py
                 dd = dx * dx + dy * dy
@@ -793,14 +955,11 @@ def _field_sums(c, s, tx, ty, pts, w, field, x0, y0, inv_cell, tol, off, cap, ce
     agree = away = 0.0
     tol2, off2, cap2 = tol * tol, off * off, cap * cap
     _field_cells(c, s, tx, ty, pts, x0, y0, inv_cell, ny, nx, cell)
-    for k in range(pts.shape[0]):
-        if cell[k] < 0:
-            continue
-        d2 = flat[cell[k]]
-        if d2 < tol2:
-            agree += w[k] * (1.0 - d2 / tol2)
-        elif off2 <= d2 < cap2:
-            away += w[k]
+    for k in range(pts.shape[0]):  # without branches (11% faster): a sample adds 0.0 where it
+        inside = cell[k] >= 0      # adds nothing, and sums of w >= 0 from +0.0 never meet −0.0
+        d2 = flat[max(cell[k], 0)]
+        agree += w[k] * (1.0 - d2 / tol2) if inside & (d2 < tol2) else 0.0
+        away += w[k] if inside & (d2 >= tol2) & (off2 <= d2) & (d2 < cap2) else 0.0
     return agree, away
 
 
@@ -844,6 +1003,30 @@ def map_numbers(xy, edges, ends, eps, pad, pad2):
         ex0, ex1, ey0, ey1 = _bbox(ends)
         x0, x1, y0, y1 = min(x0, ex0), max(x1, ex1), min(y0, ey0), max(y1, ey1)
     return margin, x0 - pad - pad2, y0 - pad - pad2, x1 + pad + pad2, y1 + pad + pad2
+
+
+@njit(cache=True, nogil=True)
+def map_fields(xy, edges, pieces, knn, min_dist, step, eps, reach, cell):
+    """Everything ``fusion.merge._prepare`` computes of a map in compiled code, in one call:
+    :func:`node_pairs` (``near, i, j, length``; then the pairs in both orientations sorted
+    by length, stably, as :func:`pair_candidates` reads B's), :func:`path_samples` of the
+    path pieces ``pieces`` (``pts, w``), :func:`map_numbers`' ``margin`` and the raster's origin
+    ``(x0, y0)``, the :func:`path_field` raster (``ceil(extent / cell) + 1`` cells a side, as
+    ``math.ceil``) and :func:`branch_slots` (``node, slot, d, degree``)."""
+    near, i, j, length = node_pairs(xy, edges, knn, min_dist)
+    pts, w = path_samples(pieces, step)
+    margin, x0, y0, x1, y1 = map_numbers(xy, edges, pieces.reshape(-1, 2), eps, reach, cell)
+    nx = math.ceil((x1 - x0) / cell) + 1
+    ny = math.ceil((y1 - y0) / cell) + 1
+    field = path_field(pieces, x0, y0, cell, ny, nx, reach)
+    node, slot, d, degree = branch_slots(xy, edges, xy.shape[0])
+    # both orientations of the pairs, by length (stable): what a merge reads of its map B
+    both_i = np.concatenate((i, j))
+    both_j = np.concatenate((j, i))
+    both_len = np.concatenate((length, length))
+    order = np.argsort(both_len, kind="mergesort")
+    return (near, i, j, length, both_i[order], both_j[order], both_len[order], pts, w, margin,
+            x0, y0, field, node, slot, d, degree)
 
 
 @njit(cache=True, nogil=True)
@@ -977,3 +1160,76 @@ def nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell):
             near[n, 0], near[n, 1] = bx, by
             n += 1
     return idx[:n], near[:n]
+
+
+@njit(cache=True, nogil=True)
+def fit_points(a_xy, b_xy, matches, seg, pts, pts_w, path_weight, theta, tx, ty, gate, field,
+               x0, y0, cell):
+    """What the least-squares fit of ``fusion.merge._least_squares`` pairs: ``(P, Q, w)``, the
+    matched B nodes ``b_xy[matches[:, 1]]`` onto ``a_xy[matches[:, 0]]`` (weight 1 each), then,
+    when ``path_weight > 0``, the points ``pts`` that :func:`nearest_on_paths` finds within
+    ``gate`` of the segments ``seg`` (moved by ``(theta, tx, ty)``) onto their nearest segment
+    points, ``path_weight × pts_w`` each: the rows ``np.vstack`` and ``np.concatenate`` gave."""
+    n = matches.shape[0]
+    idx = np.empty(0, dtype=np.int64)
+    near = np.empty((0, 2))
+    if path_weight > 0.0:
+        idx, near = nearest_on_paths(seg, pts, theta, tx, ty, gate, field, x0, y0, cell)
+    m = n + idx.shape[0]
+    P = np.empty((m, 2))
+    Q = np.empty((m, 2))
+    w = np.ones(m)
+    for k in range(n):
+        P[k, 0], P[k, 1] = b_xy[matches[k, 1], 0], b_xy[matches[k, 1], 1]
+        Q[k, 0], Q[k, 1] = a_xy[matches[k, 0], 0], a_xy[matches[k, 0], 1]
+    for k in range(idx.shape[0]):
+        P[n + k, 0], P[n + k, 1] = pts[idx[k], 0], pts[idx[k], 1]
+        Q[n + k, 0], Q[n + k, 1] = near[k, 0], near[k, 1]
+        w[n + k] = path_weight * pts_w[idx[k]]
+    return P, Q, w
+
+
+@njit(cache=True, nogil=True)
+def fused_graph(node, first, xy, kinds, edges, lengths, rank_of_kind, kind_of_rank):
+    """The map ``fusion.merge.fuse_maps`` builds once its nodes are grouped (``node[i]``: the
+    fused node of input node ``i``; ``first[c]``: the lowest input node of fused node ``c``,
+    :func:`components_by_first`): ``(xy, kinds, edges, lengths)`` — each fused node at
+    ``xy[first[c]]``, of the kind of lowest ``rank_of_kind`` among its nodes (``kind_of_rank``
+    back to a kind, int8); each path joining two fused nodes once (its first listing; none
+    within one node), ends in ascending order, its length at least the new straight line
+    (``sqrt(dx² + dy²)``, as ``np.linalg.norm``). What ``np.minimum.at``, ``np.sort`` by row
+    and ``np.unique(..., return_index=True)`` gave."""
+    n_out = first.shape[0]
+    best = np.full(n_out, 99, dtype=np.int64)
+    for i in range(node.shape[0]):
+        best[node[i]] = min(best[node[i]], rank_of_kind[kinds[i]])
+    out_xy = np.empty((n_out, 2))
+    out_kinds = np.empty(n_out, dtype=np.int8)
+    for c in range(n_out):
+        out_xy[c, 0], out_xy[c, 1] = xy[first[c], 0], xy[first[c], 1]
+        out_kinds[c] = kind_of_rank[best[c]]
+    m = edges.shape[0]
+    u = np.empty(m, dtype=np.int64)
+    v = np.empty(m, dtype=np.int64)
+    key = np.empty(m, dtype=np.int64)
+    width = max(n_out, 1)
+    for k in range(m):
+        a, b = node[edges[k, 0]], node[edges[k, 1]]
+        u[k], v[k] = min(a, b), max(a, b)
+        key[k] = u[k] * width + v[k]
+    order = np.argsort(key, kind="mergesort")  # stable: each key's first listing leads its run
+    take = np.zeros(m, dtype=np.bool_)
+    for r in range(m):
+        k = order[r]
+        take[k] = u[k] != v[k] and (r == 0 or key[order[r - 1]] != key[k])
+    out_edges = np.empty((take.sum(), 2), dtype=np.int64)
+    out_lengths = np.empty(take.sum())
+    j = 0
+    for k in range(m):
+        if take[k]:
+            out_edges[j, 0], out_edges[j, 1] = u[k], v[k]
+            dx = out_xy[u[k], 0] - out_xy[v[k], 0]
+            dy = out_xy[u[k], 1] - out_xy[v[k], 1]
+            out_lengths[j] = max(lengths[k], math.sqrt(dx * dx + dy * dy))
+            j += 1
+    return out_xy, out_kinds, out_edges, out_lengths

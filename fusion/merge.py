@@ -56,7 +56,7 @@ from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
 from fusion._config import config_from
-from fusion.icp import degeneracy, icp_svd, rigid_fit
+from fusion.icp import degeneracy, icp_checked, icp_svd, moments_degeneracy, rigid_fit
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
@@ -255,6 +255,9 @@ success), 3-pair coarse hypotheses in the one ranking (+1.3 points at σ = 0.05 
 fit both ways or iterated 6 times, the length of A's paths inside B's hull that B does not
 have (no separation)."""
 
+_SCORE_WEIGHTS = tuple(CONFIDENCE_WEIGHTS.values())
+"""The weights of :data:`CONFIDENCE_WEIGHTS` in order (:attr:`MergeEvidence.score`)."""
+
 
 @dataclass(frozen=True, slots=True)
 class MergeEvidence:
@@ -313,28 +316,27 @@ class MergeEvidence:
     path_agree: float = 0.0
     path_off: float = 0.0
 
+    def _feature_values(self) -> tuple[float, ...]:
+        """The inputs of :attr:`score`, in the order of :data:`CONFIDENCE_WEIGHTS`."""
+        return (1.0, self.closeness, float(self.inliers), float(self.matched_edges),
+                float(self.conflicts), float(self.crossings), float(self.branches_agree),
+                float(self.branches_disagree), float(self.near_misses),
+                math.log(max(1, self.n_a * self.n_b)), self.likelihood, self.path_agree,
+                self.path_off)
+
     def features(self) -> dict[str, float]:
         """The inputs of :attr:`score`, by the names of :data:`CONFIDENCE_WEIGHTS`."""
-        return {
-            "bias": 1.0,
-            "closeness": self.closeness,
-            "inliers": float(self.inliers),
-            "matched_edges": float(self.matched_edges),
-            "conflicts": float(self.conflicts),
-            "crossings": float(self.crossings),
-            "branches_agree": float(self.branches_agree),
-            "branches_disagree": float(self.branches_disagree),
-            "near_misses": float(self.near_misses),
-            "log_pairs": math.log(max(1, self.n_a * self.n_b)),
-            "likelihood": self.likelihood,
-            "path_agree": self.path_agree,
-            "path_off": self.path_off,
-        }
+        return dict(zip(CONFIDENCE_WEIGHTS, self._feature_values(), strict=True))
 
     @property
     def score(self) -> float:
-        """Log-odds that the alignment is right: ``Σ CONFIDENCE_WEIGHTS[f] × features()[f]``."""
-        return float(sum(CONFIDENCE_WEIGHTS[k] * v for k, v in self.features().items()))
+        """Log-odds that the alignment is right: ``Σ CONFIDENCE_WEIGHTS[f] × features()[f]``,
+        summed in that order (a plain loop: a dict and a generator cost ~6 µs a score, and
+        scores are read ~7 times a merge)."""
+        total = 0.0
+        for w, v in zip(_SCORE_WEIGHTS, self._feature_values(), strict=True):
+            total += w * v
+        return float(total)
 
     @property
     def confidence(self) -> float:
@@ -401,6 +403,9 @@ class _Prepared:
     pair_i: np.ndarray
     pair_j: np.ndarray
     pair_len: np.ndarray
+    both_i: np.ndarray  # the pairs in both orientations, by length (stable): B's hypotheses
+    both_j: np.ndarray
+    both_len: np.ndarray
     margin: np.ndarray  # (E,) fraction of each path within eps of its ends
     branches: np.ndarray  # (n, max degree) direction of each path leaving a node, nan padded
     segments: np.ndarray  # (S, 4) straight pieces of the paths (_segments)
@@ -413,16 +418,13 @@ class _Prepared:
 def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
-    near, i, j, length = K.node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
     pieces = _segments(m)
-    pts, w = K.path_samples(pieces, PATH_STEP)
-    margin, x0, y0, x1, y1 = K.map_numbers(xy, edges, pieces.reshape(-1, 2), cfg.eps,
-                                           PATH_REACH, PATH_CELL)
-    nx = math.ceil((x1 - x0) / PATH_CELL) + 1
-    ny = math.ceil((y1 - y0) / PATH_CELL) + 1
-    field = K.path_field(pieces, x0, y0, PATH_CELL, ny, nx, PATH_REACH)
-    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, margin,
-                     _branches(xy, edges), pieces, pts, w, field, (x0, y0))
+    near, i, j, length, both_i, both_j, both_len, pts, w, margin, x0, y0, field, *slots = (
+        K.map_fields(xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP,
+                     cfg.eps, PATH_REACH, PATH_CELL))
+    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, both_i, both_j,
+                     both_len, margin, _branches(len(xy), *slots), pieces, pts, w, field,
+                     (x0, y0))
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -437,10 +439,11 @@ def _segments(m: TopoMap) -> np.ndarray:
     return K.polyline_chords(pts, sizes, PATH_CHORD)
 
 
-def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """``(n, max degree)`` angle of each path leaving each node (toward its other end)."""
-    node, slot, d, degree = K.branch_slots(xy, edges, len(xy))
-    out = np.full((len(xy), max(1, degree)), np.nan)
+def _branches(n: int, node: np.ndarray, slot: np.ndarray, d: np.ndarray,
+              degree: int) -> np.ndarray:
+    """``(n, max degree)`` angle of each path leaving each node (toward its other end), from
+    :func:`fusion._merge_kernels.branch_slots`."""
+    out = np.full((n, max(1, degree)), np.nan)
     if len(node):  # numpy's arctan2 (numba's differs in the last bit), on the same layout
         out[node, slot] = np.arctan2(d[:, 1], d[:, 0])
     return out
@@ -462,6 +465,7 @@ class _Eval:
 
 
 _BRANCH_TOL = math.radians(25.0)
+_LOOSE_KIND = int(NodeKind.DEAD_END)  # the kind that makes no conflicts (frontier artefacts)
 _MIN_CROSSING_SIN = 0.5  # paths within 30° of parallel are one corridor seen twice
 _FEATURE_COLUMNS = {"closeness": 0, "inliers": 1, "matched_edges": 2, "conflicts": 3,
                    "crossings": 4, "branches_agree": 5, "branches_disagree": 6,
@@ -476,15 +480,23 @@ def _evidence_args(pa: _Prepared, pb: _Prepared) -> tuple:
             pb.edges, pb.margin, pb.branches)
 
 
+def _path_args(pa: _Prepared, pb: _Prepared) -> tuple:
+    """What :func:`fusion._merge_kernels.path_agreement` reads of the two maps, and its
+    constants."""
+    return (pa.path_pts, pa.path_w, pa.field, *pa.field_origin, pb.path_pts, pb.path_w, pb.field,
+            *pb.field_origin, 1.0 / PATH_CELL, PATH_TOL, PATH_OFF, PATH_REACH)
+
+
 def _path_evidence(pa: _Prepared, pb: _Prepared, theta: np.ndarray, tx: np.ndarray,
                    ty: np.ndarray, both: bool = True) -> np.ndarray:
     """``(H, 2)`` :attr:`MergeEvidence.path_agree` and ``path_off`` of each hypothesis (without
     ``both``, twice what B's paths alone give: the quick estimate the re-ranking uses)."""
-    return K.path_agreement(theta, tx, ty, pa.path_pts, pa.path_w, pa.field, *pa.field_origin,
-                            pb.path_pts, pb.path_w, pb.field, *pb.field_origin, 1.0 / PATH_CELL,
-                            PATH_TOL, PATH_OFF, PATH_REACH, both)
+    return K.path_agreement(theta, tx, ty, *_path_args(pa, pb), both)
 
 
+_FEATURE_COLS = list(_FEATURE_COLUMNS.values())
+_FEATURE_WEIGHTS = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
+"""The columns of :data:`_FEATURE_COLUMNS` and their score weights (:func:`_scores`)."""
 _PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["path_off"]])
 """Score weights of the columns of :func:`_path_evidence` (``path_agree``, ``path_off``)."""
 
@@ -492,31 +504,26 @@ _PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["
 def _scores(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
     """:attr:`MergeEvidence.score` of rows of :func:`fusion._merge_kernels.evidence` features
     and of :func:`_path_evidence`."""
-    cols = list(_FEATURE_COLUMNS.values())
-    w = np.array([CONFIDENCE_WEIGHTS[k] for k in _FEATURE_COLUMNS])
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
-    return (features[:, cols] @ w + const
+    return (features[:, _FEATURE_COLS] @ _FEATURE_WEIGHTS + const
             + CONFIDENCE_WEIGHTS["likelihood"] * features[:, _LIKELIHOOD].max(axis=1)
             + paths @ _PATH_WEIGHTS)
 
 
 def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
               cfg: MergeConfig) -> _Eval:
-    match_b = np.empty(len(pb.xy), dtype=np.int64)
-    d2_b = np.empty(len(pb.xy))
-    f = K.evidence(*_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
-                   KIND_COMPATIBLE, int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
-                   cfg.near_miss, match_b, d2_b)
-    b_idx = np.flatnonzero(match_b >= 0)
-    matches = np.column_stack([match_b[b_idx], b_idx]).astype(np.int64)
-    n = len(b_idx)
-    collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
-    agree, off = _path_evidence(pa, pb, np.array([float(theta)]), np.array([float(t[0])]),
-                                np.array([float(t[1])]))[0]
-    ev = MergeEvidence(n, float(f[0]), int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
+    """The full evidence (:class:`MergeEvidence`) and matches of B moved by ``(theta, t)``."""
+    f, matches, (agree, off), moments = K.evaluation(
+        *_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
+        KIND_COMPATIBLE, _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss,
+        *_path_args(pa, pb))
+    f = f.tolist()  # Python floats: cheaper to read one by one
+    n = len(matches)
+    collinear = n < 3 or moments_degeneracy(moments, "matches", 1e-3) is not None
+    ev = MergeEvidence(n, f[0], int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
                        int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
-                       len(pb.xy), likelihood=float(f[_LIKELIHOOD].max()),
-                       path_agree=float(agree), path_off=float(off))
+                       len(pb.xy), likelihood=max(f[_LIKELIHOOD]), path_agree=agree,
+                       path_off=off)
     return _Eval(float(wrap_angle(theta)), np.asarray(t, dtype=np.float64), matches, ev)
 
 
@@ -525,13 +532,9 @@ def _least_squares(pa: _Prepared, pb: _Prepared, matches: np.ndarray, theta: flo
     """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
     B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
     paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
-    P, Q = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]]
-    w = np.ones(len(P))
-    if PATH_FIT_WEIGHT > 0.0:
-        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL,
-                                       pa.field, *pa.field_origin, PATH_CELL)
-        P, Q = np.vstack([P, pb.path_pts[idx]]), np.vstack([Q, near])
-        w = np.concatenate([w, PATH_FIT_WEIGHT * pb.path_w[idx]])
+    P, Q, w = K.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
+                           PATH_FIT_WEIGHT, theta, t[0], t[1], PATH_TOL, pa.field,
+                           *pa.field_origin, PATH_CELL)
     return rigid_fit(P, Q, w)
 
 
@@ -544,8 +547,8 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
     best = start
     if start.evidence.inliers >= 2:
         trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))
-        icp = icp_svd(pa.xy, pb.xy, tau=None, rel_tol=1e-9, max_iter=cfg.icp_max_iter,
-                      init=start.transform, max_distance=cfg.eps, trim=trim)
+        icp = icp_checked(pa.xy, pb.xy, None, cfg.icp_max_iter, start.transform, 1e-9,
+                          cfg.eps, trim)  # the maps' nodes were checked by merge_maps
         ev = _evaluate(pa, pb, icp.transform.theta, icp.transform.T, cfg)
         best = max((best, ev), key=_Eval.key)
     theta, t, moved = best.theta, best.t, False
@@ -559,8 +562,8 @@ def _polish(pa: _Prepared, pb: _Prepared, start: _Eval, cfg: MergeConfig) -> _Ev
 
 def _centroid_image(theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
                     centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    c, s = np.cos(theta), np.sin(theta)
-    return c * centre[0] - s * centre[1] + tx, s * centre[0] + c * centre[1] + ty
+    """Where each motion ``(theta, tx, ty)`` puts the point ``centre``: ``(cx, cy)``."""
+    return K.centroid_image(np.cos(theta), np.sin(theta), tx, ty, centre[0], centre[1])
 
 
 def _runner_up(best: _Eval, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
@@ -576,9 +579,8 @@ def _runner_up(best: _Eval, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
     p = best.transform.apply(centre)
     cx, cy = _centroid_image(theta, tx, ty, centre)
     gap = np.abs(np.angle(np.exp(1j * (theta - best.theta))))
-    distinct = ((gap >= math.radians(cfg.distinct_angle_deg))
-                | (np.hypot(cx - p[0], cy - p[1]) >= cfg.distinct_distance))
-    return float(scores[distinct].max()) if distinct.any() else -math.inf
+    return K.best_distinct_score(scores, gap, cx, cy, p[0], p[1],
+                                 math.radians(cfg.distinct_angle_deg), cfg.distinct_distance)
 
 
 def _runner_up_of(best: _Eval, others: list[_Eval], b_xy: np.ndarray, cfg: MergeConfig) -> float:
@@ -599,19 +601,16 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
     :data:`~fusion._merge_kernels.NEAR_ANY_NODE` (within ~``tol`` of an A node) and
     :data:`~fusion._merge_kernels.ON_PATH` (within ~``path_tol`` of an A path).
     Returns ``(table, x0, y0, 1 / cell)``."""
-    cell = tol / 2.0
-    lo = pa.xy.min(axis=0) - tol - cell
-    shape = (np.ceil((pa.xy.max(axis=0) - lo + tol) / cell) + 2).astype(np.int64)
     # a small dtype keeps the table in cache (int16: scoring twice faster at 60 nodes than
     # int32; int8 another ~10%)
     n = len(pa.xy)
-    dtype = np.int8 if n < 127 else np.int16 if n < 32767 else np.int32  # iinfo costs 10 µs
-    table = np.full((shape[1], shape[0], len(NodeKind) + 1), -1, dtype=dtype)
-    table[:, :, -1] = 0
-    K.paint_nearest(table, lo[0], lo[1], cell, pa.xy, pa.kinds, tol, KIND_COMPATIBLE)
-    K.paint_segments(table[:, :, -1], lo[0], lo[1], cell, pa.xy, pa.edges, path_tol,
-                     1 << K.ON_PATH)
-    return table, float(lo[0]), float(lo[1]), 1.0 / cell
+    like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32  # iinfo costs 10 µs
+    return K.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, KIND_COMPATIBLE, like)
+
+
+_INT8, _INT16, _INT32 = (np.empty(0, dtype=t) for t in (np.int8, np.int16, np.int32))
+"""Empty arrays of the :func:`_hit_grid` table's dtypes (a compiled kernel takes an array's
+dtype, not a dtype)."""
 
 
 _COARSE_MIN_PAIRS = 4
@@ -630,13 +629,9 @@ the tuning and held-out no-overlap seeds, at the same success."""
 
 
 def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
-    b_i = np.concatenate([pb.pair_i, pb.pair_j])
-    b_j = np.concatenate([pb.pair_j, pb.pair_i])
-    b_len = np.concatenate([pb.pair_len, pb.pair_len])
-    order = np.argsort(b_len, kind="stable")
-    b_i, b_j = b_i[order], b_j[order]
+    b_i, b_j = pb.both_i, pb.both_j
     hyp_p, hyp_q, weight = K.pair_candidates(pa.kinds, pa.pair_i, pa.pair_j, pa.pair_len,
-                                             pb.kinds, b_i, b_j, b_len[order],
+                                             pb.kinds, b_i, b_j, pb.both_len,
                                              cfg.pair_tolerance, KIND_COMPATIBLE)
     n_hyp = len(hyp_p)
     if n_hyp == 0:
@@ -651,33 +646,28 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     min_pairs = max(cfg.min_inliers, _COARSE_MIN_PAIRS)
     reserve = cfg.sparse_pool if cfg.min_inliers < min_pairs else 0
     coarse = K.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
-                              y0, inv_cell, cfg.eps, int(NodeKind.DEAD_END),
+                              y0, inv_cell, cfg.eps, _LOOSE_KIND,
                               cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
-    few = landed < min_pairs  # ranked with the unscored ones (0) here, and pooled apart
-    ranked = np.argsort(np.where(few, 0.0, -coarse), kind="stable")
+    # those landing fewer than min_pairs are ranked with the unscored ones (0), and pooled apart
+    ranked, small = K.coarse_ranking(coarse, landed, min_pairs, _SPARSE_MIN)
     chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
                                cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
     if reserve:  # the best distinct ones landing only min_inliers..3 nodes: sparse_pool
-        small = np.flatnonzero(few & (coarse > _SPARSE_MIN * landed))
-        small = small[np.argsort(-coarse[small], kind="stable")]
         chosen = K.select_distinct(np.concatenate([chosen, small]), theta, cx, cy,
                                    math.radians(cfg.distinct_angle_deg), cfg.distinct_distance,
                                    len(chosen) + reserve)
     if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
         w = CONFIDENCE_WEIGHTS
         paths = _path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
-        gain = coarse[chosen] + paths @ _PATH_WEIGHTS / (w["closeness"] + w["inliers"])
-        chosen = chosen[np.argsort(-gain, kind="stable")[:cfg.candidates]]  # best first
-    th, txc, tyc = theta[chosen].copy(), tx[chosen].copy(), ty[chosen].copy()
-    gates = np.array([cfg.coarse_tolerance, cfg.eps])
-    counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, KIND_COMPATIBLE,
-                            gates)
-    keep = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
-    th, txc, tyc = th[keep], txc[keep], tyc[keep]
+        chosen = K.best_by_gain(chosen, coarse, paths @ _PATH_WEIGHTS,
+                                w["closeness"] + w["inliers"], cfg.candidates)  # best first
+    th, txc, tyc = K.refine_most_matched(theta, tx, ty, chosen, pa.xy, pa.kinds, pb.xy, pb.kinds,
+                                         KIND_COMPATIBLE,
+                                         np.array([cfg.coarse_tolerance, cfg.eps]), cfg.scored)
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
-                                int(NodeKind.DEAD_END), _BRANCH_TOL, _MIN_CROSSING_SIN,
+                                _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
     scores = _scores(features, _path_evidence(pa, pb, th, txc, tyc), len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
@@ -749,18 +739,19 @@ def decide(evidence: MergeEvidence, config: MergeConfig | None = None) -> str | 
     """
     cfg = _DEFAULT_CONFIG if config is None else config_from(MergeConfig, config)
     e = evidence
+    score = e.score  # a sum of 13 products: once
     reasons = []
     if e.inliers < cfg.min_inliers:
         reasons.append(f"too few matched nodes: {e.inliers} < min_inliers={cfg.min_inliers}")
     if e.collinear:
         reasons.append("matched nodes are collinear: rotation not determined")
-    if e.score < cfg.min_score:
-        reasons.append(f"weak evidence: score {e.score:.2f} < min_score={cfg.min_score} "
+    if score < cfg.min_score:
+        reasons.append(f"weak evidence: score {score:.2f} < min_score={cfg.min_score} "
                        f"({e.inliers} matches, {e.matched_edges} matched paths, "
                        f"{e.conflicts} conflicts, {e.crossings} crossings, rmse {e.rmse:.2f} m)")
-    if e.runner_up > e.score - cfg.min_margin:
+    if e.runner_up > score - cfg.min_margin:
         reasons.append(f"ambiguous: a distinct alignment scores {e.runner_up:.2f} against "
-                       f"{e.score:.2f} (margin < min_margin={cfg.min_margin})")
+                       f"{score:.2f} (margin < min_margin={cfg.min_margin})")
     return "; ".join(reasons) or None
 
 
@@ -784,24 +775,11 @@ def fuse_maps(map_a: TopoMap, map_b: TopoMap, transform: Rigid2D, matches: np.nd
     rows = np.concatenate([matches[:, 0], close[:, 0]])
     cols = np.concatenate([matches[:, 1] + n_a, close[:, 1]])
     node, first = K.components_by_first(n, rows, cols)
-    n_out = len(first)
-    kinds = np.concatenate([map_a.kinds, map_b.kinds]).astype(np.int64)
-    rank = _RANK_OF_KIND[kinds]
-    best = np.full(n_out, 99, dtype=np.int64)
-    np.minimum.at(best, node, rank)
-    out_xy = xy[first]
-    edges = np.concatenate([map_a.edges, map_b.edges + n_a]).astype(np.int64)
-    lengths = np.concatenate([map_a.lengths, map_b.lengths])
-    e = np.sort(node[edges], axis=1) if len(edges) else np.empty((0, 2), dtype=np.int64)
-    keep = e[:, 0] != e[:, 1]
-    e, lengths = e[keep], lengths[keep]
-    _, uniq = np.unique(e[:, 0] * max(n_out, 1) + e[:, 1], return_index=True)
-    uniq = np.sort(uniq)
-    e, lengths = e[uniq], lengths[uniq]
-    straight = np.linalg.norm(out_xy[e[:, 0]] - out_xy[e[:, 1]], axis=1) if len(e) else lengths
+    fields = K.fused_graph(node, first, xy, np.concatenate([map_a.kinds, map_b.kinds]),
+                           np.concatenate([map_a.edges, map_b.edges + n_a]).astype(np.int64),
+                           np.concatenate([map_a.lengths, map_b.lengths]).astype(np.float64),
+                           _RANK_OF_KIND, _KIND_OF_RANK)
     # Built directly: every field is valid by construction (from_arrays re-parses each kind).
-    fields = (out_xy, _KIND_OF_RANK[best].astype(np.int8), e.reshape(-1, 2).astype(np.int64),
-              np.maximum(lengths, straight).astype(np.float64))
     for f in fields:
         f.setflags(write=False)
     return TopoMap(*fields)

@@ -339,6 +339,63 @@ def test_path_field_is_the_distance_to_the_nearest_segment(seed):
     assert field == pytest.approx(np.minimum(d2, reach**2).reshape(ny, nx), abs=1e-5)
 
 
+def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
+    """fusion._merge_kernels.path_field as it was written before its rows were laid out first
+    (54fa37b), in plain Python: each row's extent, then its cells, one row after the other."""
+    d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
+    for ux, uy, wx, wy in seg.tolist():
+        vx, vy = wx - ux, wy - uy
+        ll = vx * vx + vy * vy
+        inv_ll = 0.0 if ll == 0.0 else 1.0 / ll
+        band = reach * math.sqrt(ll)
+        bx0, bx1 = min(ux, wx) - reach, max(ux, wx) + reach
+        iy0 = max(0, math.floor((min(uy, wy) - reach - y0) / cell))
+        iy1 = min(ny, math.ceil((max(uy, wy) + reach - y0) / cell) + 1)
+        for iy in range(iy0, iy1):
+            py = y0 + (iy + 0.5) * cell
+            lo, hi = bx0, bx1
+            if vy != 0.0:
+                e1 = ux + ((py - uy) * vx - band) / vy
+                e2 = ux + ((py - uy) * vx + band) / vy
+                lo, hi = max(lo, min(e1, e2)), min(hi, max(e1, e2))
+            elif abs(py - uy) > reach:
+                continue
+            ix0 = max(0, math.floor((lo - x0) / cell - 0.5))
+            ix1 = min(nx, math.ceil((hi - x0) / cell - 0.5) + 1)
+            px = x0 + (ix0 + 0.5) * cell
+            t = ((px - ux) * vx + (py - uy) * vy) * inv_ll
+            dt = cell * vx * inv_ll
+            for ix in range(ix0, ix1):
+                tc = min(1.0, max(0.0, t))
+                dx, dy = ux + tc * vx - px, uy + tc * vy - py
+                dd = dx * dx + dy * dy
+                if dd < float(d2[iy, ix]):
+                    d2[iy, ix] = dd
+                px += cell
+                t += dt
+    return d2
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_path_field_is_the_row_by_row_walk_bit_for_bit(seed):
+    """fusion._merge_kernels.path_field lays a segment's rows out before walking them, for
+    speed: the same raster, bit for bit, as walking one row after the other (grid-aligned
+    coordinates, so that horizontal, vertical, zero-length and shared-end segments occur)."""
+    from fusion import _merge_kernels as K
+
+    rng = np.random.default_rng(seed)
+    seg = np.round(rng.uniform(0.0, 12.0, (12, 4)) * 2.5) / 2.5
+    seg[0, 2] = seg[0, 0]  # vertical
+    seg[1, 3] = seg[1, 1]  # horizontal
+    seg[2, 2:] = seg[2, :2]  # a point
+    seg[3, :2] = seg[4, 2:]  # chained
+    x0, y0, cell, ny, nx, reach = -2.4, -2.0, 0.4, 41, 42, 2.0
+    got = K.path_field(seg, x0, y0, cell, ny, nx, reach)
+    want = _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach)
+    assert np.array_equal(got.view(np.int32), want.view(np.int32))
+
+
 def _corridors(shift: float = 0.0) -> TopoMap:
     """A comb of corridors (a 12 m spine, three 4 m branches), moved up by ``shift``."""
     xy = np.array([[0, 0], [4, 0], [8, 0], [12, 0], [4, 4], [8, 4], [12, 4]], dtype=float)
