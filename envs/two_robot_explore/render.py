@@ -187,10 +187,13 @@ class Renderer:
         view = _View(box, offset)
         self._blit_cells(STATE_COLOURS[states], g, rows, cols, view)
         merge = env.merge
-        if t is not None and merge is not None and getattr(merge, "merged", None) is not None:
-            self._draw_graph(merge.merged, view)
-        else:
+        if t is None:
             self._draw_graph(m0.topomap, view)
+        elif merge is not None and merge.accepted and getattr(merge, "merged", None) is not None:
+            self._draw_graph(merge.merged, view)
+        else:  # merged earlier; the last attempt (a re-examination) kept the transform in use
+            self._draw_graph(m0.topomap, view)
+            self._draw_graph(m1.topomap, view, t)
         status = "merged" if t is not None else "not merged"
         self._label(f"shared map (robot_0 frame), {status}", (offset[0] + 4, offset[1] + 4))
 

@@ -37,6 +37,25 @@ def test_rgb_array_frame_shows_something():
     par.close()
 
 
+def test_rgb_array_shows_robot_1_in_the_shared_panel_once_merged():
+    """With a transform in use the shared panel draws robot 1's graph too, also when the last
+    merge attempt (a re-examination) was rejected and kept the transform."""
+    from types import SimpleNamespace
+
+    par = two_robot_explore_v0.parallel_env(render_mode="rgb_array", **{**SMALL, "max_cycles": 60})
+    par.reset(seed=0)
+    for _ in range(50):
+        par.step({a: np.array([0.8, 0.2]) for a in par.agents})
+    assert par.maps[1].topomap.n_nodes
+    par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
+    par.merge = SimpleNamespace(accepted=True, merged=par.maps[0].topomap)  # robot 0's graph
+    own_graph = par.render()
+    par.merge = SimpleNamespace(accepted=False, merged=par.maps[0].topomap)  # kept transform
+    both_graphs = par.render()
+    assert both_graphs.shape == own_graph.shape and not np.array_equal(both_graphs, own_graph)
+    par.close()
+
+
 def test_max_cycles():
     max_cycles_test(two_robot_explore_v0)
 
