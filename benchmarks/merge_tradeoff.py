@@ -39,6 +39,9 @@ from fusion.evaluate import (  # noqa: E402
 from fusion.merge import MergeConfig, decide, merge_maps  # noqa: E402
 
 BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 0.8))
+OVERLAP_PAIRS = {"overlap_range": [0.2, 0.8], "no_overlap_fraction": 0.0}
+"""``synthetic_pairs`` settings of the overlap pairs (also read by ``polish_drift.py`` and
+``search_stages.py``, so all three measure the same pairs)."""
 NOISES = (0.05, 0.15)
 SCORES = (-3.0, -2.0, -1.5, -1.0, -0.5, 0.0, 1.0, 2.0)
 MARGINS = (0.0, 1.0, 2.0, 3.0)
@@ -75,8 +78,7 @@ def main() -> None:
     parser.add_argument("--no-overlap-seed", type=int, default=9000)
     args = parser.parse_args()
 
-    over = merge_all(synthetic_pairs(args.pairs, args.seed, NOISES,
-                                     {"overlap_range": [0.2, 0.8], "no_overlap_fraction": 0.0}),
+    over = merge_all(synthetic_pairs(args.pairs, args.seed, NOISES, OVERLAP_PAIRS),
                      "overlap pairs")
     none = []
     for nodes in ((5, 15), (15, 60), (60, 80)):

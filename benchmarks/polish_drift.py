@@ -14,6 +14,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from merge_tradeoff import BINS, OVERLAP_PAIRS  # noqa: E402  (benchmarks/, the same pairs)
+
 from fusion.evaluate import (  # noqa: E402
     is_success,
     oracle_transform,
@@ -21,9 +23,6 @@ from fusion.evaluate import (  # noqa: E402
     transform_errors,
 )
 from fusion.merge import MergeConfig, _evaluate, _polish, _prepare  # noqa: E402
-
-BINS = ((0.2, 0.4), (0.4, 0.6), (0.6, 0.8))
-OVERLAP = {"overlap_range": [0.2, 0.8], "no_overlap_fraction": 0}
 
 
 def drift(pairs, cfg: MergeConfig, verbose: bool = False) -> dict:
@@ -58,7 +57,7 @@ def main() -> int:
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args()
     noise = [float(s) for s in args.noise.split(",")]
-    table = drift(synthetic_pairs(args.pairs, args.seed, noise, OVERLAP), MergeConfig(),
+    table = drift(synthetic_pairs(args.pairs, args.seed, noise, OVERLAP_PAIRS), MergeConfig(),
                   args.verbose)
     print(f"seed {args.seed}: drift / oracle right")
     for (sigma, label), row in sorted(table.items()):

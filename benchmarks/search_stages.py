@@ -40,6 +40,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from merge_tradeoff import OVERLAP_PAIRS  # noqa: E402  (benchmarks/, the same pairs)
+
 from fusion import _merge_kernels as K  # noqa: E402
 from fusion import merge as M  # noqa: E402
 from fusion.diagnose import classify  # noqa: E402
@@ -203,8 +205,7 @@ def main() -> None:
     cfg = M.MergeConfig.from_dict(json.loads(args.config)) if args.config else M.MergeConfig()
     noises = [float(s) for s in args.noise.split(",")]
     off = dataclasses.replace(cfg, min_score=-1e6, min_margin=0.0)
-    pairs = synthetic_pairs(args.pairs, args.seed, noises,
-                            {"overlap_range": [0.2, 0.8], "no_overlap_fraction": 0.0})
+    pairs = synthetic_pairs(args.pairs, args.seed, noises, OVERLAP_PAIRS)
     table = Counter()
     classes = Counter()
     why = Counter()
