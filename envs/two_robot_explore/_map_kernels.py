@@ -102,19 +102,6 @@ def absorb(states, ever, win, union, reachable):
 
 
 @njit(cache=True, nogil=True)
-def or_into(dst, src, r0, r1, c0, c1):
-    """``dst[r0:r1, c0:c1] |= src[r0:r1, c0:c1]`` (bool); returns how many cells of ``dst``
-    became true."""
-    n = 0
-    for iy in range(r0, r1):
-        for ix in range(c0, c1):
-            if src[iy, ix] and not dst[iy, ix]:
-                dst[iy, ix] = True
-                n += 1
-    return n
-
-
-@njit(cache=True, nogil=True)
 def or_patch(dst, patch, r0, c0):
     """``dst[r0:r0+h, c0:c0+w] |= patch`` (bool, ``patch`` ``h × w``); returns how many cells
     of ``dst`` became true."""

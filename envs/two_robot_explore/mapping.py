@@ -31,7 +31,6 @@ from envs.two_robot_explore._map_kernels import (
     NO_UNION,
     cell_box,
     integrate_scan,
-    or_into,
     or_patch,
     sample_image,
     sample_states,
@@ -240,7 +239,7 @@ class SharedMap:
             return 0
         if index == 0:
             rs, cs = window
-            new = or_into(self.ever, robot_map.ever, rs.start, rs.stop, cs.start, cs.stop)
+            new = or_patch(self.ever, robot_map.ever[rs, cs], rs.start, cs.start)
         else:
             if self.transform is None:
                 return 0
