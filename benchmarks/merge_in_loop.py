@@ -55,6 +55,7 @@ class _GridClock:
 
 
 def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock) -> dict:
+    """One episode's row of the table (module docstring), watched step by step."""
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)})
     clock.env = env
     row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,

@@ -396,7 +396,14 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
 
     An accepted result (the same alignment refined, or a distinct one) is for the caller to
     use instead. This is how a merge accepted early on small, self-similar maps (a building's
-    180°-turned or shifted copy of a room row) gets undone once the maps have grown."""
+    180°-turned or shifted copy of a room row) gets undone once the maps have grown.
+
+    Raises:
+        TypeError: ``in_use`` is not a :class:`fusion.Rigid2D`.
+    """
+    if not isinstance(in_use, Rigid2D):
+        raise TypeError(f"in_use must be a fusion.Rigid2D (the transform in use), got "
+                        f"{type(in_use).__name__}")
     cfg = config or GridMergeConfig()
     result, grid = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg)
     if result.accepted or grid is None or grid.centre is None:

@@ -160,6 +160,13 @@ def test_recheck_refutes_a_transform_the_grids_no_longer_support():
     assert recheck(TINY, TINY, g, g, merge_grids(g, g).transform)[1] is None
 
 
+def test_recheck_needs_a_transform_in_use():
+    a, b, _ = overlapping_views(90.0)
+    with pytest.raises(TypeError, match=r"in_use must be a fusion.Rigid2D \(the transform in "
+                                        r"use\), got ndarray"):
+        recheck(TINY, TINY, a, b, np.eye(3))
+
+
 def _pooled_numpy(states: np.ndarray, fine: float, res: float):
     """The obvious form of the crop-and-pool: nonzero for the known box, block reductions."""
     rows, cols = np.nonzero(states != 0)
