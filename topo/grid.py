@@ -33,7 +33,7 @@ import numpy as np
 from scipy import ndimage
 
 from topo._checks import as_points, check_real
-from topo._grid_kernels import sonar_update
+from topo._grid_kernels import NO_COUNTS, NO_MASK, sonar_update
 
 
 def _float_array(value: Any, name: str, shape: str) -> np.ndarray:
@@ -165,7 +165,8 @@ class OccupancyGrid:
         sonar_update(self.log_odds, self._states, self.origin[0], self.origin[1],
                      self.resolution, pose[0], pose[1], pose[2], ranges, sensor_angles,
                      max_range, cone_half_width, (m.hit_width or self.resolution) / 2.0,
-                     m.l_free, m.l_occupied, m.clamp, m.threshold)
+                     m.l_free, m.l_occupied, m.clamp, m.threshold, NO_MASK, NO_MASK, NO_MASK,
+                     NO_COUNTS)
 
     def _check_scan(self, pose: Any, ranges: Any, angles: Any):
         # sums instead of np.isfinite(...).all(): NaN and inf survive a sum, and on arrays this

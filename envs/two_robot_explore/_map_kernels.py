@@ -1,8 +1,8 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
-disk): a whole scan's grid update (the grid's sonar model, the window the scan can touch,
-folding the cells it made known into the "ever known" masks), the ``local_map`` crop, and the
-``graph_nodes`` observation. Each replaces a dozen small numpy calls whose overhead, not
-arithmetic, was the cost (four grids are updated every env step)."""
+disk): a whole scan's grid update (the grid's sonar model, folding the cells it made known into
+the "ever known" masks), the ``local_map`` crop, and the ``graph_nodes`` observation. Each
+replaces a dozen small numpy calls whose overhead, not arithmetic, was the cost (four grids are
+updated every env step)."""
 
 from __future__ import annotations
 
@@ -15,41 +15,21 @@ from topo._grid_kernels import sonar_update
 
 
 @njit(cache=True, nogil=True)
-def scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half, margin):
-    """``[r0, r1, c0, c1]`` cells covering the pose and both arc ends of every cone (reach
-    ``reach[k]`` at ``theta + angles[k] ± half``) plus ``margin`` cells, clipped to the
-    ``h × w`` grid; ``r0 == r1`` when empty."""
-    lo_x = hi_x = x
-    lo_y = hi_y = y
-    for k in range(reach.shape[0]):
-        for a in (theta + angles[k] - half, theta + angles[k] + half):
-            px = x + reach[k] * math.cos(a)
-            py = y + reach[k] * math.sin(a)
-            lo_x, hi_x = min(lo_x, px), max(hi_x, px)
-            lo_y, hi_y = min(lo_y, py), max(hi_y, py)
-    return cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin)
-
-
-@njit(cache=True, nogil=True)
 def integrate_scan(log_odds, states, ever, ox, oy, res, x, y, theta, ranges, angles, mount,
-                   max_range, half_cone, hit_half, l_free, l_occ, clamp, threshold, margin,
-                   union, reachable):
+                   max_range, half_cone, hit_half, l_free, l_occ, clamp, threshold, union,
+                   reachable):
     """One scan into a grid and its "ever known" mask, in one call: the grid's sonar model
-    (``topo._grid_kernels.sonar_update``) with ``ranges + mount`` and ``max_range + mount``
-    (ranges are from the transducers, the model's sensors sit at the centre), then
-    :func:`absorb` over the :func:`scan_window` of reaches ``min(ranges, max_range) + mount``
-    (``margin`` cells around). Returns :func:`absorb`'s counts."""
-    n = ranges.shape[0]
-    shifted = np.empty(n)
-    reach = np.empty(n)
-    for k in range(n):
-        shifted[k] = ranges[k] + mount
-        reach[k] = min(ranges[k], max_range) + mount
-    sonar_update(log_odds, states, ox, oy, res, x, y, theta, shifted, angles, max_range + mount,
-                 half_cone, hit_half, l_free, l_occ, clamp, threshold)
-    h, w = states.shape
-    win = scan_window(ox, oy, res, h, w, x, y, theta, reach, angles, half_cone, margin)
-    return absorb(states, ever, win, union, reachable)
+    with its coverage bookkeeping (``topo._grid_kernels.sonar_update``: ``union`` and
+    ``reachable`` there; empty ``log_odds`` and ``states`` only sweep ``ever``) with
+    ``ranges + mount`` and ``max_range + mount`` (ranges are from the transducers, the
+    model's sensors sit at the centre). Returns its counts ``[n_fresh, r0, r1, c0, c1, both,
+    new, covered]``: the cells known for the first time, their bounding box (all zero if
+    none), and how they fell in ``union``."""
+    fresh = np.zeros(8, dtype=np.int64)
+    sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges + mount, angles,
+                 max_range + mount, half_cone, hit_half, l_free, l_occ, clamp, threshold, ever,
+                 union, reachable, fresh)
+    return fresh
 
 
 @njit(cache=True, nogil=True)
@@ -65,39 +45,6 @@ def cell_box(lo_x, lo_y, hi_x, hi_y, ox, oy, res, h, w, margin):
     out[3] = min(int(math.floor((hi_x - ox) * inv)) + margin + 1, w)
     if out[0] >= out[1] or out[2] >= out[3]:
         out[:] = 0
-    return out
-
-
-@njit(cache=True, nogil=True)
-def absorb(states, ever, win, union, reachable):
-    """Mark the known cells of ``states[win]`` not yet in ``ever`` as ever known.
-
-    With a non-empty ``union`` (bool, same shape), also fold them into it, counting cells
-    already there (``both``), new to it (``new``) and new and ``reachable`` (``covered``).
-    Returns ``[n_fresh, r0, r1, c0, c1, both, new, covered]``; the box bounds the fresh
-    cells (all zero when none).
-    """
-    out = np.zeros(8, dtype=np.int64)
-    track = union.size > 0
-    r_lo, r_hi, c_lo, c_hi = win[1], -1, win[3], -1
-    for iy in range(win[0], win[1]):
-        for ix in range(win[2], win[3]):
-            if states[iy, ix] == 0 or ever[iy, ix]:
-                continue
-            ever[iy, ix] = True
-            out[0] += 1
-            r_lo, r_hi = min(r_lo, iy), max(r_hi, iy)
-            c_lo, c_hi = min(c_lo, ix), max(c_hi, ix)
-            if track:
-                if union[iy, ix]:
-                    out[5] += 1
-                else:
-                    union[iy, ix] = True
-                    out[6] += 1
-                    if reachable[iy, ix]:
-                        out[7] += 1
-    if out[0]:
-        out[1], out[2], out[3], out[4] = r_lo, r_hi + 1, c_lo, c_hi + 1
     return out
 
 
@@ -133,11 +80,13 @@ def warp_patch(out, src, r0, c0, h, w, ox, oy, res, d_r0, d_c0, x0, y0, src_res,
                 out[a, b] = src[r0 + iv, c0 + iu]
 
 
-NO_UNION = np.zeros((0, 0), dtype=np.bool_)
-"""The ``union``/``reachable`` arguments of :func:`absorb` when there is no union to fold into."""
+NO_LOG_ODDS = np.zeros((0, 0))
+"""The ``log_odds`` argument of :func:`integrate_scan` for a sweep without a grid (with
+:data:`NO_STATES`)."""
 
 NO_STATES = np.zeros((0, 0), dtype=np.int8)
-"""The ``states2`` argument of :func:`sample_image` when there is no second grid."""
+"""The ``states2`` argument of :func:`sample_image` when there is no second grid, and the
+``states`` of a sweep (:data:`NO_LOG_ODDS`)."""
 
 
 @njit(cache=True, nogil=True)

@@ -6,11 +6,12 @@ in robot 0's frame ("A"); robot 1's map ("B") enters it through the latest accep
 ``fusion.merge_maps`` transform (``p_A = R p_B + T``). Ground truth is the world frame.
 
 Per step only a window around each robot is touched: the grid update visits the cones' cells
-(``topo.OccupancyGrid``), the "ever known" mask is refreshed in the bounding box of the cones,
-and the shared map and the true coverage only receive the bounding box of the cells that became
-known this step — so a step costs the same in a 20 m and an 80 m world. The shared map is
-re-warped whole only when a merge changes the transform. "Ever known" makes coverage monotone: a
-cell whose log-odds later drift back to unknown still counts as covered.
+(``topo.OccupancyGrid``) and adds those it makes known to the "ever known" mask, and the shared
+map only receives the bounding box of the cells that became known this step — so a step costs
+the same in a 20 m and an 80 m world. The shared map is re-warped whole only when a merge
+changes the transform. "Ever known" makes coverage monotone: a cell whose log-odds later drift
+back to unknown still counts as covered. The true coverage sweeps the cones without a grid
+(:class:`OracleCoverage`).
 
 Cell states are :class:`topo.grid.CellState` codes (``UNKNOWN = 0``, ``FREE = 1``,
 ``OCCUPIED = 2``); ``topo.grid.IMAGE_VALUES`` is the one table turning them into ``local_map``
@@ -27,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from envs.two_robot_explore._map_kernels import (
+    NO_LOG_ODDS,
     NO_STATES,
-    NO_UNION,
     cell_box,
     integrate_scan,
     or_patch,
@@ -37,6 +38,7 @@ from envs.two_robot_explore._map_kernels import (
     warp_patch,
 )
 from fusion.rigid import Rigid2D
+from topo._grid_kernels import NO_MASK
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
 from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
@@ -44,10 +46,6 @@ from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
 LOCAL_MAP_VALUES = IMAGE_VALUES
 """``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
 255, occupied 0)."""
-
-_MARGIN_CELLS = 2
-"""Extra cells around a sonar window (the inverse model marks a band behind the echo)."""
-
 
 @dataclass(frozen=True, slots=True)
 class Geometry:
@@ -58,7 +56,7 @@ class Geometry:
     resolution: float
     shape: tuple[int, int]
 
-    def window(self, xy: np.ndarray, margin: int = _MARGIN_CELLS) -> tuple[slice, slice] | None:
+    def window(self, xy: np.ndarray, margin: int) -> tuple[slice, slice] | None:
         """Row and column slices of the cells covering points ``xy`` (``(N, 2)``) plus
         ``margin`` cells, clipped to the grid; ``None`` if that is empty."""
         lo = xy.min(axis=0)
@@ -111,7 +109,7 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
 
 class RobotMap:
     """An occupancy grid with "ever known" bookkeeping and a topological map: one robot's maps
-    in its own start frame, or (for :class:`OracleCoverage`) a robot's true sweep in the world.
+    in its own start frame.
 
     Args:
         extent: ``(xmin, ymin, xmax, ymax)`` of the grid, metres.
@@ -140,27 +138,25 @@ class RobotMap:
         self.topomap = TopoMap.empty()
 
     def integrate(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
-                  mount_radius: float, max_range: float, half_cone: float,
-                  union: np.ndarray = NO_UNION, reachable: np.ndarray = NO_UNION
-                  ) -> np.ndarray:
+                  mount_radius: float, max_range: float, half_cone: float) -> np.ndarray:
         """Fold one sonar scan (taken at odometry ``pose``) into the grid and :attr:`ever`.
 
         Readings are measured from the transducers on the rim; the grid's sensor model puts all
         sensors at the robot centre, so ``mount_radius`` is added to ranges and to
-        ``max_range``. ``union``/``reachable``: see :func:`_map_kernels.absorb`. Returns its
-        counts ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: how many cells became known
-        for the first time and their bounding box (all zero if none).
+        ``max_range``. Returns the counts of :func:`_map_kernels.integrate_scan`, of which
+        ``[n_fresh, r0, r1, c0, c1]`` matter here: how many cells became known for the first
+        time and their bounding box (all zero if none).
         """
         # one compiled call: the grid's update (OccupancyGrid.update_valid: the env's scans are
-        # valid by construction, the grid's checks would double the cost), the scan's window
-        # and the "ever known" bookkeeping
+        # valid by construction, the grid's checks would double the cost) and the "ever known"
+        # bookkeeping
         grid, g = self.grid, self.geometry
         m = grid.model
         counts = integrate_scan(grid.log_odds, self._cells, self.ever, g.origin[0], g.origin[1],
                                 g.resolution, float(pose[0]), float(pose[1]), float(pose[2]),
                                 ranges, angles, mount_radius, max_range, half_cone,
                                 (m.hit_width or grid.resolution) / 2.0, m.l_free, m.l_occupied,
-                                m.clamp, m.threshold, _MARGIN_CELLS, union, reachable)
+                                m.clamp, m.threshold, NO_MASK, NO_MASK)
         n = int(counts[0])
         if n:
             self.n_ever += n
@@ -269,30 +265,39 @@ class SharedMap:
 class OracleCoverage:
     """True coverage: what the sonars have really swept, in the world frame.
 
-    Each robot's scans are folded, from its **true** pose and with its **true** ranges (nearest
-    real echo per cone, no noise, no dropout), into a world-frame grid with the same inverse
-    sensor model as the robots' own maps. A dropped echo makes a robot believe it sees through
-    a wall; the sweep stops at the wall. Odometry errors do not enter either.
+    Each robot's scans are swept, from its **true** pose and with its **true** ranges (nearest
+    real echo per cone, no noise, no dropout), into a world-frame mask: the cells the robots'
+    inverse sensor model would update (free up to the echo, the band at the echo). That model
+    makes a cell known with a single update, so this is exactly the "ever known" mask of a
+    world-frame grid folding the same scans, without keeping the grid. A dropped echo makes a
+    robot believe it sees through a wall; the sweep stops at the wall. Odometry errors do not
+    enter either.
 
     Attributes:
-        sweeps: two world-frame :class:`RobotMap` s, one per robot.
+        swept: per robot, ``(H, W)`` bool world cells it has swept; ``n_swept``: their counts.
         union: ``(H, W)`` bool, world cells swept by either robot.
         both: cells swept by both; ``covered``: reachable cells swept by either (the coverage
             numerator); ``count``: ``union.sum()``.
     """
 
-    __slots__ = ("geometry", "reachable", "n_reachable", "sweeps", "union", "both", "covered",
-                 "count")
+    __slots__ = ("geometry", "reachable", "n_reachable", "swept", "n_swept", "union", "both",
+                 "covered", "count", "_model")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float,
                  reachable: np.ndarray) -> None:
-        self.sweeps = [RobotMap(extent, resolution) for _ in range(2)]
-        self.geometry = self.sweeps[0].geometry
+        grid = OccupancyGrid(resolution=resolution, extent=extent)  # the robots' geometry, model
+        self.geometry = geometry_of(grid)
         if self.geometry.shape != reachable.shape:
             raise ValueError(f"reachable must have the grid's shape {self.geometry.shape}, got "
                              f"{reachable.shape}")
+        m = self._model = grid.model
+        if not (-m.l_free > m.threshold and m.l_occupied > m.threshold):
+            raise ValueError(f"the sweep needs a sensor model whose single update makes a cell "
+                             f"known (|l_free| and l_occupied above threshold), got {m}")
         self.reachable = reachable
         self.n_reachable = int(np.count_nonzero(reachable))
+        self.swept = [np.zeros(self.geometry.shape, dtype=bool) for _ in range(2)]
+        self.n_swept = [0, 0]
         self.union = np.zeros(self.geometry.shape, dtype=bool)
         self.both = 0
         self.covered = 0
@@ -306,7 +311,7 @@ class OracleCoverage:
     @property
     def overlap(self) -> float:
         """Fraction of the smaller robot sweep also swept by the other robot."""
-        small = min(self.sweeps[0].n_ever, self.sweeps[1].n_ever)
+        small = min(self.n_swept)
         return self.both / small if small else 0.0
 
     @property
@@ -316,11 +321,17 @@ class OracleCoverage:
 
     def add(self, index: int, pose: np.ndarray, true_ranges: np.ndarray, angles: np.ndarray,
             mount_radius: float, max_range: float, half_cone: float) -> int:
-        """Sweep robot ``index``'s scan from its true world ``pose``; returns how many world
-        cells the team swept for the first time."""
-        counts = self.sweeps[index].integrate(pose, true_ranges, angles, mount_radius,
-                                              max_range, half_cone, self.union, self.reachable)
-        both, new, covered = counts[5:].tolist()
+        """Sweep robot ``index``'s scan from its true world ``pose`` (ranges from the
+        transducers, as :meth:`RobotMap.integrate`); returns how many world cells the team
+        swept for the first time."""
+        g, m = self.geometry, self._model
+        counts = integrate_scan(NO_LOG_ODDS, NO_STATES, self.swept[index], g.origin[0],
+                                g.origin[1], g.resolution, float(pose[0]), float(pose[1]),
+                                float(pose[2]), true_ranges, angles, mount_radius, max_range,
+                                half_cone, (m.hit_width or g.resolution) / 2.0, m.l_free,
+                                m.l_occupied, m.clamp, m.threshold, self.union, self.reachable)
+        fresh, both, new, covered = counts[[0, 5, 6, 7]].tolist()
+        self.n_swept[index] += fresh
         self.both += both
         self.count += new
         self.covered += covered

@@ -1,4 +1,5 @@
-"""Window resampling and the egocentric local map, on synthetic grids."""
+"""Window resampling, the egocentric local map and the coverage bookkeeping, on synthetic
+grids."""
 
 import math
 
@@ -11,10 +12,13 @@ from envs.two_robot_explore.mapping import (
     LOCAL_MAP_VALUES,
     Geometry,
     LocalMapSampler,
+    OracleCoverage,
+    RobotMap,
     compose_pose,
     warp_window,
 )
 from fusion.rigid import Rigid2D
+from topo.grid import OccupancyGrid
 
 G = Geometry((-2.0, -3.0), 0.1, (60, 40))
 FULL = (slice(0, 60), slice(0, 40))
@@ -297,3 +301,69 @@ def test_adjacency_kernel_is_the_numpy_form(seed, n, n_edges, n_max):
     ref[e[:, 0], e[:, 1]] = 1.0
     ref[e[:, 1], e[:, 0]] = 1.0
     np.testing.assert_array_equal(adj, ref)
+
+
+PIONEER = np.radians([-90.0, -50.0, -30.0, -10.0, 10.0, 30.0, 50.0, 90.0])
+
+
+def _scans(seed, n=25):
+    """Random scans in a 6 m square: poses, ranges (some beyond the 2.5 m range: no echo)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        pose = np.array([*rng.uniform(-2.5, 2.5, 2), rng.uniform(-math.pi, math.pi)])
+        yield pose, rng.uniform(0.0, 3.0, PIONEER.size)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_robot_map_ever_known_is_the_grid_known_after_each_scan(seed):
+    """``RobotMap.integrate`` folds the newly known cells into ``ever`` in the grid update: the
+    same as OR-ing ``states != UNKNOWN`` in after every scan of a plain ``OccupancyGrid``,
+    with the count and bounding box of the new cells."""
+    rmap = RobotMap((-3.0, -3.0, 3.0, 3.0), 0.1)
+    grid = OccupancyGrid(resolution=0.1, extent=(-3.0, -3.0, 3.0, 3.0))
+    ever = np.zeros(grid.shape, dtype=bool)
+    mount, max_range, half = 0.2, 2.5, math.radians(7.5)
+    for pose, ranges in _scans(seed):
+        counts = rmap.integrate(pose, ranges, PIONEER, mount, max_range, half)
+        grid.update(pose, ranges + mount, PIONEER, max_range + mount, half)
+        new = (grid.states() != 0) & ~ever
+        ever |= new
+        np.testing.assert_array_equal(rmap.states, grid.states())
+        np.testing.assert_array_equal(rmap.ever, ever)
+        assert counts[0] == new.sum() and rmap.n_ever == ever.sum()
+        if new.any():
+            rows, cols = np.nonzero(new)
+            assert counts[1:5].tolist() == [rows.min(), rows.max() + 1, cols.min(),
+                                            cols.max() + 1]
+        else:
+            assert counts[1:5].tolist() == [0, 0, 0, 0]
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_true_coverage_sweep_is_the_ever_known_of_a_grid(seed):
+    """``OracleCoverage`` sweeps without a grid: per robot the cells a world-frame
+    ``OccupancyGrid`` folding the same scans has ever known, and the union's counts."""
+    extent = (-3.0, -3.0, 3.0, 3.0)
+    reachable = np.random.default_rng(seed).random((60, 60)) < 0.7
+    oracle = OracleCoverage(extent, 0.1, reachable)
+    grids = [OccupancyGrid(resolution=0.1, extent=extent) for _ in range(2)]
+    ever = [np.zeros((60, 60), dtype=bool) for _ in range(2)]
+    union = np.zeros((60, 60), dtype=bool)
+    covered = both = 0
+    mount, max_range, half = 0.2, 2.5, math.radians(7.5)
+    for k, (pose, ranges) in enumerate(_scans(seed, 40)):
+        i = k % 2
+        new_union = oracle.add(i, pose, ranges, PIONEER, mount, max_range, half)
+        grids[i].update(pose, ranges + mount, PIONEER, max_range + mount, half)
+        new = (grids[i].states() != 0) & ~ever[i]
+        ever[i] |= new
+        assert new_union == (new & ~union).sum()
+        both += int((new & union).sum())
+        covered += int((new & ~union & reachable).sum())
+        union |= new
+        np.testing.assert_array_equal(oracle.swept[i], ever[i])
+        assert oracle.n_swept[i] == ever[i].sum()
+    np.testing.assert_array_equal(oracle.union, union)
+    assert (oracle.both, oracle.covered, oracle.count) == (both, covered, union.sum())
