@@ -125,8 +125,8 @@ After that ``agents`` is empty and ``step()`` raises until ``reset()``.
 ## Infos
 
 Per robot: ``true_coverage`` — the fraction of the reachable free area the sonars have truly
-swept: each scan folded from the robot's true pose with its true ranges (nearest real echo per
-cone, no noise, no dropout) into a world-frame grid with the robots' inverse sensor model, so a
+swept: the world cells the robots' inverse sensor model updates for each scan taken from the
+robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
 dropped echo that "sees through" a wall, or odometry drift, does not count; ``true_area_m2``
 (swept area, walls included), ``shared_area_m2``, ``shared_coverage`` (shared area / reachable
 area; the robots' estimate, it includes walls, phantom free space behind dropped echoes and
