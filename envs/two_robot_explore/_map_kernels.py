@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from topo._grid_kernels import sonar_update
 
@@ -112,14 +112,16 @@ def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
 
 
 @njit(cache=True, nogil=True)
-def sample_image(image, values, offsets, states, ox, oy, res, x, y, theta,
+def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
                  states2, ox2, oy2, res2, x2, y2, theta2):
-    """The ``local_map`` pixels in one pass: ``image`` (``(1, n, n)`` uint8, ``n * n``
-    offsets in row-major order) gets ``values[state]`` of :func:`sample_states`' state of
-    ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of the larger of
-    that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid with its own
-    origin and cell size). The same arithmetic as :func:`sample_states`."""
-    flat = image.reshape(-1)
+    """The ``local_map`` pixels in one pass: pixel ``(i, j)`` of ``image`` (``(1, n, n)``
+    uint8) gets ``values[state]`` of :func:`sample_states`' state at the offset ``(fwd[i],
+    left[j])`` of ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of
+    the larger of that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid
+    with its own origin and cell size). The same arithmetic as :func:`sample_states`, in the
+    same order, with each row's and column's share computed once (and unsigned indices: the
+    bounds are checked first)."""
+    n = fwd.shape[0]
     h, w = states.shape
     inv = 1.0 / res
     c = math.cos(theta) * inv
@@ -133,22 +135,27 @@ def sample_image(image, values, offsets, states, ox, oy, res, x, y, theta,
     s2 = math.sin(theta2) * inv2
     u02 = (x2 - ox2) * inv2
     v02 = (y2 - oy2) * inv2
-    for k in range(offsets.shape[1]):
-        f = offsets[0, k]
-        g = offsets[1, k]
-        u = u0 + c * f - s * g
-        v = v0 + s * f + c * g
-        st = 0
-        if 0.0 <= u < w and 0.0 <= v < h:
-            st = states[int(v), int(u)]
-        if both:
-            u = u02 + c2 * f - s2 * g
-            v = v02 + s2 * f + c2 * g
-            if 0.0 <= u < w2 and 0.0 <= v < h2:
-                st2 = states2[int(v), int(u)]
-                if st2 > st:
-                    st = st2
-        flat[k] = values[st]
+    flat, flat2 = states.ravel(), states2.ravel()
+    sg, cg = s * left, c * left
+    sg2, cg2 = s2 * left, c2 * left
+    for i in range(n):
+        f = fwd[i]
+        a, b = u0 + c * f, v0 + s * f  # u = u0 + c f - s g, left to right as sample_states
+        a2, b2 = u02 + c2 * f, v02 + s2 * f
+        for j in range(n):
+            u = a - sg[j]
+            v = b + cg[j]
+            st = 0
+            if 0.0 <= u < w and 0.0 <= v < h:
+                st = flat[uint64(int(v)) * uint64(w) + uint64(int(u))]
+            if both:
+                u = a2 - sg2[j]
+                v = b2 + cg2[j]
+                if 0.0 <= u < w2 and 0.0 <= v < h2:
+                    st2 = flat2[uint64(int(v)) * uint64(w2) + uint64(int(u))]
+                    if st2 > st:
+                        st = st2
+            image[0, i, j] = values[uint64(st)]
 
 
 @njit(cache=True, nogil=True)

@@ -346,12 +346,13 @@ class LocalMapSampler:
     centre facing up, its left on the image's left.
     """
 
-    __slots__ = ("size", "_offsets")
+    __slots__ = ("size", "_steps", "_offsets")
 
     def __init__(self, size: int, resolution: float) -> None:
         self.size = size
-        k = (size / 2.0 - np.arange(size) - 0.5) * resolution
-        fwd, left = np.meshgrid(k, k, indexing="ij")
+        # row r lies _steps[r] ahead, column c _steps[c] to the left
+        self._steps = (size / 2.0 - np.arange(size) - 0.5) * resolution
+        fwd, left = np.meshgrid(self._steps, self._steps, indexing="ij")
         self._offsets = np.ascontiguousarray(np.stack([fwd.ravel(), left.ravel()]))
 
     def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
@@ -377,10 +378,11 @@ class LocalMapSampler:
             states2, g2, pose2 = NO_STATES, geometry, pose
         else:
             states2, g2, pose2 = other
-        sample_image(img, LOCAL_MAP_VALUES, self._offsets, states, geometry.origin[0],
-                     geometry.origin[1], geometry.resolution, float(pose[0]), float(pose[1]),
-                     float(pose[2]), states2, g2.origin[0], g2.origin[1], g2.resolution,
-                     float(pose2[0]), float(pose2[1]), float(pose2[2]))
+        sample_image(img, LOCAL_MAP_VALUES, self._steps, self._steps, states,
+                     geometry.origin[0], geometry.origin[1], geometry.resolution,
+                     float(pose[0]), float(pose[1]), float(pose[2]), states2, g2.origin[0],
+                     g2.origin[1], g2.resolution, float(pose2[0]), float(pose2[1]),
+                     float(pose2[2]))
         return img
 
 
