@@ -626,18 +626,22 @@ class TwoRobotExploreEnv(ParallelEnv):
         return dict.fromkeys(self.agents, self.steps >= self._max_cycles)
 
     # ------------------------------------------------------------------ observations
-    def _peer_pose(self, i: int) -> np.ndarray | None:
-        """The teammate's odometry pose in robot ``i``'s frame, via the merge transform."""
+    def _poses_across(self) -> list[np.ndarray] | None:
+        """Each robot's odometry pose in the other robot's frame, via the merge transform
+        (robot 0's by its inverse, robot 1's by it); ``None`` before a merge. Robot ``i``'s
+        entry places it on its teammate's map (``local_map``), the other is its ``teammate``."""
         t = self.shared.transform
         if t is None:
             return None
-        other = self.robots[1 - i].odometry
-        return compose_pose(t if i == 0 else self.shared.inverse, other)
+        return [compose_pose(self.shared.inverse, self.robots[0].odometry),
+                compose_pose(t, self.robots[1].odometry)]
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        return {a: self._observe_one(i) for i, a in enumerate(AGENTS) if a in self.agents}
+        across = self._poses_across()
+        return {a: self._observe_one(i, across) for i, a in enumerate(AGENTS)
+                if a in self.agents}
 
-    def _observe_one(self, i: int) -> dict[str, np.ndarray]:
+    def _observe_one(self, i: int, across: list[np.ndarray] | None) -> dict[str, np.ndarray]:
         cfg = self.config
         robot = self.robots[i]
         odo = robot.odometry
@@ -651,8 +655,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graph_obs(i, odo, c, s)
         teammate = np.zeros(5, dtype=np.float32)
-        peer = self._peer_pose(i)
-        if peer is not None:
+        if across is not None:
+            peer = across[1 - i]
             dx, dy = peer[0] - ox, peer[1] - oy
             dth = peer[2] - oth
             teammate[:] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
@@ -663,7 +667,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             "graph_nodes": nodes,
             "graph_mask": mask,
             "graph_adjacency": adj,
-            "local_map": self._local_map(i),
+            "local_map": self._local_map(i, across),
             "teammate": teammate,
         }
 
@@ -694,16 +698,13 @@ class TwoRobotExploreEnv(ParallelEnv):
         static[:, -1] = np.minimum(topo.degree(), MAX_DEGREE)
         self._graph_cache[i] = (static, None, None)
 
-    def _local_map(self, i: int) -> np.ndarray:
-        pose = self.robots[i].odometry
+    def _local_map(self, i: int, across: list[np.ndarray] | None) -> np.ndarray:
         own = self.maps[i]
-        t = self.shared.transform
         other = None
-        if t is not None:
+        if across is not None:
             peer = self.maps[1 - i]
-            other = (peer.states, peer.geometry,
-                     compose_pose(t if i == 1 else self.shared.inverse, pose))
-        return self._sampler.image(own.states, own.geometry, pose, other)
+            other = (peer.states, peer.geometry, across[i])
+        return self._sampler.image(own.states, own.geometry, self.robots[i].odometry, other)
 
     # ------------------------------------------------------------------ infos
     def merge_errors(self) -> tuple[float, float]:

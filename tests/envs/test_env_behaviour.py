@@ -121,7 +121,7 @@ def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
     _, par = _episode(8, 150, sonar={"dropout_prob": 0.0})
     par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
     assert par.shared.area == pytest.approx(par.oracle.area, rel=0.05)
-    obs = par._observe_one(0)
+    obs = par._observe_one(0, par._poses_across())
     truth = np.array([r.true_pose() for r in par.robots])
     dx, dy = truth[1, :2] - truth[0, :2]
     c, s = math.cos(truth[0, 2]), math.sin(truth[0, 2])
@@ -250,4 +250,4 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     assert reward < 0  # robot 1's cells left the shared map at that step
     assert "the grids refute the transform in use" in info["merge"].reason
     assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
-    assert par._observe_one(0)["teammate"][4] == 0.0
+    assert par._observe_one(0, par._poses_across())["teammate"][4] == 0.0
