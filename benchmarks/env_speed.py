@@ -4,8 +4,9 @@ size scaling, and memory over a long run.
 The **raw floor** is what no implementation of this env can avoid, measured in the same run on
 the same world: the pymunk substeps of both robots plus the same sonar ray casts
 (``segments × rays × 2`` per step), nothing else. The env is reported as steps/s and as a ratio
-to that floor. The env casts through chipmunk's ``cpSpaceSegmentQueryFirst`` directly (see
-``envs/two_robot_explore/sonar.py``), so the floor does too; the floor through pymunk's public
+to that floor. The env calls chipmunk's ``cpSpaceSegmentQueryFirst`` directly (a whole scan in
+one compiled call where the platform allows; see ``envs/two_robot_explore/sonar.py``), so the
+"chipmunk floor" casts with the env's own ``Sonar._cast``; the floor through pymunk's public
 ``Space.segment_query_first`` (what the env called before, and the issue's definition when it
 was written) is printed beside it.
 
@@ -107,14 +108,7 @@ def run_floor(par, steps: int, seed: int = 0, public: bool = False) -> Speed:
     acts = _actions(steps, seed)
     w_max = math.radians(cfg.robot.max_turn_rate)
     dt, substeps = cfg.robot.dt, cfg.robot.substeps
-    if public:
-        query = space.segment_query_first
-    else:
-        info = sonar._ffi.new("cpSegmentQueryInfo *")
-        cspace = space._space
-
-        def query(a, b, radius, f, first=sonar._QUERY_FIRST):
-            return first(cspace, a, b, radius, f, info)
+    query = space.segment_query_first
     clock = _Clock()
     for k in range(steps):
         for r, name in zip(robots, ("robot_0", "robot_1"), strict=True):
@@ -123,7 +117,11 @@ def run_floor(par, steps: int, seed: int = 0, public: bool = False) -> Speed:
         robot.simulate(space, robots, dt, substeps)
         for r in robots:
             p = r.body.position
-            starts_, ends = son.ray_segments(np.array([p.x, p.y, r.body.angle]))
+            pose = np.array([p.x, p.y, r.body.angle])
+            if not public:
+                son._cast(space, pose, r.sensor_filter)  # the env's own casts
+                continue
+            starts_, ends = son.ray_segments(pose)
             f = r.sensor_filter
             for a, b in zip(starts_.tolist(), ends.tolist(), strict=True):
                 query(a, b, 0.0, f)

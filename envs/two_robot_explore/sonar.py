@@ -15,14 +15,16 @@ clipped to ``[min_range, max_range]``; ``max_range`` means "no echo". With ``mea
 set, a new scan is taken only after the robot has travelled that far since the last one (the
 paper's robots measured every 0.10 m); otherwise every step.
 
-The casts call chipmunk's ``cpSpaceSegmentQueryFirst`` through pymunk's own cffi binding (the
-function ``Space.segment_query_first`` wraps, with the same arguments): the wrapper's Python
-(a fresh query struct, a shape lookup, two ``Vec2d`` and a result tuple per ray) cost two
-thirds of every cast, and the env casts 48 rays per step. A test checks both find the same
-echoes (pymunk is pinned to the 7.x series whose binding this uses). The rays' end points are
-computed by a compiled loop into an array that cffi also views as the ``cpVect`` structs the
-query takes, and the hits are turned into ranges and readings by compiled loops: per ray only
-the chipmunk call and the reading of its result are Python.
+The casts call chipmunk's ``cpSpaceSegmentQueryFirst`` (the function
+``Space.segment_query_first`` wraps, with the same arguments) without pymunk's wrapper, whose
+Python (a fresh query struct, a shape lookup, two ``Vec2d`` and a result tuple per ray) cost two
+thirds of every cast; the env casts 48 rays per step. Where the platform's calling convention
+allows (:mod:`._chipmunk`: Linux and macOS on x86-64 and ARM64), one compiled call casts a
+whole scan; elsewhere a Python loop calls the function through pymunk's cffi binding. Tests
+check both against the public query, bit for bit (pymunk is pinned to the 7.x series whose
+binding this uses). The rays' end points are computed by a compiled loop into an array that
+cffi also views as the ``cpVect`` structs the query takes, and the hits are turned into ranges
+and readings by compiled loops.
 """
 
 from __future__ import annotations
@@ -37,10 +39,13 @@ from numba import njit
 from pymunk._chipmunk_cffi import ffi as _ffi
 from pymunk._chipmunk_cffi import lib as _lib
 
+from envs.two_robot_explore import _chipmunk
 from envs.two_robot_explore.config import SonarConfig
 
 _QUERY_FIRST = _lib.cpSpaceSegmentQueryFirst
 _NULL = _ffi.NULL
+_COMPILED = _chipmunk.AVAILABLE
+"""Whether scans are cast by :func:`._chipmunk.cast_rays` (else the cffi loop)."""
 
 
 @njit(cache=True, nogil=True)
@@ -117,7 +122,8 @@ class Sonar:
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "true_last",
                  "last_pose", "fresh",
                  "_local_dir", "_length", "_cos_dropout", "_since", "_n_rays", "_rays",
-                 "_info", "_filter", "_filter_of", "_ends", "_dirs", "_end_structs")
+                 "_info", "_filter", "_filter_words", "_filter_of", "_ends", "_dirs",
+                 "_end_structs", "_hit", "_alpha", "_nx", "_ny")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -149,6 +155,12 @@ class Sonar:
         self._end_structs = [ends[i] for i in range(self._n_rays)]
         self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
         self._filter = None
+        self._filter_words = np.zeros(2, dtype=np.uint64)  # the same, for the compiled casts
+        # the compiled casts' query result (a cpSegmentQueryInfo's 6 words) and per-ray hits
+        self._hit = np.zeros(6)
+        self._alpha = np.zeros(self._n_rays)
+        self._nx = np.zeros(self._n_rays)
+        self._ny = np.zeros(self._n_rays)
 
     def reset(self) -> None:
         """Forget the last scan (the next :meth:`measure` always scans)."""
@@ -171,20 +183,27 @@ class Sonar:
         """Noise-free ray casts: ``(S*K,)`` hit distances from the transducers (``inf`` =
         nothing within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
         alpha, nx, ny = self._cast(space, pose, shape_filter)
-        return _echoes(np.array(alpha), np.array(nx), np.array(ny), self._dirs, self._length,
-                       self.mount_radius)
+        return _echoes(alpha, nx, ny, self._dirs, self._length, self.mount_radius)
 
-    def _cast(self, space: pymunk.Space, pose: np.ndarray,
-              shape_filter: pymunk.ShapeFilter) -> tuple[list[float], list[float], list[float]]:
+    def _cast(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per ray the hit fraction of its length (``inf``: no hit) and the surface normal
-        ``(nx, ny)`` (0 without a hit); leaves the rays' world directions in ``_dirs``."""
+        ``(nx, ny)`` (0 without a hit); leaves the rays' world directions in ``_dirs``. The
+        arrays are overwritten by the next cast."""
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         _ray_ends(x, y, math.cos(th), math.sin(th), self._length, self._local_dir, self._ends,
                   self._dirs)
-        # the filter and the start as C structs once per scan, not converted on every ray
+        # the filter as a C struct once, not converted on every ray
         if shape_filter is not self._filter_of:
             self._filter_of = shape_filter
             self._filter = _ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
+            self._filter_words = _chipmunk.filter_words(shape_filter)
+        if _COMPILED:
+            w = self._filter_words
+            _chipmunk.cast_rays(_chipmunk.QUERY_FIRST, _chipmunk.address(space._space), x, y,
+                                self._ends, w[0], w[1], self._hit, self._alpha, self._nx,
+                                self._ny)
+            return self._alpha, self._nx, self._ny
         start = _ffi.new("cpVect *", (x, y))[0]
         cspace, info, query, flt = space._space, self._info, _QUERY_FIRST, self._filter
         inf = math.inf
@@ -201,7 +220,7 @@ class Sonar:
                 n = info.normal
                 nx.append(n.x)
                 ny.append(n.y)
-        return alpha, nx, ny
+        return np.array(alpha), np.array(nx), np.array(ny)
 
     def measure(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter,
                 rng: np.random.Generator, travelled: float = 0.0) -> np.ndarray:
@@ -226,9 +245,9 @@ class Sonar:
         noise = rng.standard_normal(len(self.angles))
         self.last = np.empty(len(self.angles))
         self.true_last = np.empty(len(self.angles))
-        _readings(np.array(alpha), np.array(nx), np.array(ny), self._dirs, self._length,
-                  self.mount_radius, u, noise, self._rays, self._cos_dropout, cfg.dropout_prob,
-                  cfg.min_range, cfg.max_range, cfg.noise_std, self.last, self.true_last)
+        _readings(alpha, nx, ny, self._dirs, self._length, self.mount_radius, u, noise,
+                  self._rays, self._cos_dropout, cfg.dropout_prob, cfg.min_range, cfg.max_range,
+                  cfg.noise_std, self.last, self.true_last)
         self.last_pose = np.array(pose, dtype=np.float64)
         self.fresh = True
         return self.last

@@ -1,11 +1,15 @@
 """The pymunk sonar against a slow numpy caster, and the sensor model's rules."""
 
 import math
+import platform
+import sys
 
 import numpy as np
 import pytest
 from raycast_reference import cast_rays
 
+from envs.two_robot_explore import _chipmunk
+from envs.two_robot_explore import sonar as sonar_module
 from envs.two_robot_explore.config import RobotConfig, SonarConfig, WorldConfig
 from envs.two_robot_explore.robot import Robot, build_space
 from envs.two_robot_explore.sonar import Sonar
@@ -68,9 +72,23 @@ def _cast_public(sonar, space, pose, shape_filter):
     return np.array(dist), np.array(cos_inc)
 
 
-def test_direct_chipmunk_casts_equal_pymunks_public_query(scene):
-    """The casts call chipmunk through pymunk's binding; ``Space.segment_query_first`` must
-    give the same echoes, from inside walls, past the teammate, anywhere."""
+def test_compiled_casts_are_used_where_the_calling_convention_allows():
+    """Linux and macOS on x86-64 / ARM64 (CI's platform among them) cast scans compiled."""
+    if sys.platform.startswith(("linux", "darwin")) and platform.machine().lower() in (
+            "x86_64", "amd64", "aarch64", "arm64"):
+        assert _chipmunk.AVAILABLE and sonar_module._COMPILED
+    else:
+        assert not _chipmunk.AVAILABLE
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "cffi-loop"])
+def test_direct_chipmunk_casts_equal_pymunks_public_query(scene, monkeypatch, compiled):
+    """The casts call chipmunk directly (a compiled loop, or a Python loop through pymunk's
+    binding); ``Space.segment_query_first`` must give the same echoes, from inside walls, past
+    the teammate, anywhere."""
+    if compiled and not _chipmunk.AVAILABLE:
+        pytest.skip("no compiled casts on this platform")
+    monkeypatch.setattr(sonar_module, "_COMPILED", compiled)
     world, robots, space = scene
     sonar = Sonar(SonarConfig(rays=3), mount_radius=0.25)
     rng = np.random.default_rng(11)
@@ -87,6 +105,24 @@ def test_direct_chipmunk_casts_equal_pymunks_public_query(scene):
             np.testing.assert_allclose(cos_inc, ref_cos, rtol=0, atol=1e-12)
             hits += int(np.isfinite(dist).sum())
     assert hits > 1000
+
+
+@pytest.mark.skipif(not _chipmunk.AVAILABLE, reason="no compiled casts on this platform")
+def test_compiled_casts_are_the_cffi_loops_bit_for_bit(scene, monkeypatch):
+    world, robots, space = scene
+    sonar = Sonar(SonarConfig(rays=4), mount_radius=0.25)
+    rng = np.random.default_rng(5)
+    lo = np.array(world.origin)
+    hi = lo + np.array(world.shape[::-1]) * world.resolution
+    for _ in range(200):
+        pose = np.array([*rng.uniform(lo, hi), rng.uniform(-math.pi, math.pi)])
+        for robot in robots:
+            monkeypatch.setattr(sonar_module, "_COMPILED", True)
+            got = [a.copy() for a in sonar._cast(space, pose, robot.sensor_filter)]
+            monkeypatch.setattr(sonar_module, "_COMPILED", False)
+            want = sonar._cast(space, pose, robot.sensor_filter)
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_array_equal(g, w)
 
 
 def test_own_disc_is_not_seen_but_teammate_is(scene):
