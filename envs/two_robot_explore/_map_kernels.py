@@ -159,13 +159,20 @@ def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
 
 
 @njit(cache=True, nogil=True)
-def nearest_nodes(rel, static, lim, nodes, mask):
-    """The ``graph_nodes`` rows: the ``len(nodes)`` nodes nearest to the robot (by squared
-    distance ``x² + y²`` of their offsets ``rel``; stable order: ties by index) get their
+def nearest_nodes(xy, x, y, c, s, static, lim, nodes, mask):
+    """The ``graph_nodes`` rows: of the nodes ``xy``, seen from ``(x, y)`` at heading ``(cos,
+    sin) = (c, s)`` — offsets ``(c dx + s dy, -s dx + c dy)`` — the ``len(nodes)`` nearest (by
+    squared distance ``x² + y²`` of their offsets; stable order: ties by index) get their
     offsets clipped to ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``;
     returns their indices."""
-    dist2 = np.empty(rel.shape[0])
-    for q in range(rel.shape[0]):
+    n = xy.shape[0]
+    rel = np.empty((n, 2))
+    dist2 = np.empty(n)
+    for q in range(n):
+        dx = xy[q, 0] - x
+        dy = xy[q, 1] - y
+        rel[q, 0] = c * dx + s * dy
+        rel[q, 1] = c * dy - s * dx
         dist2[q] = rel[q, 0] * rel[q, 0] + rel[q, 1] * rel[q, 1]
     order = np.argsort(dist2, kind="mergesort")[: nodes.shape[0]]
     for j in range(order.shape[0]):

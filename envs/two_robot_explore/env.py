@@ -680,8 +680,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         if n == 0:
             return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
         static, last_order, last_adj = self._graph_cache[i]
-        rel = (topo.xy - odo[:2]) @ np.array([[c, -s], [s, c]])
-        order = nearest_nodes(rel, static, 2 * self.frame_radius, nodes, mask)
+        order = nearest_nodes(topo.xy, float(odo[0]), float(odo[1]), c, s, static,
+                              2 * self.frame_radius, nodes, mask)
         if last_order is not None and order.tobytes() == last_order.tobytes():
             return nodes, mask, last_adj.copy()
         adj = np.zeros((n_max, n_max), dtype=np.float32)

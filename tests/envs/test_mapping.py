@@ -261,18 +261,25 @@ def test_env_extraction_kernels_match_the_libraries(monkeypatch):
     assert ran["corners"] == ran["topomap"] == len(compared)  # the checks above did run
 
 
-@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(1, 40))
-def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max):
-    """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip."""
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(1, 40),
+       st.sampled_from([0.0, math.pi / 2, 1.0, -2.5]))
+def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max, theta):
+    """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip,
+    any heading."""
     from envs.two_robot_explore._map_kernels import nearest_nodes
 
     rng = np.random.default_rng(seed)
-    rel = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
+    xy = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
+    x, y = np.round(rng.uniform(-3, 3, 2), 1)
+    c, s = math.cos(theta), math.sin(theta)
+    d = xy - (x, y)
+    rel = np.stack([c * d[:, 0] + s * d[:, 1], c * d[:, 1] - s * d[:, 0]], axis=1)
+    np.testing.assert_allclose(rel, d @ np.array([[c, -s], [s, c]]), atol=1e-12)
     static = rng.random((n, 4)).astype(np.float32)
     lim = 20.0
     nodes = np.zeros((n_max, 6), np.float32)
     mask = np.zeros(n_max, np.float32)
-    order = nearest_nodes(rel, static, lim, nodes, mask)
+    order = nearest_nodes(xy, x, y, c, s, static, lim, nodes, mask)
     want = np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")[:n_max]
     k = len(want)
     ref_nodes = np.zeros_like(nodes)
