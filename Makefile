@@ -55,3 +55,4 @@ lint: $(VENV)/.deps-test
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .ruff_cache .hypothesis
+	find . -name '*.nbi' -o -name '*.nbc' | xargs rm -f  # numba's kernel caches
