@@ -11,13 +11,15 @@ x86-64 and ARM64) a ``cpVect`` (two doubles) travels in two floating-point regis
 ``cpShapeFilter`` (16 bytes: a ``uintptr_t`` group, two 32-bit masks) in two integer
 registers — exactly as two doubles and two 64-bit integers would — so the call is declared
 that way (:func:`_query_first`). :data:`AVAILABLE` is ``True`` only on those platforms and when
-the struct layouts are the ones assumed (checked at import); elsewhere (e.g. Windows, which
-passes 16-byte structs by reference) the sonar keeps the cffi loop. Tests check both against
-pymunk's public query, bit for bit.
+the struct layouts are the ones assumed (checked at import), and :func:`usable` adds a check on
+first use that the compiled casts find what pymunk's binding finds in a small scene; elsewhere
+(e.g. Windows, which passes 16-byte structs by reference) the sonar keeps the cffi loop. Tests
+check both against pymunk's public query, bit for bit.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import platform
 import sys
@@ -89,3 +91,33 @@ def cast_rays(fn, space, x, y, ends, group, masks, info, alpha, nx, ny):
             alpha[i] = info[5]
             nx[i] = info[3]
             ny[i] = info[4]
+
+
+@functools.cache
+def usable() -> bool:
+    """:data:`AVAILABLE`, and on first call :func:`cast_rays` checked against chipmunk called
+    through pymunk's binding on rays at a wall and a disc, hit and missed (once per process)."""
+    if not AVAILABLE:
+        return False
+    import pymunk
+
+    space = pymunk.Space()
+    space.add(pymunk.Segment(space.static_body, (1.0, -1.0), (1.2, 1.0), 0.0))
+    disc = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+    disc.position = (-1.0, 0.5)
+    space.add(disc, pymunk.Circle(disc, 0.3))
+    angles = np.linspace(-math.pi, math.pi, 13)
+    ends = np.stack([3.0 * np.cos(angles), 0.1 + 3.0 * np.sin(angles)], axis=1)
+    shape_filter = pymunk.ShapeFilter()
+    info = ffi.new("cpSegmentQueryInfo *")
+    flt = ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
+    want = []
+    for e in ends:
+        hit = lib.cpSpaceSegmentQueryFirst(space._space, (0.0, 0.1), tuple(e), 0.0, flt, info)
+        want.append((math.inf, 0.0, 0.0) if hit == ffi.NULL
+                    else (info.alpha, info.normal.x, info.normal.y))
+    got = np.empty((3, len(ends)))
+    words = filter_words(shape_filter)
+    cast_rays(QUERY_FIRST, address(space._space), 0.0, 0.1, ends, words[0], words[1],
+              np.zeros(6), got[0], got[1], got[2])
+    return bool(np.array_equal(got.T, np.array(want)) and np.isfinite(got[0]).sum() >= 2)

@@ -45,7 +45,8 @@ from envs.two_robot_explore.config import SonarConfig
 _QUERY_FIRST = _lib.cpSpaceSegmentQueryFirst
 _NULL = _ffi.NULL
 _COMPILED = _chipmunk.AVAILABLE
-"""Whether scans are cast by :func:`._chipmunk.cast_rays` (else the cffi loop)."""
+"""Whether scans are cast by :func:`._chipmunk.cast_rays` where :func:`._chipmunk.usable` (else
+the cffi loop)."""
 
 
 @njit(cache=True, nogil=True)
@@ -198,7 +199,7 @@ class Sonar:
             self._filter_of = shape_filter
             self._filter = _ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
             self._filter_words = _chipmunk.filter_words(shape_filter)
-        if _COMPILED:
+        if _COMPILED and _chipmunk.usable():
             w = self._filter_words
             _chipmunk.cast_rays(_chipmunk.QUERY_FIRST, _chipmunk.address(space._space), x, y,
                                 self._ends, w[0], w[1], self._hit, self._alpha, self._nx,
