@@ -266,14 +266,14 @@ def main() -> None:
     casts = par.sonars[0].ray_angles.size * 2
     print("| what | steps/s | to the pymunk-API floor (the target's) | to the floor casting "
           "as the env | CPU steps/s | CPU ratio (pymunk-API) |\n|---|---|---|---|---|---|")
-    rows = [("raw floor: pymunk substeps + {casts} casts through `segment_query_first`", public),
+    rows = [(f"raw floor: pymunk substeps + {casts} casts through `segment_query_first`", public),
             (f"raw floor: pymunk substeps + {casts} casts as the env (`Sonar._cast`)", floor),
             ("env, defaults", env_sps)]
     for label, kw in (("env, no topo/merge", {"mapping": {"topo_every": 0, "merge_every": 0}}),
                       ("env, no merge", {"mapping": {"merge_every": 0}})):
         rows.append((label, run_env(args.steps, **kw)[0]))
     for label, sps in rows:
-        print(f"| {label.format(casts=casts)} | {sps.wall:,.0f} | {sps.wall / public.wall:.2f} | "
+        print(f"| {label} | {sps.wall:,.0f} | {sps.wall / public.wall:.2f} | "
               f"{sps.wall / floor.wall:.2f} | {sps.cpu:,.0f} | {sps.cpu / public.cpu:.2f} |")
 
     seeds_table(args.steps)

@@ -107,6 +107,19 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
     return dwin, out
 
 
+def _integrate(log_odds: np.ndarray, states: np.ndarray, ever: np.ndarray, g: Geometry,
+               model: Any, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
+               mount_radius: float, max_range: float, half_cone: float, union: np.ndarray,
+               reachable: np.ndarray) -> np.ndarray:
+    """:func:`_map_kernels.integrate_scan` of one scan with the sensor ``model``'s numbers (a
+    ``topo.grid.SensorModel``) on a grid of geometry ``g``; returns its counts."""
+    return integrate_scan(log_odds, states, ever, g.origin[0], g.origin[1], g.resolution,
+                          float(pose[0]), float(pose[1]), float(pose[2]), ranges, angles,
+                          mount_radius, max_range, half_cone,
+                          (model.hit_width or g.resolution) / 2.0, model.l_free,
+                          model.l_occupied, model.clamp, model.threshold, union, reachable)
+
+
 class RobotMap:
     """An occupancy grid with "ever known" bookkeeping and a topological map: one robot's maps
     in its own start frame.
@@ -150,13 +163,9 @@ class RobotMap:
         # one compiled call: the grid's update (OccupancyGrid.update_valid: the env's scans are
         # valid by construction, the grid's checks would double the cost) and the "ever known"
         # bookkeeping
-        grid, g = self.grid, self.geometry
-        m = grid.model
-        counts = integrate_scan(grid.log_odds, self._cells, self.ever, g.origin[0], g.origin[1],
-                                g.resolution, float(pose[0]), float(pose[1]), float(pose[2]),
-                                ranges, angles, mount_radius, max_range, half_cone,
-                                (m.hit_width or grid.resolution) / 2.0, m.l_free, m.l_occupied,
-                                m.clamp, m.threshold, NO_MASK, NO_MASK)
+        counts = _integrate(self.grid.log_odds, self._cells, self.ever, self.geometry,
+                            self.grid.model, pose, ranges, angles, mount_radius, max_range,
+                            half_cone, NO_MASK, NO_MASK)
         n = int(counts[0])
         if n:
             self.n_ever += n
@@ -324,12 +333,9 @@ class OracleCoverage:
         """Sweep robot ``index``'s scan from its true world ``pose`` (ranges from the
         transducers, as :meth:`RobotMap.integrate`); returns how many world cells the team
         swept for the first time."""
-        g, m = self.geometry, self._model
-        counts = integrate_scan(NO_LOG_ODDS, NO_STATES, self.swept[index], g.origin[0],
-                                g.origin[1], g.resolution, float(pose[0]), float(pose[1]),
-                                float(pose[2]), true_ranges, angles, mount_radius, max_range,
-                                half_cone, (m.hit_width or g.resolution) / 2.0, m.l_free,
-                                m.l_occupied, m.clamp, m.threshold, self.union, self.reachable)
+        counts = _integrate(NO_LOG_ODDS, NO_STATES, self.swept[index], self.geometry,
+                            self._model, pose, true_ranges, angles, mount_radius, max_range,
+                            half_cone, self.union, self.reachable)
         fresh, both, new, covered = counts[[0, 5, 6, 7]].tolist()
         self.n_swept[index] += fresh
         self.both += both
