@@ -22,13 +22,25 @@ backend run with one BLAS/OpenMP thread (one episode per CPU). Starting and stop
 Ray cluster takes about 6 s on a 2-core machine, so on jobs of a few pairs the process backend
 is faster; on jobs of a minute or more the two are alike (``benchmarks/explorers.py --only
 dataset`` compares them).
+
+Safety: every setting is checked before anything is written (the env is built once and an
+``sb3:`` model loaded once, so a bad ``--world-size``, map file or model is refused up front).
+One writer at a time: a run holds the lock file ``OUT/.lock`` (the kernel's ``flock``, released
+when the run exits, even killed) and a second run on the same ``--out`` stops at once, naming
+the holder's pid. A new dataset whose run fails before its first pair is written is removed
+again (``dataset.json`` and the folders the run created), so the corrected command starts
+afresh; a run that wrote pairs leaves them, and the same command resumes. Bad settings, an
+``--out`` that is a file or a foreign folder, a dataset made with other settings and a held
+lock are one-line errors naming the flag (exit status 2).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -43,6 +55,7 @@ from agents.base import run_episode
 from fusion.pairs import (
     FORMAT,
     FORMAT_VERSION,
+    LOCK_FILE,
     DatasetError,
     GridSnapshot,
     MapPair,
@@ -55,10 +68,39 @@ from fusion.pairs import (
 )
 from fusion.rigid import Rigid2D
 from topo._checks import check_int
+from topo._io import TEMP_PREFIX, LockHeld, exclusive_lock
 
 BACKENDS = ("process", "ray")
 _WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 """Environment of worker processes (either backend): one BLAS/OpenMP thread per episode."""
+
+
+class SettingsError(ValueError):
+    """A bad :class:`GenerateArgs` setting, or an ``out`` folder this run cannot write.
+
+    Attributes:
+        field: the :class:`GenerateArgs` field at fault (its CLI flag is :attr:`flag`).
+    """
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+    @property
+    def flag(self) -> str:
+        """The command-line flag of :attr:`field` (``world_size`` → ``--world-size``)."""
+        return "--" + self.field.replace("_", "-")
+
+
+@contextlib.contextmanager
+def _setting(field: str) -> Iterator[None]:
+    """Re-raise a ``ValueError`` of the block as a :class:`SettingsError` of ``field``."""
+    try:
+        yield
+    except SettingsError:
+        raise
+    except ValueError as exc:
+        raise SettingsError(field, str(exc)) from exc
 
 
 @dataclass(frozen=True)
@@ -93,28 +135,38 @@ class GenerateArgs:
     """Show a progress bar."""
 
     def __post_init__(self) -> None:
-        check_int(self.pairs, "pairs", low=1)
-        check_int(self.snapshots, "snapshots", low=1)
-        check_int(self.workers, "workers", low=1)
-        check_int(self.seed, "seed", low=0)
-        check_int(self.max_cycles, "max_cycles", low=10)
+        """Check every setting; a bad one is a :class:`SettingsError` (a ``ValueError``)
+        naming it."""
+        from envs.two_robot_explore.config import WorldConfig
+
+        for name, low in (("pairs", 1), ("snapshots", 1), ("workers", 1), ("seed", 0),
+                          ("max_cycles", 10)):
+            with _setting(name):
+                check_int(getattr(self, name), name, low=low)
         if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {list(BACKENDS)}, got {self.backend!r}")
+            raise SettingsError("backend", f"backend must be one of {list(BACKENDS)}, got "
+                                           f"{self.backend!r}")
         if self.address is not None and self.backend != "ray":
-            raise ValueError(f"address is only used with backend='ray', got backend="
-                             f"{self.backend!r}")
-        if self.world != "procedural" and not Path(self.world).is_file():
-            raise ValueError(f"world must be 'procedural' or an existing map file, got "
-                             f"{self.world!r}")
+            raise SettingsError("address", f"address is only used with backend='ray', got "
+                                           f"backend={self.backend!r}")
+        if self.world != "procedural":
+            if not Path(self.world).is_file():
+                raise SettingsError("world", f"world must be 'procedural' or an existing map "
+                                             f"file, got {self.world!r}")
+            with _setting("world"):
+                WorldConfig(source=self.world)
+        else:
+            with _setting("world_size"):
+                WorldConfig(size=self.world_size)
         if not self.explorer.startswith("sb3:"):
             from agents.scripted import EXPLORERS
 
             if self.explorer not in EXPLORERS:
-                raise ValueError(f"explorer must be one of {sorted(EXPLORERS)} or 'sb3:PATH', "
-                                 f"got {self.explorer!r}")
+                raise SettingsError("explorer", f"explorer must be one of {sorted(EXPLORERS)} "
+                                                f"or 'sb3:PATH', got {self.explorer!r}")
         elif not Path(self.explorer[4:]).is_file():
-            raise ValueError(f"explorer {self.explorer!r}: no saved model at "
-                             f"{self.explorer[4:]!r}")
+            raise SettingsError("explorer", f"explorer {self.explorer!r}: no saved model at "
+                                            f"{self.explorer[4:]!r}")
 
     @property
     def n_episodes(self) -> int:
@@ -135,6 +187,14 @@ def episode_seed(seed: int, episode: int) -> int:
 def coverage_levels(snapshots: int) -> np.ndarray:
     """True-coverage thresholds of the snapshots, evenly spread over 15–85 %."""
     return 0.15 + 0.70 * (np.arange(snapshots) + 0.5) / snapshots
+
+
+def env_kwargs(settings: dict[str, Any]) -> dict[str, Any]:
+    """The ``parallel_env`` arguments of a run's ``settings``."""
+    world: dict[str, Any] = {"source": settings["world"]}
+    if settings["world"] == "procedural":
+        world["size"] = tuple(settings["world_size"])
+    return {"max_cycles": settings["max_cycles"], "world": world}
 
 
 def _snapshot(env: Any, infos: dict, pair_id: int, episode: int, k: int, seed: int,
@@ -169,10 +229,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     ids = [episode * snapshots + k for k in range(snapshots)]
     ids = [i for i in ids if i < n_pairs]
     seed = episode_seed(settings["seed"], episode)
-    world: dict[str, Any] = {"source": settings["world"]}
-    if settings["world"] == "procedural":
-        world["size"] = tuple(settings["world_size"])
-    env = parallel_env(max_cycles=settings["max_cycles"], world=world)
+    env = parallel_env(**env_kwargs(settings))
     team = make_team(settings["explorer"])
     levels = coverage_levels(snapshots)[: len(ids)]
     deadlines = [math.ceil((k + 1) / snapshots * settings["max_cycles"]) for k in range(len(ids))]
@@ -269,22 +326,122 @@ def _ray_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
     return run
 
 
+def _preflight(args: GenerateArgs) -> None:
+    """Build once what every episode builds — the env (a map file is loaded and checked) and
+    an ``sb3:`` explorer's model — so that a bad setting stops the run before it writes."""
+    from envs.two_robot_explore_v0 import parallel_env
+
+    with _setting("world"):
+        parallel_env(**env_kwargs(args.settings())).close()
+    if args.explorer.startswith("sb3:"):
+        from agents.scripted import make_team
+
+        try:
+            make_team(args.explorer)
+        except Exception as exc:  # whatever SB3/torch raise on a file that is not a model
+            raise SettingsError("explorer", f"explorer {args.explorer!r}: cannot load the "
+                                            f"model ({type(exc).__name__}: {exc})") from exc
+
+
+def _cli_value(value: Any) -> str:
+    """A setting as it is typed on the command line (lists space-separated)."""
+    return " ".join(map(str, value)) if isinstance(value, list) else str(value)
+
+
+def _open_manifest(root: Path, settings: dict[str, Any]) -> bool:
+    """Check ``root/dataset.json`` against ``settings``, or write it in a folder that holds
+    nothing else; returns whether it was written now. Called under the dataset's lock."""
+    path = root / "dataset.json"
+    if path.exists():
+        stored = read_manifest(root).get("settings") or {}
+        if stored != settings:
+            diff = "; ".join(
+                f"--{k.replace('_', '-')} {_cli_value(stored.get(k, '(unset)'))} (this run: "
+                f"{_cli_value(settings.get(k, '(unset)'))})"
+                for k in sorted(set(stored) | set(settings)) if stored.get(k) != settings.get(k))
+            raise SettingsError("out", f"{root} holds a dataset made with other settings: "
+                                       f"{diff}; run with its settings to resume it, or give "
+                                       f"another --out for a new dataset")
+        return False
+    others = sorted(p.name for p in root.iterdir()
+                    if p.name != LOCK_FILE and not p.name.startswith(TEMP_PREFIX))
+    if others:
+        raise SettingsError("out", f"{root} is a folder that is not a map-pair dataset (no "
+                                   f"dataset.json; it holds {others[:3]}"
+                                   f"{'...' if len(others) > 3 else ''}): give a new or empty "
+                                   f"folder")
+    atomic_write_json(path, {"format": FORMAT, "version": FORMAT_VERSION, "settings": settings})
+    return True
+
+
+def _forget_empty_dataset(root: Path) -> None:
+    """After a failed run that started dataset ``root``: if no pair was written, remove
+    ``dataset.json`` and ``pairs/`` so that the folder is as it was."""
+    try:
+        if pair_files(root, clean_temp=True):
+            return  # pairs were written: the same command resumes
+    except DatasetError:
+        return
+    (root / "dataset.json").unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        (root / "pairs").rmdir()
+
+
+@contextlib.contextmanager
+def _dataset_lock(root: Path) -> Iterator[None]:
+    try:
+        with exclusive_lock(root / LOCK_FILE):
+            yield
+    except LockHeld as exc:
+        h = exc.holder
+        who = (f"pid {h.get('pid')} on {h.get('host')}, since {h.get('since')}" if h
+               else "a process starting just now")
+        raise SettingsError("out", f"{root} is being written by another run ({who}): wait for "
+                                   f"it to end or stop it; its lock {exc.path} goes with that "
+                                   f"process (delete the file only if no such process runs)"
+                            ) from exc
+
+
 def generate(args: GenerateArgs) -> dict[str, Any]:
     """Generate (or resume) the dataset described by ``args``; returns a summary with the
-    pairs written now, the pairs already there, the time and pairs/s."""
+    pairs written now, the pairs already there, the time and pairs/s.
+
+    Raises:
+        SettingsError: a setting the env or the explorer refuses; ``out`` is a file, a folder
+            that is not a dataset, a dataset made with other settings, or being written by
+            another run (its lock is held).
+        fusion.pairs.DatasetError: a corrupt ``dataset.json`` or a foreign file in ``pairs/``.
+    """
     root = Path(args.out)
     settings = args.settings()
-    manifest_path = root / "dataset.json"
-    if manifest_path.exists():
-        manifest = read_manifest(root)
-        if manifest.get("settings") != settings:
-            raise DatasetError(
-                f"{manifest_path}: was generated with settings {manifest.get('settings')}, "
-                f"not {settings}; use another --out to start a new dataset")
-    else:
-        root.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(manifest_path, {"format": FORMAT, "version": FORMAT_VERSION,
-                                          "settings": settings})
+    if root.exists() and not root.is_dir():
+        raise SettingsError("out", f"{root} is a file, not a folder: give a new folder, or a "
+                                   f"dataset folder to resume")
+    _preflight(args)
+    made = [p for p in (root, *root.parents) if not p.exists()]  # deepest first
+    with _setting("out"):
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"cannot create {root}: {exc.strerror}") from exc
+    try:
+        with _dataset_lock(root):
+            fresh = _open_manifest(root, settings)
+            try:
+                return _run(args, root, settings)
+            except BaseException:
+                if fresh:
+                    _forget_empty_dataset(root)
+                raise
+    finally:
+        for folder in made:  # the folders this run created, if it left them empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+
+
+def _run(args: GenerateArgs, root: Path, settings: dict[str, Any]) -> dict[str, Any]:
     existing = pair_files(root, clean_temp=True)
     todo = [e for e in range(args.n_episodes)
             if any(i not in existing and i < args.pairs
@@ -333,14 +490,44 @@ class InfoArgs:
     """Dataset folder."""
 
 
+@dataclass(frozen=True)
+class _GenerateFlags(GenerateArgs):
+    __doc__ = GenerateArgs.__doc__
+
+    def __post_init__(self) -> None:
+        """Nothing: :func:`main` builds the checked :class:`GenerateArgs` itself, so that a bad
+        setting is its one-line error rather than tyro's box."""
+
+
+PROG = "python -m agents.dataset"
+
+
+def _fail(command: str, message: str) -> None:
+    print(f"{PROG} {command}: error: {' '.join(message.split())}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def main(argv: list[str] | None = None) -> None:
-    """CLI entry point: ``generate`` or ``info`` (tyro subcommands)."""
+    """CLI entry point: ``generate`` or ``info`` (tyro subcommands).
+
+    A bad setting, an unusable ``--out`` (a file, a foreign folder, a dataset made with other
+    settings, another run's lock) or an unreadable dataset prints one line naming the flag on
+    stderr and exits with status 2 (``SystemExit(2)``)."""
     cmd = tyro.extras.subcommand_cli_from_dict(
-        {"generate": GenerateArgs, "info": InfoArgs}, args=argv)
+        {"generate": _GenerateFlags, "info": InfoArgs}, args=argv, prog=PROG)
     if isinstance(cmd, InfoArgs):
-        print(info(cmd.root))
+        try:
+            print(info(cmd.root))
+        except DatasetError as exc:
+            _fail("info", f"ROOT: {exc}")
         return
-    summary = generate(cmd)
+    try:
+        summary = generate(GenerateArgs(**{f.name: getattr(cmd, f.name)
+                                           for f in dataclasses.fields(GenerateArgs)}))
+    except SettingsError as exc:
+        _fail("generate", f"{exc.flag}: {exc}")
+    except DatasetError as exc:
+        _fail("generate", f"--out: {exc}")
     print(f"wrote {summary['written']} pairs ({summary['already_there']} already there) in "
           f"{summary['seconds']:.1f} s: {summary['pairs_per_s'] * 60:.1f} pairs/min")
 

@@ -30,7 +30,7 @@ import json
 import math
 import statistics
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -42,6 +42,7 @@ from fusion.icp import rigid_fit
 from fusion.merge import METHODS, MergeConfig, merge_maps
 from fusion.pairs import atomic_write_json
 from fusion.rigid import Rigid2D
+from fusion.search import DEFAULT_MAX_EVALUATIONS, too_many_evaluations
 from fusion.synthetic import SyntheticConfig, generate_pairs
 from topo.graph import TopoMap
 
@@ -187,10 +188,15 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
 
     With ``for_noise``, each pair with a known noise level is merged with
     :meth:`MergeConfig.for_noise` of that level (``config``, a dict, overriding its fields).
+
+    Raises:
+        ValueError: unknown methods; or ``"exhaustive"`` on pairs too large for the paper's
+            search (:func:`check_exhaustive`), before anything runs.
     """
     methods = parse_methods(methods)
-    base = config_from(MergeConfig, config, "config")
-    overrides = config if isinstance(config, dict) else {}
+    config_of = _config_of(config, for_noise)
+    if "exhaustive" in methods:
+        check_exhaustive(pairs, config, for_noise)
     from tqdm import tqdm
 
     records = []
@@ -201,9 +207,7 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
         if pair.correspondences is not None:
             records.append(_record(pair, ORACLE, oracle, oracle is not None, 0.0, None,
                                    None if oracle is not None else "fewer than 2 true pairs"))
-        cfg = base
-        if for_noise and pair.noise is not None:
-            cfg = MergeConfig.for_noise(pair.noise, **overrides)
+        cfg = config_of(pair)
         for method in methods:
             if method in GRID_METHODS:
                 r = _grid_method(pair, method)
@@ -214,6 +218,54 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
             bar.update()
     bar.close()
     return records
+
+
+def _search_points(m: TopoMap) -> int:
+    """How many points ``merge_maps(method="exhaustive")`` searches over for map ``m``: its
+    path endpoints, or all its nodes when it has no paths."""
+    return len(m.endpoints()) or m.n_nodes
+
+
+def _config_of(config: MergeConfig | dict | None,
+               for_noise: bool) -> Callable[[EvalPair], MergeConfig]:
+    """The merge config of each pair, as :func:`evaluate` documents it."""
+    base = config_from(MergeConfig, config, "config")
+    overrides = config if isinstance(config, dict) else {}
+
+    def config_of(pair: EvalPair) -> MergeConfig:
+        if for_noise and pair.noise is not None:
+            return MergeConfig.for_noise(pair.noise, **overrides)
+        return base
+    return config_of
+
+
+def check_exhaustive(pairs: Sequence[EvalPair], config: MergeConfig | dict | None = None,
+                     for_noise: bool = False) -> None:
+    """Refuse, before any merge runs, pairs on which ``"exhaustive"`` would refuse (more than
+    :data:`fusion.search.DEFAULT_MAX_EVALUATIONS` placements at the pair's
+    ``exhaustive_step_deg``; ``config`` and ``for_noise`` as in :func:`evaluate`): otherwise the
+    evaluation would stop there, possibly after minutes of the other methods.
+
+    Raises:
+        ValueError: naming how many pairs are too large, the largest, its count and estimated
+            time, and the ``exhaustive_step_deg`` that fits it.
+    """
+    config_of = _config_of(config, for_noise)
+    too_big = []
+    for pair in pairs:
+        if min(pair.map_a.n_nodes, pair.map_b.n_nodes) < 3:
+            continue  # merge_maps does not search maps that small
+        n_a, n_b = _search_points(pair.map_a), _search_points(pair.map_b)
+        why = too_many_evaluations(n_a, n_b, config_of(pair).exhaustive_step_deg,
+                                   DEFAULT_MAX_EVALUATIONS, step_name="exhaustive_step_deg")
+        if why:
+            too_big.append((n_a * n_b, pair.name, why))
+    if too_big:
+        _, name, why = max(too_big)
+        raise ValueError(
+            f"'exhaustive' (the paper's search) is too slow for {len(too_big)} of "
+            f"{len(pairs)} pairs; the largest, {name}: {why}. Leave 'exhaustive' out of the "
+            f"methods, or coarsen it with the config field exhaustive_step_deg")
 
 
 GRID_METHODS = ("hybrid", "grid")
@@ -486,8 +538,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         parser.error(str(exc))
     overrides = _json_arg(parser, args.config, "--config")
-    records = evaluate(pairs, methods, overrides if args.for_noise else config,
-                       progress=not args.quiet, for_noise=args.for_noise)
+    merge_config = overrides if args.for_noise else config
+    if "exhaustive" in methods:
+        try:
+            check_exhaustive(pairs, merge_config, args.for_noise)
+        except ValueError as exc:
+            parser.error(f"--methods: {exc} (--config '{{\"exhaustive_step_deg\": ...}}')")
+    records = evaluate(pairs, methods, merge_config, progress=not args.quiet,
+                       for_noise=args.for_noise)
     summary = summarise(records)
     print(format_tables(summary))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"

@@ -11,6 +11,7 @@ Layout of a dataset folder (format ``topomerge.map_pairs``, version :data:`FORMA
       dataset.json          what generated it (explorer, world, seed, snapshots, env config) —
                             a resumed run must match it
       index.json            one summary row per pair (rebuilt from the pair files at any time)
+      .lock                 only while a writer runs (:data:`LOCK_FILE`): one writer at a time
       pairs/
         pair_000000.npz     one compressed numpy archive per pair (arrays below)
         pair_000001.npz
@@ -56,6 +57,8 @@ from topo.graph import TopoMap
 FORMAT = "topomerge.map_pairs"
 FORMAT_VERSION = 1
 PAIR_FILE = re.compile(r"^pair_(\d{6,})\.npz$")
+LOCK_FILE = ".lock"
+"""Name of the lock file a writer holds in the dataset folder (``topo._io.exclusive_lock``)."""
 
 
 class DatasetError(ValueError):

@@ -10,6 +10,12 @@ placement with the largest ω. With a 4-vertex A, a 7-vertex B and 2° steps fro
 *inclusive* that is the paper's 4 × 7 × 181 = 5068 fusions; 0° and 360° are the same rotation,
 so only 4 × 7 × 180 = 5040 of them are distinct. The paper rotates map A; topomerge keeps its one
 convention and moves B onto A (``p_A = R p_B + T``), so a paper angle θ corresponds to −θ here.
+
+The search costs about 2 µs per placement, so it grows with the product of the map sizes: 1.4 M
+placements (two 90-endpoint maps) take about 3 s, two 300-endpoint maps 16 M placements, over
+half a minute. Beyond :data:`DEFAULT_MAX_EVALUATIONS` placements (about 10 s) it refuses at once
+with a ``ValueError`` stating the count, the estimated time and the two ways out:
+``max_evaluations=None`` (or a larger limit), or a coarser ``step_deg``.
 """
 
 from __future__ import annotations
@@ -24,11 +30,20 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fusion.rigid import Rigid2D
-from topo._checks import as_points, check_real
+from topo._checks import as_points, check_int, check_real
 from topo.graph import TopoMap
 
 DEFAULT_EPS = 0.3
 """Default coincidence tolerance in metres (the evaluation's translation-success threshold)."""
+
+DEFAULT_MAX_EVALUATIONS = 5_000_000
+"""Placements :func:`exhaustive_search` scores before refusing unless told otherwise (about 10 s
+at :data:`SECONDS_PER_EVALUATION`; the paper's example has 5068, two 160-endpoint maps 4.6 M)."""
+
+SECONDS_PER_EVALUATION = 2e-6
+"""Cost of one placement for the time estimates in :func:`exhaustive_search`'s refusal:
+1.1–2.2 µs from 20 to 300 endpoints per map on one core of a 2-core machine
+(``benchmarks/exhaustive_cost.py``; see ``benchmarks/fusion.md``)."""
 
 
 def endpoint_set(value: Any, name: str) -> np.ndarray:
@@ -103,8 +118,49 @@ def search_angles(step_deg: float) -> np.ndarray:
     return np.arange(n + 1) * step
 
 
+def exhaustive_evaluations(n_a: int, n_b: int, step_deg: float = 2.0) -> int:
+    """Placements :func:`exhaustive_search` scores on maps of ``n_a`` and ``n_b`` endpoints:
+    ``n_a × n_b × len(search_angles(step_deg))`` (the paper's 4 × 7 × 181 = 5068)."""
+    return int(n_a) * int(n_b) * len(search_angles(step_deg))
+
+
+def fitting_step(n_a: int, n_b: int, max_evaluations: int) -> float | None:
+    """The finest rotation step, in tenths of a degree, at which maps of ``n_a`` and ``n_b``
+    endpoints stay within ``max_evaluations`` placements; ``None`` if no step does (even the
+    two angles 0° and 360°)."""
+    max_angles = max_evaluations // max(int(n_a) * int(n_b), 1)
+    if max_angles < 2:
+        return None
+    for tenths in range(max(1, 3600 // max_angles), 3601):
+        if exhaustive_evaluations(n_a, n_b, tenths / 10) <= max_evaluations:
+            return tenths / 10
+    return None  # unreachable: 360° gives 2 angles
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"
+
+
+def too_many_evaluations(n_a: int, n_b: int, step_deg: float, max_evaluations: int,
+                         step_name: str = "step_deg") -> str:
+    """Why :func:`exhaustive_search` refuses maps of ``n_a`` and ``n_b`` endpoints at
+    ``step_deg`` — the count, the estimated time and the coarsest step that fits, called
+    ``step_name`` — or ``""`` when it does not refuse them."""
+    count = exhaustive_evaluations(n_a, n_b, step_deg)
+    if count <= max_evaluations:
+        return ""
+    fit = fitting_step(n_a, n_b, max_evaluations)
+    coarser = (f"{step_name} >= {fit:g} fits" if fit is not None
+               else f"no {step_name} fits: the maps are too large")
+    return (f"{n_a} × {n_b} endpoints × {len(search_angles(step_deg))} angles ({step_name}="
+            f"{step_deg:g}) = {count:,} placements, above max_evaluations={max_evaluations:,} "
+            f"(about {_duration(count * SECONDS_PER_EVALUATION)} at "
+            f"{SECONDS_PER_EVALUATION * 1e6:g} µs each; {coarser})")
+
+
 def exhaustive_search(
-    map_a: Any, map_b: Any, step_deg: float = 2.0, eps: float = DEFAULT_EPS
+    map_a: Any, map_b: Any, step_deg: float = 2.0, eps: float = DEFAULT_EPS,
+    max_evaluations: int | None = DEFAULT_MAX_EVALUATIONS,
 ) -> SearchResult:
     """The paper's baseline: the best of every rotation step × every vertex-on-vertex placement.
 
@@ -113,6 +169,16 @@ def exhaustive_search(
         map_b: the moved map, ``N >= 1``.
         step_deg: rotation step in degrees, in ``(0, 360]``; angles run 0..360 inclusive.
         eps: coincidence tolerance of ω, ``> 0``.
+        max_evaluations: the most placements to score (:func:`exhaustive_evaluations`),
+            ``>= 1``, or ``None`` for no limit. The default, :data:`DEFAULT_MAX_EVALUATIONS`, is
+            about 10 s: the search's cost grows with the product of the map sizes, and it is
+            better refused at once than minutes later.
+
+    Raises:
+        ValueError: an empty map, a bad ``step_deg``/``eps``/``max_evaluations``, or more
+            placements than ``max_evaluations`` (the message gives the count, the estimated
+            time and a ``step_deg`` that fits; ``merge_maps`` takes the step from
+            ``MergeConfig.exhaustive_step_deg``).
 
     Every placement of one angle is scored at once: the candidate translations are the
     differences ``a_i − R b_j``, and ω of a translation is how many of those differences lie
@@ -126,6 +192,13 @@ def exhaustive_search(
     eps = check_real(eps, "eps", low=0.0)
     angles = search_angles(step_deg)
     n_a, n_b = len(a), len(b)
+    if max_evaluations is not None:
+        check_int(max_evaluations, "max_evaluations", low=1)
+        why = too_many_evaluations(n_a, n_b, float(step_deg), max_evaluations)
+        if why:
+            raise ValueError(f"exhaustive_search: {why}; pass max_evaluations=None (or a larger "
+                             f"limit) to run it anyway, or a coarser step_deg (merge_maps: "
+                             f"MergeConfig.exhaustive_step_deg)")
 
     best = -1
     tied: list[tuple[float, int, int, np.ndarray]] = []

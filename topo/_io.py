@@ -1,13 +1,18 @@
-"""Atomic file writes shared by every package: write to a temporary file in the target's folder,
-flush and fsync it, then rename it into place — a file exists whole or not at all."""
+"""File writing shared by every package: atomic writes (write to a temporary file in the target's
+folder, flush and fsync it, then rename it into place — a file exists whole or not at all) and an
+exclusive lock file (one writer of a folder at a time)."""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
+import socket
 import tempfile
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 TEMP_PREFIX = ".tmp-"
 """Name prefix of the temporary files (readers of a folder skip them)."""
@@ -36,3 +41,74 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (:func:`atomic_write`)."""
     return atomic_write(path, lambda fh: fh.write(data))
+
+
+class LockHeld(RuntimeError):
+    """:func:`exclusive_lock` found its lock file held by another process.
+
+    Attributes:
+        path: the lock file.
+        holder: what the holder wrote into it (``pid``, ``host``, ``since``), or ``{}`` when it
+            had not written it yet.
+    """
+
+    def __init__(self, path: Path, holder: dict[str, Any]) -> None:
+        who = (f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('since')}"
+               if holder else "a process that is just taking it")
+        super().__init__(f"{path} is held by {who}")
+        self.path = path
+        self.holder = holder
+
+
+def _read_holder(fd: int) -> dict[str, Any]:
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        data = json.loads(os.read(fd, 4096).decode() or "{}")
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+@contextlib.contextmanager
+def exclusive_lock(path: str | Path) -> Iterator[Path]:
+    """Hold an exclusive lock on the file ``path`` for the ``with`` block, or raise
+    :class:`LockHeld` at once (never waits).
+
+    The lock is the kernel's ``flock`` on the file, which the holder writes its pid, host and
+    start time into; the file is removed on exit. A holder that dies (even ``kill -9``) releases
+    the lock with it, so a left-over file is taken over, not a stale lock. POSIX only (``fcntl``);
+    on file systems whose ``flock`` does not work across machines only writers on the same
+    machine are excluded.
+
+    Raises:
+        LockHeld: another open file description holds the lock (another process, or this one).
+    """
+    import fcntl
+
+    path = Path(path)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_holder(fd)
+            os.close(fd)
+            raise LockHeld(path, holder) from None
+        mine = os.fstat(fd)
+        try:
+            now = os.stat(path)
+            same = (now.st_ino, now.st_dev) == (mine.st_ino, mine.st_dev)
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # the previous holder removed this file as we opened it: lock the new one
+    try:
+        os.ftruncate(fd, 0)
+        holder = {"pid": os.getpid(), "host": socket.gethostname(),
+                  "since": time.strftime("%Y-%m-%d %H:%M:%S")}
+        os.write(fd, json.dumps(holder).encode())
+        yield path
+    finally:
+        path.unlink(missing_ok=True)  # while still locked: a waiter that opened it retries
+        os.close(fd)

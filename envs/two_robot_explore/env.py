@@ -10,7 +10,9 @@ maps are aligned (``mapping.merge_method``, default ``"hybrid"``: ``fusion.merge
 topological maps, then an occupancy-grid alignment, see Maps); when a merge is accepted, robot
 1's map joins robot 0's in the **shared map**. The team is rewarded for growing the shared map,
 so a wrong merge costs reward. It is a cooperative PettingZoo ``ParallelEnv``; ``env()`` gives
-the AEC version.
+the AEC version; ``gymnasium.make("topomerge/TwoRobotExplore-v0")`` (after ``import envs``) is
+one Gymnasium agent driving both robots (joint action, both observations, the team reward:
+:mod:`envs.two_robot_explore.centralised`), for Gymnasium's wrappers and vector envs.
 
 ## Action Space
 
@@ -85,7 +87,10 @@ after a merge is accepted (``fusion.grid_merge.recheck``): an accepted alignment
 transform in use (refined, or a different one), and a rejected one whose best alignment is
 clearly different from the transform in use drops it (info ``merge_drops``): the shared map is
 robot 0's cells alone again until the next accepted merge. Other values run one
-``fusion.merge_maps`` method; ``"none"`` never merges.
+``fusion.merge_maps`` method; ``"none"`` never merges. ``"exhaustive"`` (the paper's search)
+suits small maps only: beyond ``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of
+about 166 path endpoints) it raises a ``ValueError`` from ``step()`` instead of running for
+minutes.
 
 ## Rewards
 

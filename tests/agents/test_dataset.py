@@ -1,13 +1,29 @@
 """Map-pair dataset generation: round trip with ground truth, resume, workers, Ray, CLI."""
 
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
 import agents.dataset as dataset
-from agents.dataset import GenerateArgs, coverage_levels, episode_seed, generate, info, main
+from agents.dataset import (
+    GenerateArgs,
+    SettingsError,
+    coverage_levels,
+    episode_seed,
+    generate,
+    info,
+    main,
+)
 from fusion import Rigid2D
-from fusion.pairs import DatasetError, load_pairs, pair_files
+from fusion.pairs import LOCK_FILE, load_pairs, pair_files
+from topo._io import exclusive_lock
 from topo.grid import CellState
 
 KW = {"explorer": "frontier", "snapshots": 2, "max_cycles": 200, "world_size": (10.0, 10.0),
@@ -73,6 +89,7 @@ def test_resume_after_an_interruption_gives_the_same_pairs(reference, tmp_path, 
     with pytest.raises(KeyboardInterrupt):
         generate(GenerateArgs(out=tmp_path, pairs=4, **KW))
     assert sorted(pair_files(tmp_path)) == [0, 1]
+    assert not (tmp_path / LOCK_FILE).exists()  # released: the same command resumes
     monkeypatch.setattr(dataset, "generate_episode", real)
     summary = generate(GenerateArgs(out=tmp_path, pairs=4, **KW))
     assert summary["already_there"] == 2 and summary["written"] == 2
@@ -90,11 +107,13 @@ def test_ray_backend_gives_the_same_pairs(reference, tmp_path):
     pytest.importorskip("ray")
     generate(GenerateArgs(out=tmp_path, pairs=4, workers=2, backend="ray", **KW))
     assert [fields(p) for p in load_pairs(tmp_path)] == [fields(p) for p in reference[1]]
+    assert not (tmp_path / LOCK_FILE).exists()
 
 
 def test_changed_settings_refuse_to_resume(reference, tmp_path):
     generate(GenerateArgs(out=tmp_path, pairs=2, **KW))
-    with pytest.raises(DatasetError, match="was generated with settings"):
+    with pytest.raises(SettingsError, match=r"holds a dataset made with other settings: "
+                                            r"--explorer frontier \(this run: random_walk\)"):
         generate(GenerateArgs(out=tmp_path, pairs=2, **{**KW, "explorer": "random_walk"}))
 
 
@@ -119,8 +138,133 @@ def test_snapshot_levels_spread():
         ({"explorer": "spiral"}, r"explorer must be one of \["),
         ({"explorer": "sb3:/nowhere/model.zip"}, "no saved model at '/nowhere/model.zip'"),
         ({"world": "/nowhere/map.yaml"}, "world must be 'procedural' or an existing map file"),
+        ({"world_size": (1.0, 1.0)}, r"world.size\[0\] must be >= 6.0, got 1.0"),
     ],
 )
 def test_bad_arguments(tmp_path, kwargs, match):
-    with pytest.raises(ValueError, match=match):
+    with pytest.raises(SettingsError, match=match) as exc:
         GenerateArgs(out=tmp_path, **kwargs)
+    assert exc.value.field == next(iter(kwargs))
+
+
+# ------------------------------------------------------------------------ CLI errors
+TINY = ["--pairs", "1", "--snapshots", "1", "--max-cycles", "20", "--explorer", "random_walk",
+        "--no-progress"]
+
+
+def cli_error(capsys, argv: list[str]) -> str:
+    """Run the CLI expecting a user error: exit status 2 and one line on stderr."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    out = capsys.readouterr()
+    assert out.err.count("\n") == 1 and "Traceback" not in out.err and out.out == ""
+    return out.err
+
+
+def test_cli_too_small_world_is_one_line_and_writes_nothing(tmp_path):
+    out = tmp_path / "new" / "pairs"
+    run = subprocess.run([sys.executable, "-m", "agents.dataset", "generate", "--world-size",
+                          "1", "1", "--out", str(out), *TINY], capture_output=True, text=True,
+                         cwd=Path(__file__).parents[2], timeout=120)
+    assert run.returncode == 2
+    assert run.stderr == ("python -m agents.dataset generate: error: --world-size: "
+                          "world.size[0] must be >= 6.0, got 1.0\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("flags", "match"),
+    [
+        (["--pairs", "0"], "error: --pairs: pairs must be >= 1, got 0"),
+        (["--max-cycles", "5"], "error: --max-cycles: max_cycles must be >= 10, got 5"),
+        (["--address", "auto"], "error: --address: address is only used with backend='ray'"),
+        (["--explorer", "spiral"], r"error: --explorer: explorer must be one of \["),
+        (["--world", "/nowhere/map.yaml"], "error: --world: world must be 'procedural' or an"),
+    ],
+)
+def test_cli_bad_settings(tmp_path, capsys, flags, match):
+    err = cli_error(capsys, ["generate", "--out", str(tmp_path / "d"), *flags])
+    assert re.search(match, err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_unloadable_world_file_or_model_writes_nothing(tmp_path, capsys):
+    bad_map = tmp_path / "room.json"
+    bad_map.write_text('{"verts": [[0, 0], [1, 0]]}')
+    bad_model = tmp_path / "model.zip"
+    bad_model.write_text("not a model")
+    out = tmp_path / "d"
+    err = cli_error(capsys, ["generate", "--out", str(out), "--world", str(bad_map)])
+    assert "error: --world: world file" in err and "at least 3 [x, y] pairs" in err
+    err = cli_error(capsys, ["generate", "--out", str(out), "--explorer", f"sb3:{bad_model}"])
+    assert "error: --explorer: explorer 'sb3:" in err and "cannot load the model" in err
+    assert not out.exists()
+
+
+def test_cli_out_is_a_file_or_a_foreign_folder(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    err = cli_error(capsys, ["generate", "--out", str(tmp_path / "notes.txt"), *TINY])
+    assert f"error: --out: {tmp_path / 'notes.txt'} is a file, not a folder" in err
+    err = cli_error(capsys, ["generate", "--out", str(tmp_path), *TINY])
+    assert (f"error: --out: {tmp_path} is a folder that is not a map-pair dataset (no "
+            f"dataset.json; it holds ['notes.txt'])") in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_cli_settings_mismatch_names_the_flags(tmp_path, capsys):
+    main(["generate", "--out", str(tmp_path), *TINY])
+    capsys.readouterr()
+    err = cli_error(capsys, ["generate", "--out", str(tmp_path), *TINY, "--max-cycles", "30",
+                             "--world-size", "12", "12"])
+    assert err == (f"python -m agents.dataset generate: error: --out: {tmp_path} holds a "
+                   "dataset made with other settings: --max-cycles 20 (this run: 30); "
+                   "--world-size 20.0 20.0 (this run: 12.0 12.0); run with its settings to "
+                   "resume it, or give another --out for a new dataset\n")
+
+
+def test_cli_info_of_a_folder_that_is_no_dataset(tmp_path, capsys):
+    err = cli_error(capsys, ["info", str(tmp_path)])
+    assert f"error: ROOT: {tmp_path / 'dataset.json'}: missing" in err
+
+
+def test_a_second_writer_is_locked_out(tmp_path, capsys):
+    with exclusive_lock(tmp_path / LOCK_FILE):
+        err = cli_error(capsys, ["generate", "--out", str(tmp_path), *TINY])
+    assert (f"error: --out: {tmp_path} is being written by another run (pid {os.getpid()} "
+            f"on ") in err
+    assert f"its lock {tmp_path / LOCK_FILE} goes with that process" in err
+    assert list(tmp_path.iterdir()) == []  # neither the lock nor a manifest is left
+    main(["generate", "--out", str(tmp_path), *TINY])  # the lock went with its holder
+    assert "wrote 1 pairs" in capsys.readouterr().out
+    assert not (tmp_path / LOCK_FILE).exists()
+
+
+def test_a_killed_writer_leaves_no_stale_lock(tmp_path):
+    lock = tmp_path / LOCK_FILE
+    code = ("import os, signal, sys\nfrom topo._io import exclusive_lock\n"
+            f"with exclusive_lock({str(lock)!r}):\n    os.kill(os.getpid(), signal.SIGKILL)\n")
+    run = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2],
+                         timeout=60)
+    assert run.returncode == -signal.SIGKILL and lock.exists()  # its file is left behind...
+    generate(GenerateArgs(out=tmp_path, pairs=1, **KW))  # ...but not its lock
+    assert sorted(pair_files(tmp_path)) == [0] and not lock.exists()
+
+
+def test_a_failed_new_dataset_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    def fails(root, episode, n_pairs, settings):
+        raise RuntimeError("the first episode failed")
+
+    real = dataset.generate_episode
+    monkeypatch.setattr(dataset, "generate_episode", fails)
+    out = tmp_path / "new" / "pairs"
+    with pytest.raises(RuntimeError, match="the first episode failed"):
+        generate(GenerateArgs(out=out, pairs=1, **KW))
+    assert list(tmp_path.iterdir()) == []  # the folders it created are gone too
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(RuntimeError, match="the first episode failed"):
+        generate(GenerateArgs(out=tmp_path / "empty", pairs=1, **KW))
+    assert list((tmp_path / "empty").iterdir()) == []  # a folder that existed stays
+    monkeypatch.setattr(dataset, "generate_episode", real)
+    generate(GenerateArgs(out=out, pairs=1, **{**KW, "explorer": "random_walk"}))
+    assert sorted(pair_files(out)) == [0]

@@ -7,10 +7,12 @@ import json
 import numpy as np
 import pytest
 
+from fusion import evaluate as evaluate_module
 from fusion.evaluate import (
     ROTATION_OK_DEG,
     TRANSLATION_OK_M,
     EvalPair,
+    check_exhaustive,
     evaluate,
     is_success,
     load_pair_dir,
@@ -21,6 +23,7 @@ from fusion.evaluate import (
     synthetic_pairs,
 )
 from fusion.synthetic import make_pair
+from topo import TopoMap
 
 
 def test_success_needs_both_errors_strictly_below_the_thresholds():
@@ -70,6 +73,42 @@ def test_cli_argument_errors(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--synthetic", "2", "--config", "{\"eps\": -1}"])
     assert "eps must be > 0.0, got -1" in capsys.readouterr().err
+
+
+def chain_pair(name: str, n: int) -> EvalPair:
+    """A pair of ``n``-node chains (every node ends a path: ``n`` endpoints each)."""
+    m = TopoMap.from_arrays(np.column_stack([np.arange(n), np.arange(n) % 3]),
+                            np.column_stack([np.arange(n - 1), np.arange(1, n)]))
+    return EvalPair(name, m, m, None, None, 1.0, "overlap", None)
+
+
+def test_exhaustive_on_large_pairs_is_refused_before_anything_runs(monkeypatch):
+    def no_merge(*args, **kwargs):
+        raise AssertionError("a merge ran")
+
+    monkeypatch.setattr(evaluate_module, "merge_maps", no_merge)
+    pairs = [chain_pair("small", 20), chain_pair("big", 200), chain_pair("bigger", 300)]
+    with pytest.raises(ValueError, match=(
+            r"^'exhaustive' \(the paper's search\) is too slow for 2 of 3 pairs; the largest, "
+            r"bigger: 300 × 300 endpoints × 181 angles \(exhaustive_step_deg=2\) = 16,290,000 "
+            r"placements, .* exhaustive_step_deg >= 6.6 fits\)\. Leave 'exhaustive' out of the "
+            r"methods, or coarsen it with the config field exhaustive_step_deg$")):
+        evaluate(pairs, ["auto", "exhaustive"], progress=False)
+    check_exhaustive(pairs, {"exhaustive_step_deg": 6.6})  # coarse enough: no error
+    check_exhaustive(pairs[:1])
+
+
+def test_cli_exhaustive_on_large_maps_is_an_argument_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--synthetic", "1", "--noise", "0.05", "--synthetic-config",
+              "{\"map_nodes\": [250, 300]}", "--methods", "auto,exhaustive", "--quiet",
+              "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert ("error: --methods: 'exhaustive' (the paper's search) is too slow for 1 of 1 pairs"
+            in err)
+    assert "--config '{\"exhaustive_step_deg\": ...}'" in err and "Traceback" not in err
+    assert not list(tmp_path.iterdir())
 
 
 def test_parse_methods():

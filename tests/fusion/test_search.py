@@ -8,7 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion import Rigid2D, exhaustive_search, paper_example, similarity
-from fusion.search import search_angles
+from fusion.search import (
+    DEFAULT_MAX_EVALUATIONS,
+    exhaustive_evaluations,
+    fitting_step,
+    search_angles,
+)
 from topo import TopoMap
 
 # an asymmetric 8-node map: no rotation but the identity maps it onto itself
@@ -55,6 +60,42 @@ def test_similarity_counts_coinciding_endpoint_pairs():
     assert similarity(TopoMap.empty(), pts, Rigid2D.identity()) == 0
 
 
+def test_exhaustive_refuses_large_maps_at_once_saying_how_long_and_what_fits():
+    big = np.random.default_rng(0).uniform(0, 40, (300, 2))
+    with pytest.raises(ValueError, match=(
+            r"^exhaustive_search: 300 × 300 endpoints × 181 angles \(step_deg=2\) = 16,290,000 "
+            r"placements, above max_evaluations=5,000,000 \(about 33 s at 2 µs each; step_deg "
+            r">= 6.6 fits\); pass max_evaluations=None \(or a larger limit\) to run it anyway, "
+            r"or a coarser step_deg \(merge_maps: MergeConfig.exhaustive_step_deg\)$")):
+        exhaustive_search(big, big)
+    assert exhaustive_evaluations(300, 300, 6.6) <= DEFAULT_MAX_EVALUATIONS
+    assert exhaustive_evaluations(300, 300, 6.5) > DEFAULT_MAX_EVALUATIONS
+
+
+def test_exhaustive_limit_is_exact_and_can_be_lifted():
+    n = len(ASYM) ** 2 * 181
+    assert exhaustive_search(ASYM, ASYM, max_evaluations=n).evaluations == n
+    with pytest.raises(ValueError, match=r"= 11,584 placements, above max_evaluations=11,583 "):
+        exhaustive_search(ASYM, ASYM, max_evaluations=n - 1)
+    assert exhaustive_search(ASYM, ASYM, max_evaluations=None).evaluations == n
+    # the step the refusal suggests runs within the limit
+    step = fitting_step(len(ASYM), len(ASYM), 1000)
+    assert exhaustive_search(ASYM, ASYM, step_deg=step, max_evaluations=1000).evaluations <= 1000
+    with pytest.raises(ValueError, match=r"no step_deg fits: the maps are too large"):
+        exhaustive_search(ASYM, ASYM, max_evaluations=100)  # 64 × 2 angles > 100
+
+
+@settings(max_examples=50)
+@given(st.integers(1, 400), st.integers(1, 400), st.integers(1, 10**7))
+def test_fitting_step_is_the_finest_tenth_of_a_degree_that_fits(n_a, n_b, limit):
+    step = fitting_step(n_a, n_b, limit)
+    if step is None:
+        assert n_a * n_b * 2 > limit
+    else:
+        assert exhaustive_evaluations(n_a, n_b, step) <= limit
+        assert step == 0.1 or exhaustive_evaluations(n_a, n_b, round(step - 0.1, 1)) > limit
+
+
 @pytest.mark.parametrize(
     ("call", "error", "match"),
     [
@@ -65,6 +106,10 @@ def test_similarity_counts_coinciding_endpoint_pairs():
         (lambda: exhaustive_search(ASYM, ASYM, eps=-1), ValueError, r"eps must be > 0.0"),
         (lambda: exhaustive_search(TopoMap.empty(), ASYM), ValueError,
          "map_a must have at least 1 endpoint, got 0"),
+        (lambda: exhaustive_search(ASYM, ASYM, max_evaluations=0), ValueError,
+         "max_evaluations must be >= 1, got 0"),
+        (lambda: exhaustive_search(ASYM, ASYM, max_evaluations=1e6), TypeError,
+         "max_evaluations must be an integer, got float"),
         (lambda: similarity(ASYM, "B", Rigid2D.identity()), TypeError, "map_b must be an array"),
         (lambda: similarity(ASYM, ASYM, np.eye(3)), TypeError,
          "transform must be a fusion.Rigid2D, got ndarray"),
