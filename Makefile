@@ -7,7 +7,7 @@ PIP    := $(PY) -m pip
 # torch itself downloads a multi-GB CUDA build.
 TORCH  := torch==2.13.0
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench lint clean env-pairs
 
 $(VENV)/.torch:
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,10 @@ demo: $(VENV)/.deps-base
 
 test: $(VENV)/.deps-test
 	$(PY) -m pytest -q
+
+# the env-pair benchmark set (tune and test splits) for benchmarks/topo_repeatability.py
+env-pairs: $(VENV)/.deps-base
+	$(PY) benchmarks/env_pairs.py --out data/env_pairs
 
 bench: $(VENV)/.deps-bench
 	$(PY) benchmarks/icp_speed.py

@@ -12,7 +12,65 @@ import math
 import numpy as np
 from numba import njit
 
-from topo._extract_kernels import _pairwise_sum  # numpy's float64 sum, bit for bit
+
+@njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):
+    """numpy's pairwise summation of a block ``a[lo:lo + n]``, ``n <= 128``: a plain loop under
+    8 items, else 8 running sums combined as a tree, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo: lo + 8].copy()
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_sum(a, n):
+    """numpy's ``add.reduce`` of a contiguous float64 ``a[:n]``: blocks of up to 128 summed by
+    :func:`_block_sum`, longer runs split in halves (a multiple of 8 first) and the halves'
+    sums added. numpy recurses; this walks the same tree with an explicit stack (numba's disk
+    cache does not support recursion)."""
+    if n <= 128:
+        return _block_sum(a, 0, n)
+    los = np.empty(64, dtype=np.int64)
+    ns = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)
+    left = np.empty(64, dtype=np.float64)
+    sp = 0
+    los[0], ns[0] = 0, n
+    ret = 0.0
+    while sp >= 0:
+        lo, m = los[sp], ns[sp]
+        half = m // 2
+        half -= half % 8
+        if m <= 128:
+            ret = _block_sum(a, lo, m)
+            sp -= 1
+        elif stage[sp] == 0:  # first the left half
+            stage[sp] = 1
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo, half, 0
+        elif stage[sp] == 1:  # left done (in ret): now the right half
+            left[sp] = ret
+            stage[sp] = 2
+            sp += 1
+            los[sp], ns[sp], stage[sp] = lo + half, m - half, 0
+        else:
+            ret = left[sp] + ret
+            sp -= 1
+    return ret
 
 
 @njit(cache=True, nogil=True)

@@ -36,7 +36,7 @@ from fusion.evaluate import (
     synthetic_pairs,
     transform_errors,
 )
-from fusion.merge import MergeConfig, _evaluate, _polish, _prepare, merge_maps
+from fusion.merge import MergeConfig, _evaluate, _polish, _prepare_pair, merge_maps
 
 CLASSES = ("truth_too_few_matches", "truth_below_threshold", "right_rejected", "refine_off",
            "search_miss", "score_prefers_wrong")
@@ -54,7 +54,7 @@ def classify(pair: EvalPair, config: MergeConfig) -> str | None:
     errors = transform_errors(result.transform, pair)
     if result.accepted and is_success(errors):
         return None
-    pa, pb = _prepare(pair.map_a, config), _prepare(pair.map_b, config)
+    pa, pb = _prepare_pair(pair.map_a, pair.map_b, config)
     truth = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
     if truth.collinear or truth.inliers < config.min_inliers:
         return "truth_too_few_matches"

@@ -73,11 +73,68 @@ at the edge of one robot's explored space, its second corridor unseen). Not dead
 for _a, _b in [(NodeKind.JUNCTION, NodeKind.JUNCTION), (NodeKind.CORNER, NodeKind.CORNER),
                (NodeKind.DEAD_END, NodeKind.DEAD_END), (NodeKind.JUNCTION, NodeKind.CORNER),
                (NodeKind.CORNER, NodeKind.JUNCTION), (NodeKind.DEAD_END, NodeKind.CORNER),
-               (NodeKind.CORNER, NodeKind.DEAD_END)]:
+               (NodeKind.CORNER, NodeKind.DEAD_END), (NodeKind.GATEWAY, NodeKind.GATEWAY)]:
     KIND_COMPATIBLE[_a, _b] = True
 KIND_COMPATIBLE.setflags(write=False)
 
-_KIND_PRIORITY = {NodeKind.JUNCTION: 0, NodeKind.CORNER: 1, NodeKind.DEAD_END: 2}
+CLEARANCE_STEP = 0.2
+"""Width in metres of the clearance classes (:attr:`topo.TopoMap.clearance`) of matched nodes."""
+CLEARANCE_CLASSES = 16
+"""Clearance classes (the last one holds every clearance beyond)."""
+CLEARANCE_TOLERANCE = 2
+"""Two nodes may be the same place only if their clearance classes differ by at most this."""
+
+_N_KINDS = len(NodeKind)
+_PLACE_KINDS = (NodeKind.JUNCTION, NodeKind.CORNER, NodeKind.DEAD_END)
+
+
+def _match_table() -> np.ndarray:
+    """``[code_a, code_b]`` over descriptor codes ``kind + len(NodeKind) · clearance class``:
+    may a node of A and one of B be the same place? Kinds as :data:`KIND_COMPATIBLE`, except
+    that any two places with a clearance (class ≥ 1: made by ``topo.extract_topomap``) may
+    match whatever their number of paths, which depends on how many exits each robot saw; and
+    clearances within :data:`CLEARANCE_TOLERANCE` classes. Maps without clearances (all
+    class 0) match by kind alone."""
+    n = _N_KINDS * CLEARANCE_CLASSES
+    code = np.arange(n)
+    kind, cls = code % _N_KINDS, code // _N_KINDS
+    place = np.isin(kind, [int(k) for k in _PLACE_KINDS]) & (cls > 0)
+    kinds_ok = KIND_COMPATIBLE[kind[:, None], kind[None, :]] | (place[:, None] & place[None, :])
+    table = kinds_ok & (np.abs(cls[:, None] - cls[None, :]) <= CLEARANCE_TOLERANCE)
+    table.setflags(write=False)
+    return table
+
+
+MATCH_COMPATIBLE = _match_table()
+"""The node compatibility the merge uses, over descriptor codes (:func:`_match_table`)."""
+
+
+def descriptor_codes(m: TopoMap) -> np.ndarray:
+    """``(N,)`` int64 descriptor code of each node: ``kind + len(NodeKind) · class`` with
+    ``class = min(clearance // CLEARANCE_STEP, CLEARANCE_CLASSES − 1)``."""
+    cls = np.minimum((m.clearance / CLEARANCE_STEP).astype(np.int64), CLEARANCE_CLASSES - 1)
+    return m.kinds.astype(np.int64) + _N_KINDS * cls
+
+
+def matchable(m: TopoMap) -> tuple[TopoMap, np.ndarray]:
+    """The part of ``m`` a merge matches, and the index in ``m`` of each of its nodes: the
+    nodes not flagged :attr:`topo.TopoMap.frontier` and the paths between them (a node on the
+    frontier moves as its robot explores on)."""
+    keep = ~m.frontier
+    if keep.all():
+        return m, np.arange(m.n_nodes)
+    index = np.flatnonzero(keep)
+    renumber = np.full(m.n_nodes, -1, dtype=np.int64)
+    renumber[index] = np.arange(len(index))
+    kept = keep[m.edges].all(axis=1) if m.n_edges else np.zeros(0, dtype=bool)
+    paths = None if m.paths is None else [q for q, k in zip(m.paths, kept, strict=True) if k]
+    view = TopoMap.from_arrays(m.xy[index], renumber[m.edges[kept]], m.kinds[index],
+                               m.lengths[kept], paths, m.clearance[index], m.frontier[index])
+    return view, index
+
+
+_KIND_PRIORITY = {NodeKind.JUNCTION: 0, NodeKind.CORNER: 1, NodeKind.DEAD_END: 2,
+                  NodeKind.GATEWAY: 3}
 _RANK_OF_KIND = np.array([_KIND_PRIORITY[NodeKind(k)] for k in range(len(NodeKind))])
 _KIND_OF_RANK = np.array(sorted(_KIND_PRIORITY, key=_KIND_PRIORITY.get), dtype=np.int64)
 
@@ -413,18 +470,36 @@ class _Prepared:
     path_w: np.ndarray  # (S,) metres of path each stands for
     field: np.ndarray  # squared distance to the nearest path (K.path_field), PATH_CELL cells
     field_origin: tuple[float, float]
+    compat: np.ndarray  # [code, code] of the pair's codes (MATCH_COMPATIBLE, renumbered)
+    loose: int  # the code of an undescribed dead end (makes no conflicts), -1 if unused
 
 
-def _prepare(m: TopoMap, cfg: MergeConfig) -> _Prepared:
+def _prepare_pair(map_a: TopoMap, map_b: TopoMap, cfg: MergeConfig
+                  ) -> tuple[_Prepared, _Prepared]:
+    """What the search and the evidence read of two maps. Their ``kinds`` are their
+    :func:`descriptor_codes` renumbered over the codes the two maps use, ``compat`` the rows
+    and columns of :data:`MATCH_COMPATIBLE` for those codes (a small table: the search's
+    raster holds one entry per code)."""
+    code_a, code_b = descriptor_codes(map_a), descriptor_codes(map_b)
+    used = np.unique(np.concatenate([code_a, code_b]))
+    compat = np.ascontiguousarray(MATCH_COMPATIBLE[np.ix_(used, used)])
+    loose = np.flatnonzero(used == _LOOSE_KIND)
+    loose = int(loose[0]) if len(loose) else -1
+    return (_prepare(map_a, cfg, np.searchsorted(used, code_a), compat, loose),
+            _prepare(map_b, cfg, np.searchsorted(used, code_b), compat, loose))
+
+
+def _prepare(m: TopoMap, cfg: MergeConfig, codes: np.ndarray, compat: np.ndarray,
+             loose: int) -> _Prepared:
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
     pieces = _segments(m)
     near, i, j, length, both_i, both_j, both_len, pts, w, margin, x0, y0, field, *slots = (
         K.map_fields(xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP,
                      cfg.eps, PATH_REACH, PATH_CELL))
-    return _Prepared(xy, m.kinds.astype(np.int64), edges, near, i, j, length, both_i, both_j,
+    return _Prepared(xy, codes.astype(np.int64), edges, near, i, j, length, both_i, both_j,
                      both_len, margin, _branches(len(xy), *slots), pieces, pts, w, field,
-                     (x0, y0))
+                     (x0, y0), compat, loose)
 
 
 def _segments(m: TopoMap) -> np.ndarray:
@@ -515,7 +590,7 @@ def _evaluate(pa: _Prepared, pb: _Prepared, theta: float, t: np.ndarray,
     """The full evidence (:class:`MergeEvidence`) and matches of B moved by ``(theta, t)``."""
     f, matches, (agree, off), moments = K.evaluation(
         *_evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
-        KIND_COMPATIBLE, _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss,
+        pa.compat, pa.loose, _BRANCH_TOL, _MIN_CROSSING_SIN, cfg.near_miss,
         *_path_args(pa, pb))
     f = f.tolist()  # Python floats: cheaper to read one by one
     n = len(matches)
@@ -605,7 +680,7 @@ def _hit_grid(pa: _Prepared, tol: float, path_tol: float
     # int32; int8 another ~10%)
     n = len(pa.xy)
     like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32  # iinfo costs 10 µs
-    return K.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, KIND_COMPATIBLE, like)
+    return K.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, pa.compat, like)
 
 
 _INT8, _INT16, _INT32 = (np.empty(0, dtype=t) for t in (np.int8, np.int16, np.int32))
@@ -632,7 +707,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     b_i, b_j = pb.both_i, pb.both_j
     hyp_p, hyp_q, weight = K.pair_candidates(pa.kinds, pa.pair_i, pa.pair_j, pa.pair_len,
                                              pb.kinds, b_i, b_j, pb.both_len,
-                                             cfg.pair_tolerance, KIND_COMPATIBLE)
+                                             cfg.pair_tolerance, pa.compat)
     n_hyp = len(hyp_p)
     if n_hyp == 0:
         return "no pair of nodes of B matches a pair of A in length and kinds"
@@ -646,7 +721,7 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     min_pairs = max(cfg.min_inliers, _COARSE_MIN_PAIRS)
     reserve = cfg.sparse_pool if cfg.min_inliers < min_pairs else 0
     coarse = K.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
-                              y0, inv_cell, cfg.eps, _LOOSE_KIND,
+                              y0, inv_cell, cfg.eps, pa.loose,
                               cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
@@ -664,10 +739,10 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
         chosen = K.best_by_gain(chosen, coarse, paths @ _PATH_WEIGHTS,
                                 w["closeness"] + w["inliers"], cfg.candidates)  # best first
     th, txc, tyc = K.refine_most_matched(theta, tx, ty, chosen, pa.xy, pa.kinds, pb.xy, pb.kinds,
-                                         KIND_COMPATIBLE,
+                                         pa.compat,
                                          np.array([cfg.coarse_tolerance, cfg.eps]), cfg.scored)
-    features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, KIND_COMPATIBLE,
-                                _LOOSE_KIND, _BRANCH_TOL, _MIN_CROSSING_SIN,
+    features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, pa.compat,
+                                pa.loose, _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
     scores = _scores(features, _path_evidence(pa, pb, th, txc, tyc), len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
@@ -836,27 +911,30 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
     cfg = _DEFAULT_CONFIG if config is None else config_from(MergeConfig, config)
 
-    small = [f"{name} has {m.n_nodes} node(s); at least 3 are needed"
-             for name, m in (("map_a", map_a), ("map_b", map_b)) if m.n_nodes < 3]
+    (view_a, index_a), (view_b, index_b) = matchable(map_a), matchable(map_b)
+    small = [f"{name} has {v.n_nodes} node(s) off the frontier (of {m.n_nodes}); at least 3 "
+             f"are needed" for name, m, v in (("map_a", map_a, view_a), ("map_b", map_b, view_b))
+             if v.n_nodes < 3]
     if small:
         return _not_tried(map_a, method, start, "; ".join(small))
-    flat = [d for name, m in (("map_a", map_a), ("map_b", map_b))
-            if (d := degeneracy(m.xy, name)) is not None]
+    flat = [d for name, v in (("map_a", view_a), ("map_b", view_b))
+            if (d := degeneracy(v.xy, name)) is not None]
     if flat:
         return _not_tried(map_a, method, start, "; ".join(flat))
-    pa, pb = _prepare(map_a, cfg), _prepare(map_b, cfg)
+    pa, pb = _prepare_pair(view_a, view_b, cfg)
     if method == "auto":
         found = _auto(pa, pb, cfg)
     elif method == "paper_icp":
-        found = _paper_icp(map_a, map_b, pa, pb, cfg)
+        found = _paper_icp(view_a, view_b, pa, pb, cfg)
     elif method == "exhaustive":
-        found = _exhaustive(map_a, map_b, pa, pb, cfg)
+        found = _exhaustive(view_a, view_b, pa, pb, cfg)
     else:
-        found = _multistart(map_a, map_b, pa, pb, cfg)
+        found = _multistart(view_a, view_b, pa, pb, cfg)
     if isinstance(found, str):
         return _not_tried(map_a, method, start, found)
     reason = decide(found.evidence, cfg)
     transform = found.transform
-    merged = map_a if reason else fuse_maps(map_a, map_b, transform, found.matches, cfg.eps)
-    return MergeResult(transform, reason is None, found.evidence.score, found.matches, merged,
+    matches = np.stack([index_a[found.matches[:, 0]], index_b[found.matches[:, 1]]], axis=1)
+    merged = map_a if reason else fuse_maps(map_a, map_b, transform, matches, cfg.eps)
+    return MergeResult(transform, reason is None, found.evidence.score, matches, merged,
                        method, time.perf_counter() - start, reason, found.evidence)

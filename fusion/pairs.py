@@ -28,6 +28,8 @@ Arrays of a pair file (``X`` is ``a`` or ``b``):
 | ``X_lengths``     | float64 | (E,)   | path lengths (m)                                 |
 | ``X_path_xy``     | float64 | (K, 2) | all path polylines, concatenated (optional)      |
 | ``X_path_offsets``| int64   | (E+1,) | polyline ``e`` = ``X_path_xy[off[e]:off[e+1]]``  |
+| ``X_clearance``   | float64 | (N,)   | node clearances (m; optional, 0 if absent)       |
+| ``X_frontier``    | bool    | (N,)   | nodes on the frontier (optional, none if absent) |
 | ``X_grid``        | int8    | (H, W) | cell-state codes ``[iy, ix]``, row 0 at bottom   |
 
 ``meta`` holds: format, version, pair_id, transform ``[theta, tx, ty]`` (B → A), overlap,
@@ -137,6 +139,7 @@ def _map_arrays(prefix: str, m: TopoMap) -> dict[str, np.ndarray]:
     out = {
         f"{prefix}_xy": m.xy, f"{prefix}_kinds": m.kinds,
         f"{prefix}_edges": m.edges, f"{prefix}_lengths": m.lengths,
+        f"{prefix}_clearance": m.clearance, f"{prefix}_frontier": m.frontier,
     }
     if m.paths is not None:
         sizes = [len(p) for p in m.paths]
@@ -177,8 +180,9 @@ def _read_map(z: Any, prefix: str) -> TopoMap:
     if f"{prefix}_path_offsets" in z:
         off, pts = z[f"{prefix}_path_offsets"], z[f"{prefix}_path_xy"]
         paths = [pts[off[e]:off[e + 1]] for e in range(len(off) - 1)]
+    extra = [z[k] if k in z else None for k in (f"{prefix}_clearance", f"{prefix}_frontier")]
     return TopoMap.from_arrays(z[f"{prefix}_xy"], z[f"{prefix}_edges"], z[f"{prefix}_kinds"],
-                               z[f"{prefix}_lengths"], paths)
+                               z[f"{prefix}_lengths"], paths, *extra)
 
 
 def read_pair(path: str | Path) -> MapPair:

@@ -18,8 +18,9 @@ import numpy as np
 
 from topo._checks import as_points
 
-FORMAT_VERSION = 1
-"""Version of the :meth:`TopoMap.to_dict` layout; :meth:`TopoMap.from_dict` refuses others."""
+FORMAT_VERSION = 2
+"""Version of the :meth:`TopoMap.to_dict` layout (2 added ``clearance`` and ``frontier``);
+:meth:`TopoMap.from_dict` reads versions 1 and 2."""
 
 
 class NodeKind(enum.IntEnum):
@@ -28,6 +29,8 @@ class NodeKind(enum.IntEnum):
     JUNCTION = 0
     DEAD_END = 1
     CORNER = 2
+    GATEWAY = 3
+    """A doorway or narrow passage between two places (:func:`topo.extract_topomap`)."""
 
     @property
     def label(self) -> str:
@@ -92,6 +95,11 @@ class TopoMap:
         lengths: ``(E,)`` float64 path lengths in metres (at least the straight-line distance).
         paths: ``None`` or one ``(K, 2)`` polyline per edge, from its first node to its second,
             kept for plotting.
+        clearance: ``(N,)`` float64 distance (metres) from each node to the nearest obstacle or
+            unknown cell, the node's size descriptor for matching; 0 where not known (maps not
+            made by :func:`topo.extract_topomap`).
+        frontier: ``(N,)`` bool, ``True`` for a node that touches the unknown (the edge of the
+            explored area): such a node moves as the map grows, so merges leave it out.
     """
 
     xy: np.ndarray
@@ -99,6 +107,15 @@ class TopoMap:
     edges: np.ndarray
     lengths: np.ndarray
     paths: tuple[np.ndarray, ...] | None = None
+    clearance: np.ndarray | None = None
+    frontier: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = self.xy.shape[0]
+        clearance = np.zeros(n) if self.clearance is None else self.clearance
+        frontier = np.zeros(n, dtype=bool) if self.frontier is None else self.frontier
+        object.__setattr__(self, "clearance", _frozen(np.asarray(clearance, dtype=np.float64)))
+        object.__setattr__(self, "frontier", _frozen(np.asarray(frontier, dtype=bool)))
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -109,6 +126,8 @@ class TopoMap:
         kinds: Any = None,
         lengths: Any = None,
         paths: Sequence[Any] | None = None,
+        clearance: Any = None,
+        frontier: Any = None,
     ) -> TopoMap:
         """Validate arrays and build a map.
 
@@ -120,6 +139,8 @@ class TopoMap:
             lengths: ``(E,)`` path lengths; ``None`` uses straight-line distances. Must be finite
                 and not shorter than the straight line (1 mm slack).
             paths: optional polylines, one ``(K >= 2, 2)`` array per edge.
+            clearance: ``(N,)`` finite, non-negative node clearances (m); ``None`` = zeros.
+            frontier: ``(N,)`` booleans; ``None`` = no node is on the frontier.
 
         Raises:
             ValueError: naming the field and the offending value.
@@ -139,22 +160,8 @@ class TopoMap:
         else:
             lens = _as_lengths(lengths, straight)
         polys = None if paths is None else _as_paths(paths, len(edges))
-        return cls(_frozen(xy), _frozen(codes), _frozen(edges), _frozen(lens), polys)
-
-    @classmethod
-    def from_valid_arrays(cls, xy: np.ndarray, edges: np.ndarray, lengths: Sequence[float],
-                          paths: Sequence[np.ndarray]) -> TopoMap:
-        """``from_arrays(xy, edges, lengths=lengths, paths=paths)`` (kinds from degree) without
-        its checks, for producers whose arrays are valid by construction (``extract_topomap``):
-        ``xy`` float64 ``(N, 2)`` finite, ``edges`` int64 ``(E, 2)`` in range without
-        self-loops, ``lengths`` at least the straight lines, float64 polylines of at least two
-        points. The same map as :meth:`from_arrays`, without the validation's cost (a tenth of
-        an extraction on small maps); bad input here is not diagnosed."""
-        degree = np.bincount(edges.ravel(), minlength=len(xy))
-        codes = _KIND_OF_DEGREE[np.minimum(degree, 3)]  # kinds_from_degree of counts
-        return cls(_frozen(xy), _frozen(codes), _frozen(edges),
-                   _frozen(np.asarray(lengths, dtype=np.float64).reshape(-1)),
-                   tuple(_frozen(p) for p in paths))
+        return cls(_frozen(xy), _frozen(codes), _frozen(edges), _frozen(lens), polys,
+                   _as_clearance(clearance, n), _as_flags(frontier, n))
 
     @classmethod
     def empty(cls) -> TopoMap:
@@ -208,16 +215,20 @@ class TopoMap:
             paths = tuple(
                 _frozen(np.asarray(transform.apply(p), dtype=np.float64)) for p in self.paths
             )
-        return TopoMap(_frozen(xy), self.kinds, self.edges, self.lengths, paths)
+        return TopoMap(_frozen(xy), self.kinds, self.edges, self.lengths, paths, self.clearance,
+                       self.frontier)
 
     # ---------------------------------------------------------------- conversions
     def to_networkx(self) -> nx.MultiGraph:
-        """A ``networkx.MultiGraph``: node ``i`` has ``xy`` (tuple) and ``kind`` (label); each
+        """A ``networkx.MultiGraph``: node ``i`` has ``xy`` (tuple), ``kind`` (label),
+        ``clearance`` and ``frontier``; each
         edge has ``length`` and, if known, ``path`` (list of ``(x, y)``). A multigraph because
         two paths may join the same pair of nodes."""
         g = nx.MultiGraph()
-        for i, ((x, y), k) in enumerate(zip(self.xy.tolist(), self.kinds.tolist(), strict=True)):
-            g.add_node(i, xy=(x, y), kind=KIND_LABELS[k])
+        for i, ((x, y), k, c, f) in enumerate(zip(self.xy.tolist(), self.kinds.tolist(),
+                                                  self.clearance.tolist(),
+                                                  self.frontier.tolist(), strict=True)):
+            g.add_node(i, xy=(x, y), kind=KIND_LABELS[k], clearance=c, frontier=f)
         for e, (u, v) in enumerate(self.edges.tolist()):
             attrs: dict[str, Any] = {"length": float(self.lengths[e])}
             if self.paths is not None:
@@ -228,8 +239,8 @@ class TopoMap:
     @classmethod
     def from_networkx(cls, graph: nx.Graph) -> TopoMap:
         """Build from a ``Graph`` or ``MultiGraph`` whose nodes carry ``xy`` (and optionally
-        ``kind``) and whose edges may carry ``length`` and ``path``. Nodes are numbered in the
-        graph's iteration order."""
+        ``kind``, ``clearance``, ``frontier``) and whose edges may carry ``length`` and
+        ``path``. Nodes are numbered in the graph's iteration order."""
         if not isinstance(graph, nx.Graph):
             raise TypeError(f"graph must be a networkx Graph, got {type(graph).__name__}")
         if graph.is_directed():
@@ -241,6 +252,8 @@ class TopoMap:
             raise ValueError("graph nodes must each have an 'xy' attribute") from exc
         node_kinds = [graph.nodes[node].get("kind") for node in graph.nodes]
         kinds = None if any(k is None for k in node_kinds) else node_kinds
+        clearance = [graph.nodes[node].get("clearance", 0.0) for node in graph.nodes]
+        frontier = [bool(graph.nodes[node].get("frontier", False)) for node in graph.nodes]
         edge_rows = list(graph.edges(data=True))
         edges = [(index[u], index[v]) for u, v, _ in edge_rows]
         lengths = None
@@ -258,7 +271,7 @@ class TopoMap:
                 paths.append(p)
         return cls.from_arrays(np.asarray(xy, dtype=np.float64).reshape(-1, 2),
                                np.asarray(edges, dtype=np.int64).reshape(-1, 2),
-                               kinds, lengths, paths)
+                               kinds, lengths, paths, clearance, frontier)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-safe dict (plain lists and strings) that :meth:`from_dict` reads back exactly."""
@@ -272,6 +285,8 @@ class TopoMap:
         }
         if self.paths is not None:
             out["paths"] = [p.tolist() for p in self.paths]
+        out["clearance"] = self.clearance.tolist()
+        out["frontier"] = self.frontier.tolist()
         return out
 
     @classmethod
@@ -280,12 +295,13 @@ class TopoMap:
         if not isinstance(data, dict):
             raise TypeError(f"data must be a dict, got {type(data).__name__}")
         version = data.get("version")
-        if data.get("format") != "topomerge.TopoMap" or version != FORMAT_VERSION:
+        if data.get("format") != "topomerge.TopoMap" or version not in (1, FORMAT_VERSION):
             raise ValueError(
-                f"data is not a topomerge.TopoMap version {FORMAT_VERSION} dict "
+                f"data is not a topomerge.TopoMap version 1 or {FORMAT_VERSION} dict "
                 f"(format={data.get('format')!r}, version={version!r})"
             )
-        known = {"format", "version", "xy", "kinds", "edges", "lengths", "paths"}
+        known = {"format", "version", "xy", "kinds", "edges", "lengths", "paths", "clearance",
+                 "frontier"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"data has unknown keys {unknown}; allowed: {sorted(known)}")
@@ -295,15 +311,19 @@ class TopoMap:
         return cls.from_arrays(
             np.asarray(data["xy"], dtype=np.float64).reshape(-1, 2),
             np.asarray(data["edges"], dtype=np.int64).reshape(-1, 2),
-            data["kinds"], data["lengths"], data.get("paths"),
+            data["kinds"], data["lengths"], data.get("paths"), data.get("clearance"),
+            data.get("frontier"),
         )
 
     def equals(self, other: TopoMap, atol: float = 0.0) -> bool:
-        """Same nodes, kinds, edges and lengths (positions and lengths within ``atol``)."""
+        """Same nodes, kinds, frontier flags, edges and lengths (positions, clearances and
+        lengths within ``atol``)."""
         return (
             self.xy.shape == other.xy.shape
             and self.edges.shape == other.edges.shape
             and np.array_equal(self.kinds, other.kinds)
+            and np.array_equal(self.frontier, other.frontier)
+            and np.allclose(self.clearance, other.clearance, rtol=0.0, atol=atol)
             and np.array_equal(self.edges, other.edges)
             and np.allclose(self.xy, other.xy, rtol=0.0, atol=atol)
             and np.allclose(self.lengths, other.lengths, rtol=0.0, atol=atol)
@@ -360,6 +380,37 @@ def _as_lengths(lengths: Any, straight: np.ndarray) -> np.ndarray:
             f"{straight[e]:.4f} between its nodes"
         )
     return arr
+
+
+def _as_clearance(clearance: Any, n: int) -> np.ndarray | None:
+    if clearance is None:
+        return None
+    if isinstance(clearance, (str, bytes, dict)):
+        raise TypeError(f"clearance must be a sequence of {n} numbers, got "
+                        f"{type(clearance).__name__}")
+    try:
+        arr = np.asarray(clearance, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"clearance must be numeric, got {type(clearance).__name__}") from exc
+    if arr.size != n:
+        raise ValueError(f"clearance must have one entry per node ({n}), got {arr.size}")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"clearance[{i}] = {arr[i]} must be finite and >= 0")
+    return arr
+
+
+def _as_flags(frontier: Any, n: int) -> np.ndarray | None:
+    if frontier is None:
+        return None
+    arr = np.asarray(frontier)
+    if arr.dtype != bool and not (np.issubdtype(arr.dtype, np.integer)
+                                  and np.isin(arr, (0, 1)).all()):
+        raise TypeError(f"frontier must hold booleans, got dtype {arr.dtype}")
+    if arr.size != n:
+        raise ValueError(f"frontier must have one entry per node ({n}), got {arr.size}")
+    return arr.astype(bool).ravel()
 
 
 def _as_paths(paths: Sequence[Any], n_edges: int) -> tuple[np.ndarray, ...]:

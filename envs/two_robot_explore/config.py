@@ -24,11 +24,6 @@ REWARD_MODES = ("shared", "oracle", "individual")
 ACTION_TYPES = ("continuous", "discrete")
 """``EnvConfig.action_type`` values."""
 
-TOPO_PRESETS = ("sonar", "default")
-"""``MappingConfig.topo_preset`` values: ``topo.extract.ExtractConfig.for_sonar()`` (eroded by
-about a robot radius, eager spur pruning and node merging: suited to ragged sonar grids) or
-``ExtractConfig()``."""
-
 MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "none")
 """``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.grid_merge.hybrid_merge``: the
 structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method, or
@@ -56,6 +51,24 @@ def _check_optional_real(value: object, name: str, **bounds: Any) -> float | Non
 
 def _set(obj: object, name: str, value: object) -> None:
     object.__setattr__(obj, name, value)
+
+
+def _extract_config(value: object) -> Any:
+    """``mapping.topo`` as a ``topo.ExtractConfig``: ``None`` (the defaults), a config, or a
+    dict of its fields (errors name ``mapping.topo``)."""
+    from topo.extract import ExtractConfig
+
+    if value is None:
+        return ExtractConfig()
+    if isinstance(value, ExtractConfig):
+        return value
+    if isinstance(value, Mapping):
+        try:
+            return ExtractConfig.from_dict(dict(value))
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"mapping.topo: {exc}") from exc
+    raise TypeError(f"mapping.topo must be a topo.ExtractConfig, a dict of its fields or None, "
+                    f"got {type(value).__name__}")
 
 
 def _build(cls: type, data: object, name: str) -> Any:
@@ -262,7 +275,8 @@ class MappingConfig:
     Attributes:
         grid_resolution: cell size of each robot's occupancy grid, metres.
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
-        topo_preset: extraction settings, ``"sonar"`` or ``"default"`` (:data:`TOPO_PRESETS`).
+        topo: settings of the extraction (``topo.ExtractConfig``, or a dict of its fields;
+            ``None`` for its defaults).
         merge_every: merge the two topological maps every this many steps (``0`` never).
         merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, or ``"none"``
             (:data:`MERGE_METHODS`).
@@ -280,7 +294,7 @@ class MappingConfig:
 
     grid_resolution: float = 0.1
     topo_every: int = 10
-    topo_preset: str = "sonar"
+    topo: Any = None
     merge_every: int = 25
     merge_method: str = "hybrid"
     grid_merge_every: int = 100
@@ -294,7 +308,7 @@ class MappingConfig:
                                                  "mapping.grid_resolution", low=0.02,
                                                  low_inclusive=True, high=0.5))
         _set(self, "topo_every", check_int(self.topo_every, "mapping.topo_every", low=0))
-        _check_choice(self.topo_preset, "mapping.topo_preset", TOPO_PRESETS)
+        _set(self, "topo", _extract_config(self.topo))
         _set(self, "merge_every", check_int(self.merge_every, "mapping.merge_every", low=0))
         _check_choice(self.merge_method, "mapping.merge_method", MERGE_METHODS)
         _set(self, "grid_merge_every", check_int(self.grid_merge_every,

@@ -36,14 +36,16 @@ the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size
 |---|---|---|---|---|
 | ``sonar`` | (8,) f32 | range / ``max_range`` per sonar (1 = no echo) | 0 | 1 |
 | ``odometry`` | (4,) f32 | ``x, y`` (m, own start frame), ``cos θ, sin θ`` | -R, -1 | R, 1 |
-| ``graph_nodes`` | (N, 6) f32 | per node, nearest first (a) | -2R, 0 | 2R, 16 |
+| ``graph_nodes`` | (N, 9) f32 | per node, nearest first (a) | -2R, 0 | 2R, 16 |
 | ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
 | ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
 | ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
 | ``teammate`` | (5,) f32 | teammate's estimated pose (c) | -2R, -1, 0 | 2R, 1, 1 |
 
 (a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
-one-hot (junction, dead end, corner; 0–1), degree (0–16) — of the robot's own topological map.
+one-hot (junction, dead end, corner, gateway; 0–1), degree (0–16), clearance (m, 0–10), frontier
+flag (1 for a node that touches the unknown: where exploring goes on) — of the robot's own
+topological map (see Maps).
 (b) robot at the centre facing up, its left on the image's left, ``mapping.local_map_resolution``
 m/pixel; 0 occupied, 128 unknown, 255 free.
 (c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
@@ -71,8 +73,13 @@ file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` 
 HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
 of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
 ``mapping.grid_resolution``) covers a square of half-side ``R`` around its start; its
-topological map (``topo.extract_topomap`` with ``ExtractConfig.for_sonar()``, made for ragged
-sonar grids) is re-extracted every ``mapping.topo_every`` steps.
+topological map (``topo.extract_topomap``, settings ``mapping.topo``) is re-extracted from the
+grid every ``mapping.topo_every`` steps: **places** at the maxima of the clearance from the
+walls the sonars have seen (room centres, corridor crossings and bends), **gateways** at the
+narrow passes between them (doorways), **dead ends** at corridor ends, and the paths between
+them; a node that touches the unknown is flagged (its ``frontier`` feature) and the structural
+merge leaves it out, since it moves as the map grows. Two robots that know the same rooms put
+the same places there, whatever else each has seen (``benchmarks/topo_repeatability.py``).
 
 Merging (``mapping.merge_method``): ``"hybrid"`` (default) runs the structural global merge
 ``fusion.merge_maps(method="auto")`` on the two topological maps every ``merge_every`` steps
@@ -171,7 +178,7 @@ are a ``ValueError``.
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
 | ``mapping.topo_every`` / ``merge_every`` | int | 10 / 25 | steps (0 = never) |
-| ``mapping.topo_preset`` | str | ``"sonar"`` | ``ExtractConfig.for_sonar()`` or ``"default"`` |
+| ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
 | ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
@@ -221,7 +228,6 @@ from envs.two_robot_explore.robot import Robot, build_space, simulate
 from envs.two_robot_explore.sonar import Sonar
 from envs.two_robot_explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
-from topo.extract import ExtractConfig
 from topo.graph import NodeKind, TopoMap
 
 AGENTS = ("robot_0", "robot_1")
@@ -232,7 +238,11 @@ DISCRETE_ACTIONS = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [-
 MAX_DEGREE = 16
 """Upper bound of the ``graph_nodes`` degree feature (larger degrees are clipped)."""
 
-N_NODE_FEATURES = 2 + len(NodeKind) + 1
+MAX_CLEARANCE = 10.0
+"""Upper bound of the ``graph_nodes`` clearance feature, metres (larger values are clipped)."""
+
+N_NODE_FEATURES = 2 + len(NodeKind) + 3
+"""Per node: ``x, y``, the kind one-hot, degree, clearance, frontier flag (the manual)."""
 
 
 class TwoRobotExploreEnv(ParallelEnv):
@@ -285,8 +295,6 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._build_spaces()
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
-        self._extract_config = (ExtractConfig.for_sonar() if cfg.mapping.topo_preset == "sonar"
-                                else ExtractConfig())
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
@@ -312,7 +320,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         node_hi = np.ones((n, N_NODE_FEATURES), dtype=f32)
         node_lo[:, :2] = -2 * r
         node_hi[:, :2] = 2 * r
-        node_hi[:, -1] = MAX_DEGREE
+        node_hi[:, -3] = MAX_DEGREE
+        node_hi[:, -2] = MAX_CLEARANCE
         return spaces.Dict({
             "sonar": spaces.Box(0.0, 1.0, (len(cfg.sonar.angles),), f32),
             "odometry": spaces.Box(np.array([-r, -r, -1, -1], f32), np.array([r, r, 1, 1], f32)),
@@ -565,7 +574,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         every = cfg.mapping.topo_every
         if every and self.steps % every == 0:
             for i, rmap in enumerate(self.maps):
-                rmap.extract(self._extract_config)
+                rmap.extract(cfg.mapping.topo)
                 self._cache_graph(i)
 
     def _fuse(self) -> None:
@@ -700,7 +709,9 @@ class TwoRobotExploreEnv(ParallelEnv):
         topo = self.maps[i].topomap
         static = np.zeros((topo.n_nodes, N_NODE_FEATURES - 2), dtype=np.float32)
         static[np.arange(topo.n_nodes), topo.kinds] = 1.0
-        static[:, -1] = np.minimum(topo.degree(), MAX_DEGREE)
+        static[:, -3] = np.minimum(topo.degree(), MAX_DEGREE)
+        static[:, -2] = np.minimum(topo.clearance, MAX_CLEARANCE)
+        static[:, -1] = topo.frontier
         self._graph_cache[i] = (static, None, None)
 
     def _local_map(self, i: int, across: list[np.ndarray] | None) -> np.ndarray:

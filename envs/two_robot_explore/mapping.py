@@ -41,7 +41,7 @@ from fusion.rigid import Rigid2D
 from topo._grid_kernels import NO_MASK
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
-from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid
+from topo.grid import IMAGE_VALUES, OccupancyGrid
 
 LOCAL_MAP_VALUES = IMAGE_VALUES
 """``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
@@ -185,16 +185,15 @@ class RobotMap:
         return slice(self.bbox[0], self.bbox[1]), slice(self.bbox[2], self.bbox[3])
 
     def extract(self, config: ExtractConfig | None = None) -> TopoMap:
-        """Re-extract :attr:`topomap` from the free cells inside :attr:`bbox` with
+        """Re-extract :attr:`topomap` from the cell states inside :attr:`bbox` with
         ``topo.extract_topomap`` (``config``: its :class:`topo.extract.ExtractConfig`)."""
         win = self.known_window()
         if win is None:
             return self.topomap
         rs, cs = win
         g = self.geometry
-        free = self.states[win] == CellState.FREE
         origin = (g.origin[0] + cs.start * g.resolution, g.origin[1] + rs.start * g.resolution)
-        self.topomap = extract_topomap(free, resolution=g.resolution, origin=origin,
+        self.topomap = extract_topomap(self.states[win], resolution=g.resolution, origin=origin,
                                        config=config)
         return self.topomap
 

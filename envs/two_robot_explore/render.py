@@ -29,8 +29,9 @@ ROBOT_COLOURS = ((220, 60, 40), (40, 100, 220))
 STATE_COLOURS = np.array([[150, 150, 150], [255, 255, 255], [20, 20, 20]], dtype=np.uint8)
 """Panel colour of each cell state: unknown grey, free white, occupied black."""
 
-KIND_COLOURS = ((230, 140, 0), (160, 0, 160), (0, 150, 90))
-"""Node colour per ``topo.NodeKind``: junction orange, dead end purple, corner green."""
+KIND_COLOURS = ((230, 140, 0), (160, 0, 160), (0, 150, 90), (200, 30, 30))
+"""Node colour per ``topo.NodeKind``: junction orange, dead end purple, corner green, gateway
+red (a frontier node is drawn hollow)."""
 
 
 def _import_pygame():
@@ -102,10 +103,16 @@ class Renderer:
             return
         xy = topo.xy if transform is None else transform.apply(topo.xy)
         pts = [view.px(x, y) for x, y in xy.tolist()]
-        for u, v in topo.edges.tolist():
-            pg.draw.line(self.surface, (0, 120, 200), pts[u], pts[v], 2)
-        for p, k in zip(pts, topo.kinds.tolist(), strict=True):
-            pg.draw.circle(self.surface, KIND_COLOURS[k], p, 4)
+        if topo.paths is not None:
+            for path in topo.paths:
+                line = path if transform is None else transform.apply(path)
+                pg.draw.lines(self.surface, (0, 120, 200), False,
+                              [view.px(x, y) for x, y in line.tolist()], 2)
+        else:
+            for u, v in topo.edges.tolist():
+                pg.draw.line(self.surface, (0, 120, 200), pts[u], pts[v], 2)
+        for p, k, f in zip(pts, topo.kinds.tolist(), topo.frontier.tolist(), strict=True):
+            pg.draw.circle(self.surface, KIND_COLOURS[k], p, 4, width=1 if f else 0)
 
     def _label(self, text: str, pos: tuple[int, int]) -> None:
         self.surface.blit(self.font.render(text, True, (0, 0, 0), (255, 255, 255)), pos)

@@ -177,7 +177,7 @@ def test_step_before_reset_and_after_the_end_tell_to_reset():
     ({"world": {"door_width": 0.4}}, ValueError, "world.door_width must be > 2 \\* robot"),
     ({"mapping": {"local_map_size": 32}}, ValueError, "mapping.local_map_size must be >= 64"),
     ({"mapping": {"merge_method": "magic"}}, ValueError, "mapping.merge_method must be one of"),
-    ({"mapping": {"topo_preset": "fine"}}, ValueError, r"mapping.topo_preset must be one of \['sonar'"),
+    ({"mapping": {"topo": {"spur": 1}}}, ValueError, r"mapping.topo: ExtractConfig has unknown keys \[.spur.\]"),
     ({"mapping": {"grid_merge_growth": -0.1}}, ValueError,
      "mapping.grid_merge_growth must be >= 0.0, got -0.1"),
     ({"render_mode": "ansi"}, ValueError, "render_mode must be one of"),

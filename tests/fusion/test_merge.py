@@ -163,7 +163,7 @@ def test_too_small_maps_rejected_with_reason():
     tiny = TopoMap.from_arrays([(0, 0), (1, 0)], [(0, 1)])
     result = merge_maps(tiny, tiny)
     assert not result.accepted
-    assert "map_a has 2 node(s); at least 3 are needed" in result.reason
+    assert "map_a has 2 node(s) off the frontier (of 2); at least 3 are needed" in result.reason
     assert result.evidence is None
 
 
@@ -275,13 +275,13 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
     its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
     scored 0. ``landed`` counts the nodes each paired before its refit."""
     from fusion import _merge_kernels as K
-    from fusion.merge import _hit_grid, _prepare
+    from fusion.merge import _hit_grid, _prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
     truth = Rigid2D(0.7, np.array([3.0, -2.0]))
     b = a.transformed(truth.inverse())  # p_A = truth(p_B)
-    table, x0, y0, inv_cell = _hit_grid(_prepare(a, cfg), cfg.coarse_tolerance, cfg.eps)
+    table, x0, y0, inv_cell = _hit_grid(_prepare_pair(a, a, cfg)[0], cfg.coarse_tolerance, cfg.eps)
     theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
     tx = np.array([truth.T[0] + 0.1, truth.T[0]])
     ty = np.array([truth.T[1] - 0.05, truth.T[1]])
@@ -300,12 +300,12 @@ def test_likelihood_rewards_tight_matches(pair):
     """MergeEvidence.likelihood: exact matches score the tightest spread's full log-ratio each;
     the same matches 0.3 m off score less (a chance-like distance), and the score with them."""
     from fusion import _merge_kernels as K
-    from fusion.merge import _evaluate, _prepare
+    from fusion.merge import _evaluate, _prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
     truth = Rigid2D(1.1, np.array([-4.0, 2.5]))
-    pa, pb = _prepare(a, cfg), _prepare(a.transformed(truth.inverse()), cfg)
+    pa, pb = _prepare_pair(a, a.transformed(truth.inverse()), cfg)
     exact = _evaluate(pa, pb, truth.theta, truth.T, cfg).evidence
     s2 = 2 * K.LIKELIHOOD_SIGMAS[0] ** 2
     assert exact.inliers == a.n_nodes
@@ -408,28 +408,30 @@ def test_path_evidence_counts_paths_on_and_beside_the_other_maps():
     each other's (the raster's cells, PATH_CELL wide, cost a few tenths of the soft weight);
     moved 1.2 m aside the corridors run beside each other (path_off), and only the branches
     that still overlap agree."""
-    from fusion.merge import _evaluate, _prepare
+    from fusion.merge import _evaluate, _prepare_pair
 
     cfg = MergeConfig()
-    a = _prepare(_corridors(), cfg)
-    same = _evaluate(a, _prepare(_corridors(), cfg), 0.0, np.zeros(2), cfg).evidence
+    a, b = _prepare_pair(_corridors(), _corridors(), cfg)
+    same = _evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
     assert 0.8 * 48.0 < same.path_agree <= 48.0 and same.path_off == 0.0
-    aside = _evaluate(a, _prepare(_corridors(1.2), cfg), 0.0, np.zeros(2), cfg).evidence
+    a, b = _prepare_pair(_corridors(), _corridors(1.2), cfg)
+    aside = _evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
     assert aside.path_off > 12.0 and aside.path_agree < 0.6 * same.path_agree  # the 2 × 12 m spines
 
 
 def test_path_evidence_follows_polylines():
     """A path's polyline, not the straight line between its nodes, is what lies on the other
     map: a path bowed 1.5 m out does not agree with a straight one; the same bow does."""
-    from fusion.merge import _evaluate, _prepare
+    from fusion.merge import _evaluate, _prepare_pair
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]]
     bow = [np.array([[0.0, 0.0], [5.0, 1.5], [10.0, 0.0]]), np.array([[10.0, 0.0], [10.0, 5.0]])]
-    straight = _prepare(TopoMap.from_arrays(xy, [[0, 1], [1, 2]]), cfg)
-    bowed = _prepare(TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=bow), cfg)
-    ev_bow = _evaluate(bowed, bowed, 0.0, np.zeros(2), cfg).evidence
-    ev_mixed = _evaluate(straight, bowed, 0.0, np.zeros(2), cfg).evidence
+    straight_map = TopoMap.from_arrays(xy, [[0, 1], [1, 2]])
+    bowed_map = TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=bow)
+    ev_bow = _evaluate(*_prepare_pair(bowed_map, bowed_map, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_mixed = _evaluate(*_prepare_pair(straight_map, bowed_map, cfg), 0.0, np.zeros(2),
+                         cfg).evidence
     assert ev_mixed.path_agree < ev_bow.path_agree - 10.0
     assert ev_mixed.path_off > 5.0 and ev_bow.path_off == 0.0
 
@@ -470,8 +472,7 @@ def test_final_fit_uses_the_paths(monkeypatch):
     rng = np.random.default_rng(4)
     xy = a.xy + rng.normal(0.0, 0.15, a.xy.shape)
     exact = [np.array([a.xy[u], a.xy[v]]) for u, v in a.edges]
-    pa = merge._prepare(a, cfg)
-    pb = merge._prepare(TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
+    pa, pb = merge._prepare_pair(a, TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
     matches = np.column_stack([np.arange(a.n_nodes), np.arange(a.n_nodes)])
     theta, t = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
     monkeypatch.setattr(merge, "PATH_FIT_WEIGHT", 0.0)
@@ -484,7 +485,7 @@ def test_pixel_fine_polylines_are_read_as_chords():
     """Extracted maps carry a polyline point per grid cell; the path evidence reads them as
     chords about PATH_CHORD long that keep each polyline's ends and stay on its pixels, so a
     pixel-fine map scores like the same map drawn with straight pieces."""
-    from fusion.merge import PATH_CHORD, _evaluate, _prepare, _segments
+    from fusion.merge import PATH_CHORD, _evaluate, _prepare_pair, _segments
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
@@ -499,9 +500,8 @@ def test_pixel_fine_polylines_are_read_as_chords():
     assert [0.0, 0.0] in starts and [6.0, 0.0] in ends and [6.0, 0.0] in starts
     assert [6.0, 4.0] in ends
     plain = TopoMap.from_arrays(xy, [[0, 1], [1, 2]])
-    ev_fine = _evaluate(_prepare(m, cfg), _prepare(m, cfg), 0.0, np.zeros(2), cfg).evidence
-    ev_plain = _evaluate(_prepare(plain, cfg), _prepare(plain, cfg), 0.0, np.zeros(2),
-                         cfg).evidence
+    ev_fine = _evaluate(*_prepare_pair(m, m, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_plain = _evaluate(*_prepare_pair(plain, plain, cfg), 0.0, np.zeros(2), cfg).evidence
     assert ev_fine.path_agree == pytest.approx(ev_plain.path_agree, rel=0.05)
 
 

@@ -130,7 +130,7 @@ def test_bad_input_is_named(kwargs, error, match):
 
 def test_from_dict_refuses_foreign_and_unknown_keys():
     good = TopoMap.from_arrays(T_XY, T_EDGES).to_dict()
-    with pytest.raises(ValueError, match="not a topomerge.TopoMap version 1 dict"):
+    with pytest.raises(ValueError, match="not a topomerge.TopoMap version 1 or 2 dict"):
         TopoMap.from_dict({**good, "version": 99})
     with pytest.raises(ValueError, match=r"unknown keys \['colour'\]"):
         TopoMap.from_dict({**good, "colour": "red"})
@@ -148,21 +148,40 @@ def test_from_networkx_needs_positions():
 
 
 @given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.integers(0, 15))
-def test_from_valid_arrays_is_from_arrays_without_the_checks(seed, n, n_edges):
+def test_descriptors_survive_every_round_trip(seed, n, n_edges):
+    """Clearances and frontier flags go through dicts, networkx and rigid motions unchanged."""
     rng = np.random.default_rng(seed)
     xy = rng.uniform(-5, 5, (n, 2))
     pairs = [(u, v) for u, v in rng.integers(0, n, (n_edges, 2)).tolist() if u != v]
-    edges = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    lengths = [float(np.linalg.norm(xy[u] - xy[v])) + rng.uniform(0, 2) for u, v in pairs]
-    paths = [np.stack([xy[u], rng.uniform(-5, 5, 2), xy[v]])[:: 1 if k % 2 else -1]
-             for k, (u, v) in enumerate(pairs)]
-    a = TopoMap.from_arrays(xy, edges, lengths=lengths, paths=paths)
-    b = TopoMap.from_valid_arrays(xy.copy(), edges.copy(), lengths, paths)
-    assert a.to_dict() == b.to_dict()
-    for f in ("xy", "kinds", "edges", "lengths"):
-        x, y = getattr(a, f), getattr(b, f)
-        assert x.dtype == y.dtype and x.shape == y.shape and not y.flags.writeable
-        np.testing.assert_array_equal(x, y)
-    for p, q in zip(a.paths, b.paths, strict=True):
-        assert q.flags.c_contiguous and not q.flags.writeable
-        np.testing.assert_array_equal(p, q)
+    m = TopoMap.from_arrays(xy, np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+                            clearance=rng.uniform(0, 3, n), frontier=rng.random(n) < 0.5)
+    assert TopoMap.from_dict(m.to_dict()).equals(m)
+    back = TopoMap.from_networkx(m.to_networkx())  # same nodes; networkx orders the edges
+    for f in ("xy", "kinds", "clearance", "frontier"):
+        np.testing.assert_array_equal(getattr(back, f), getattr(m, f))
+    moved = m.transformed(_Shift((1.0, -2.0)))
+    np.testing.assert_array_equal(moved.clearance, m.clearance)
+    np.testing.assert_array_equal(moved.frontier, m.frontier)
+    assert not m.clearance.flags.writeable and not m.frontier.flags.writeable
+
+
+class _Shift:
+    def __init__(self, t):
+        self.t = np.asarray(t)
+
+    def apply(self, points):
+        return np.asarray(points) + self.t
+
+
+def test_version_1_dicts_still_read_and_descriptors_are_checked():
+    m = TopoMap.from_arrays([[0, 0], [1, 0]], [[0, 1]])
+    old = {k: v for k, v in m.to_dict().items() if k not in ("clearance", "frontier")}
+    old["version"] = 1
+    back = TopoMap.from_dict(old)
+    assert back.equals(m) and not back.frontier.any() and (back.clearance == 0).all()
+    with pytest.raises(ValueError, match=r"clearance\[1\] = -1.0 must be finite and >= 0"):
+        TopoMap.from_arrays([[0, 0], [1, 0]], clearance=[0.5, -1.0])
+    with pytest.raises(ValueError, match=r"clearance must have one entry per node \(2\), got 3"):
+        TopoMap.from_arrays([[0, 0], [1, 0]], clearance=[0.5, 1.0, 2.0])
+    with pytest.raises(TypeError, match="frontier must hold booleans, got dtype float64"):
+        TopoMap.from_arrays([[0, 0], [1, 0]], frontier=[0.5, 1.0])
