@@ -397,16 +397,19 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
 
 # ------------------------------------------------------------------------------- RLlib
 def _start_ray(args: Args) -> bool:
-    """Join ``args.address`` or start a local Ray cluster with a CPU per env runner (at
-    least the machine's); returns whether this call started Ray (and so must stop it)."""
+    """Join ``args.address`` or start a new local Ray cluster (even when ``ray start`` runs one
+    here) with a CPU per env runner, at least the machine's; returns whether this call started
+    Ray (and so must stop it)."""
     import ray
 
     if ray.is_initialized():
         return False
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": "ERROR"}
     if args.address is None:
-        kwargs["num_cpus"] = max(os.cpu_count() or 1, args.num_env_runners)
-    ray.init(address=args.address, **kwargs)
+        kwargs.update(address="local", num_cpus=max(os.cpu_count() or 1, args.num_env_runners))
+    else:
+        kwargs["address"] = args.address
+    ray.init(**kwargs)
     return True
 
 
