@@ -15,17 +15,21 @@ $(VENV)/.torch:
 	$(PIP) install $(TORCH)
 	touch $@
 
+# every later install keeps that torch (a constraint, not just "already satisfied")
+$(VENV)/constraints.txt: $(VENV)/.torch
+	echo "$(TORCH)" > $@
+
 # one stamp per set of extras, redone when pyproject.toml changes
-$(VENV)/.deps-base: pyproject.toml $(VENV)/.torch
-	$(PIP) install -e ".[render]"
+$(VENV)/.deps-base: pyproject.toml $(VENV)/constraints.txt
+	$(PIP) install -c $(VENV)/constraints.txt -e ".[render]"
 	touch $@
 
-$(VENV)/.deps-test: pyproject.toml $(VENV)/.torch
-	$(PIP) install -e ".[dev,render,ray]"
+$(VENV)/.deps-test: pyproject.toml $(VENV)/constraints.txt
+	$(PIP) install -c $(VENV)/constraints.txt -e ".[dev,render,ray,rllib]"
 	touch $@
 
-$(VENV)/.deps-bench: pyproject.toml $(VENV)/.torch
-	$(PIP) install -e ".[dev,render,bench]"
+$(VENV)/.deps-bench: pyproject.toml $(VENV)/constraints.txt
+	$(PIP) install -c $(VENV)/constraints.txt -e ".[dev,render,bench]"
 	touch $@
 
 # The main job on the embedded defaults (about 1 minute on 2 cores, plus the venv): the paper's example, one

@@ -1,23 +1,29 @@
-"""Train an exploration policy with PPO (Stable-Baselines3), map fusion inside the RL loop.
+"""Train an exploration policy with PPO, map fusion inside the RL loop, on Stable-Baselines3
+(default) or RLlib (``--backend rllib``, sampling scaled out over a Ray cluster).
 
-Both robots share one policy (parameter sharing): each robot of each env is one sub-environment
-of a :class:`agents.sb3.ParallelVecEnv`. The policy acts at one of two levels (``--level``):
-``goals`` (default) picks which frontier sector to explore next every ``--hold`` steps and a
-frontier planner drives there (:mod:`agents.goals`); ``motion`` outputs the env's velocity
-commands every step. The reward is the env's team reward — the growth of the
+Both robots share one policy (parameter sharing): with SB3 each robot of each env is one
+sub-environment of a :class:`agents.sb3.ParallelVecEnv`; with RLlib both robots map to one
+RLModule through ``ParallelPettingZooEnv`` (:mod:`agents.rllib`). The policy acts at one of two
+levels (``--level``): ``goals`` (default) picks which frontier sector to explore next every
+``--hold`` steps and a frontier planner drives there (:mod:`agents.goals`); ``motion`` outputs
+the env's velocity commands every step. The reward is the env's team reward — the growth of the
 *shared* map, i.e. of robot 0's map united with robot 1's map moved by the latest accepted
 ``fusion.merge_maps`` transform — so a wrong merge costs reward (``--reward-mode oracle`` uses the
 true union instead, for ablations).
 
     python train.py --total-timesteps 200000 --n-envs 4 --seed 1
+    python train.py --backend rllib --num-env-runners 2            # a local Ray cluster
+    python train.py --backend rllib --address auto --num-env-runners 8   # joins `ray start`'s
     python train.py --help
     tensorboard --logdir runs
 
 A run writes ``runs/<env>__<seed>__<time>/``: ``tb/`` (TensorBoard: reward, true and shared
-coverage, merge acceptance and errors, episode length, steps/s), ``checkpoints/`` (atomic,
+coverage, merge acceptance and errors, episode length, agent-steps/s), ``checkpoints/`` (atomic,
 resumable with ``--resume RUN_DIR``), ``eval.json`` / ``eval.md`` / ``eval_coverage.png``
-(periodic evaluation of the policy against ``Frontier`` and ``RandomWalk`` on fixed seeds) and
-``model.zip`` (the final policy, usable as ``--explorer sb3:RUN_DIR/model.zip``).
+(periodic evaluation of the policy against ``Frontier`` and ``RandomWalk`` on fixed seeds,
+:mod:`agents.evaluation`) and the final policy: ``model.zip`` (SB3, usable as
+``--explorer sb3:RUN_DIR/model.zip``) or ``rllib/`` (an RLlib algorithm checkpoint,
+:meth:`agents.rllib.RLlibPolicy.load`).
 
 Readable like CleanRL's ``ppo.py``: ``Args`` below, ``main(args)``, importable for tests.
 """
@@ -40,14 +46,13 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecMonitor
 from tqdm.auto import tqdm
 
-from agents.base import run_episode
-from agents.metrics import EpisodeRecorder
+from agents import evaluation
+from agents.goals import make_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
-from agents.scripted import make_team
 from fusion.pairs import atomic_write_json
-from topo._io import atomic_write, atomic_write_bytes
+from topo._io import atomic_write
 
 ENV_ID = "two_robot_explore_v0"
 
@@ -56,6 +61,9 @@ ENV_ID = "two_robot_explore_v0"
 class Args:
     """PPO on two_robot_explore_v0 with parameter sharing (both robots, one policy)."""
 
+    backend: Literal["sb3", "rllib"] = "sb3"
+    """PPO implementation: Stable-Baselines3 (worker processes on this machine) or RLlib
+    (env runners on a Ray cluster; needs the ``rllib`` extra)."""
     total_timesteps: int = 200_000
     """Agent-steps to train for (each env step gives two: one per robot; at the goals level
     a decision counts its ``hold`` env steps)."""
@@ -66,20 +74,28 @@ class Args:
     """Env steps each goal decision is held (``level="goals"``)."""
     sector_head: bool = True
     """At the goals level, score every sector with one shared network
-    (:class:`agents.policy.SectorPolicy`); ``False``: SB3's ``MultiInputPolicy`` (one linear
-    layer from the context to the 8 logits)."""
+    (:class:`agents.policy.SectorPolicy`, or :class:`agents.rllib.TopoExplorerModule`'s
+    sector head); ``False``: one linear layer from the context to the 8 logits."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
     """Envs run in parallel (2 robots each, so 2 × n_envs policy sub-environments)."""
     n_workers: int | None = None
-    """Worker processes stepping the envs (1: in this process); default one per CPU core, at
+    """``--backend sb3``: worker processes stepping the envs (1: in this process); default one
+    per CPU core, at
     most ``n_envs`` (on 2 cores: 946 against 657 agent-steps/s at the goals level,
     ``benchmarks/train_speed.py``)."""
+    num_env_runners: int | None = None
+    """``--backend rllib``: Ray actors sampling in parallel (0: sample in this process), the
+    ``n_envs`` envs split between them; default one per CPU core, at most ``n_envs``."""
+    address: str | None = None
+    """``--backend rllib``: the Ray cluster to join (``auto``, or ``HEAD_IP:6379`` as printed by
+    ``ray start --head``); default: start a local one for this run."""
     reward_mode: Literal["shared", "oracle", "individual"] = "shared"
     """Env reward: growth of the fused shared map, of the true union, or per robot."""
     device: str = "cpu"
-    """Torch device for the policy ("cpu", "cuda", "auto")."""
+    """Torch device for the policy ("cpu", "cuda", "auto"; with RLlib anything but "cpu" gives
+    the learner a GPU when torch sees one)."""
     world_size: tuple[float, float] = (10.0, 10.0)
     """Procedural building size in metres."""
     max_cycles: int = 500
@@ -119,7 +135,8 @@ class Args:
     run_name: str | None = None
     """Run folder name (default: <env>__<seed>__<time>); an existing one is overwritten."""
     resume: Path | None = None
-    """Continue a run: its folder (latest checkpoint) or a checkpoint .zip."""
+    """Continue a run: its folder (latest checkpoint) or a checkpoint (an SB3 ``.zip``, an
+    RLlib checkpoint folder), with the backend it was trained with."""
     progress: bool = True
     """Show a progress bar."""
     torch_threads: int = 1
@@ -135,9 +152,28 @@ class Args:
             self.batch_size = 64 if goals else 256
         if self.eval_max_cycles is None and isinstance(self.max_cycles, int):
             self.eval_max_cycles = 3 * self.max_cycles
+        envs = self.n_envs if isinstance(self.n_envs, int) else 1
         if self.n_workers is None:
-            envs = self.n_envs if isinstance(self.n_envs, int) else 1
             self.n_workers = max(1, min(os.cpu_count() or 1, envs))
+        if self.backend not in ("sb3", "rllib"):
+            raise ValueError(f"backend must be one of ['sb3', 'rllib'], got {self.backend!r}")
+        if self.backend == "rllib":
+            if self.num_env_runners is None:
+                self.num_env_runners = max(1, min(os.cpu_count() or 1, envs))
+            value = self.num_env_runners
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"num_env_runners must be an integer >= 0, got {value!r}")
+            if isinstance(self.n_envs, int) and value > self.n_envs:
+                raise ValueError(f"num_env_runners must be <= n_envs ({self.n_envs}) so that "
+                                 f"every runner has an env, got {value}")
+            if self.address is not None and (not isinstance(self.address, str)
+                                             or not self.address):
+                raise ValueError(f"address must be a non-empty string, got {self.address!r}")
+        else:
+            for name in ("num_env_runners", "address"):
+                if getattr(self, name) is not None:
+                    raise ValueError(f"{name} applies to backend='rllib' only, got "
+                                     f"{getattr(self, name)!r} with backend={self.backend!r}")
         for name in ("total_timesteps", "n_envs", "n_workers", "n_steps", "batch_size",
                      "n_epochs", "eval_episodes", "torch_threads", "max_cycles", "hold",
                      "eval_max_cycles"):
@@ -170,11 +206,17 @@ class Args:
                                  f"{sorted(EXPLORERS)}")
 
     @property
+    def envs_per_runner(self) -> int:
+        """``--backend rllib``: envs each env runner steps (``n_envs`` split evenly)."""
+        return math.ceil(self.n_envs / max(1, self.num_env_runners or 0))
+
+    @property
     def steps_per_decision(self) -> int:
         """Env steps per policy decision: ``hold`` at the goals level, else 1."""
         return self.hold if self.level == "goals" else 1
 
     def env_config(self) -> dict[str, Any]:
+        """The env's ``EnvConfig`` fields for training (``env_kwargs`` merged in)."""
         cfg = {"max_cycles": self.max_cycles, "reward_mode": self.reward_mode,
                "world": {"size": tuple(self.world_size)}}
         for key, value in self.env_kwargs.items():
@@ -185,21 +227,9 @@ class Args:
         return cfg
 
 
-def make_env(config: dict[str, Any], level: str = "motion", hold: int = 10) -> Any:
-    """One ``two_robot_explore_v0`` ParallelEnv, wrapped in
-    :class:`agents.goals.FrontierGoalEnv` at the goals level (a top-level function: picklable
-    for workers)."""
-    from envs.two_robot_explore_v0 import parallel_env
-
-    env = parallel_env(**config)
-    if level == "goals":
-        from agents.goals import FrontierGoalEnv
-
-        env = FrontierGoalEnv(env, hold=hold)
-    return env
-
-
 class _EnvFactory:
+    """Builds one training env (:func:`agents.goals.make_env`); picklable for workers."""
+
     def __init__(self, config: dict[str, Any], level: str, hold: int) -> None:
         self.config, self.level, self.hold = config, level, hold
 
@@ -312,130 +342,22 @@ class Evaluator(_Periodic):
 
 
 # ------------------------------------------------------------------------------- evaluation
-def eval_seeds(args: Args) -> list[int]:
-    """The fixed evaluation worlds: seeds derived from the run seed, disjoint from training's
-    (training envs are seeded ``seed + k``; these come from a separate SeedSequence)."""
-    ss = np.random.SeedSequence([args.seed, 0xE7A1])
-    return [int(s) for s in ss.generate_state(args.eval_episodes)]
+def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
+    """Evaluate ``policy`` (an SB3 model or an :class:`agents.rllib.RLlibPolicy`) against
+    ``args.eval_baselines`` on the run's fixed worlds (:func:`agents.evaluation.evaluate`):
+    writes ``eval.json``, ``eval.md`` and ``eval_coverage.png`` into ``run_dir``."""
+    team = {a: SB3Explorer(policy) for a in ("robot_0", "robot_1")}
+    return evaluation.evaluate(team, run_dir, step, env_config=args.env_config(),
+                               seed=args.seed, episodes=args.eval_episodes,
+                               max_cycles=args.eval_max_cycles, baselines=args.eval_baselines)
 
 
-def eval_worlds(args: Args) -> tuple[dict[str, Any], list[int], dict[str, Any]]:
-    """The evaluation's env config (``eval_max_cycles`` steps), its seeds (:func:`eval_seeds`)
-    and the JSON key that identifies both (for caching results on them)."""
-    config = {**args.env_config(), "max_cycles": args.eval_max_cycles}
-    seeds = eval_seeds(args)
-    return config, seeds, {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
-
-
-def run_explorer(team: dict, config: dict[str, Any], seeds: list[int]) -> list[dict]:
-    """Metrics of ``team`` on each evaluation seed (:class:`agents.metrics.EpisodeRecorder`)."""
-    out = []
-    for seed in seeds:
-        env = make_env(config)
-        rec = EpisodeRecorder()
-        try:
-            run_episode(env, team, seed=seed, callback=rec)
-        finally:
-            env.close()
-        out.append(rec.summary())
-    return out
-
-
-def _summarise(name: str, episodes: list[dict]) -> dict[str, Any]:
-    row: dict[str, Any] = {"explorer": name, "episodes": len(episodes)}
-    for key in ("T50", "T85", "T95", "final_coverage", "overlap", "collisions"):
-        row[key] = float(np.mean([e[key] for e in episodes]))
-    row["reached_T85"] = float(np.mean([e["reached_T85"] for e in episodes]))
-    return row
-
-
-def evaluate(model: PPO, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
-    """Evaluate the policy and the baselines on the fixed worlds; write ``eval.json``,
-    ``eval.md`` and ``eval_coverage.png`` (atomically) into ``run_dir``."""
-    config, seeds, key = eval_worlds(args)
-    cache = run_dir / "eval_baselines.json"
-    stored = json.loads(cache.read_text()) if cache.exists() else {}
-    baselines: dict[str, list[dict]] = stored["explorers"] if stored.get("key") == key else {}
-    for name in args.eval_baselines:
-        if name not in baselines:
-            eps = run_explorer(make_team(name), config, seeds)
-            baselines[name] = [{**e, "coverage": e["coverage"].tolist()} for e in eps]
-    atomic_write_json(cache, {"key": key, "explorers": baselines})
-
-    policy = {a: SB3Explorer(model) for a in ("robot_0", "robot_1")}
-    ppo = [{**e, "coverage": e["coverage"].tolist()} for e in run_explorer(policy, config, seeds)]
-    curves = {"ppo": ppo, **baselines}
-    rows = [_summarise(name, eps) for name, eps in curves.items()]
-    report = {"step": step, "seeds": seeds, "rows": rows, "max_cycles": args.eval_max_cycles}
-    atomic_write_json(run_dir / "eval.json", report)
-    lines = [f"Evaluation at {step} agent-steps on {len(seeds)} fixed worlds "
-             f"({args.eval_max_cycles}-step episodes; T = steps to that true coverage, "
-             f"not reached = {args.eval_max_cycles + 1})", "",
-             "| explorer | T50 | T85 | T95 | reached 85% | final coverage | overlap | "
-             "collisions |", "|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['explorer']} | {r['T50']:.0f} | {r['T85']:.0f} | {r['T95']:.0f} | "
-                     f"{r['reached_T85']:.0%} | {r['final_coverage']:.2f} | {r['overlap']:.2f} "
-                     f"| {r['collisions']:.1f} |")
-    atomic_write_bytes(run_dir / "eval.md", ("\n".join(lines) + "\n").encode())
-    _plot_coverage(curves, run_dir / "eval_coverage.png", step)
-    return report
-
-
-def _plot_coverage(curves: dict[str, list[dict]], path: Path, step: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from topo.plotting import save_figure
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for name, eps in curves.items():
-        n = max(len(e["coverage"]) for e in eps)
-        padded = np.array([np.pad(e["coverage"], (0, n - len(e["coverage"])), mode="edge")
-                           for e in eps])
-        ax.plot(np.arange(1, n + 1), padded.mean(axis=0), label=name)
-    for level in (0.5, 0.85, 0.95):
-        ax.axhline(level, color="0.7", lw=0.8, ls="--")
-    ax.set_xlabel("env step")
-    ax.set_ylabel("true coverage (mean over evaluation worlds)")
-    ax.set_title(f"Coverage vs steps after {step} agent-steps")
-    ax.set_ylim(0, 1)
-    ax.legend()
-    ax.grid(alpha=0.3)
-    save_figure(fig, path)
-    plt.close(fig)
-
-
-# ------------------------------------------------------------------------------- main
-def _resume_checkpoint(resume: Path) -> tuple[Path, Path]:
-    resume = Path(resume)
-    if resume.is_file():
-        return resume.parent.parent, resume
-    checkpoints = sorted((resume / "checkpoints").glob("step_*.zip"))
-    final = resume / "model.zip"
-    candidates = checkpoints + ([final] if final.exists() else [])
-    if not candidates:
-        raise ValueError(f"resume: {str(resume)!r} has no checkpoints/step_*.zip or model.zip")
-    return resume, max(candidates, key=lambda p: p.stat().st_mtime)
-
-
-def main(args: Args) -> Path:
-    """Train (or resume) and return the run folder (see the module docstring)."""
-    torch.set_num_threads(args.torch_threads)
-    if args.resume is not None:
-        run_dir, checkpoint = _resume_checkpoint(args.resume)
-    else:
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(args.runs_dir) / (args.run_name or f"{ENV_ID}__{args.seed}__{stamp}")
-        checkpoint = None
-    run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
-
-    config = args.env_config()
+# ------------------------------------------------------------------------------- SB3
+def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, int]:
+    """Train (or resume from ``checkpoint``) with Stable-Baselines3; save ``model.zip``.
+    Returns the model and the agent-steps trained."""
     scale = args.steps_per_decision
-    venv = ParallelVecEnv([_EnvFactory(config, args.level, args.hold)
+    venv = ParallelVecEnv([_EnvFactory(args.env_config(), args.level, args.hold)
                            for _ in range(args.n_envs)], n_workers=args.n_workers)
     venv = VecMonitor(venv)
     venv.seed(args.seed)
@@ -468,11 +390,164 @@ def main(args: Args) -> Path:
             model.learn(total_timesteps=remaining, callback=callbacks,
                         reset_num_timesteps=checkpoint is None, tb_log_name="ppo")
         save_model_atomic(model, run_dir / "model.zip")
-        evaluate(model, args, run_dir, model.num_timesteps * scale)
     finally:
         venv.close()
+    return model, model.num_timesteps * scale
+
+
+# ------------------------------------------------------------------------------- RLlib
+def _start_ray(args: Args) -> bool:
+    """Join ``args.address`` or start a new local Ray cluster (even when ``ray start`` runs one
+    here) with a CPU per env runner, at least the machine's; returns whether this call started
+    Ray (and so must stop it)."""
+    import ray
+
+    if ray.is_initialized():
+        return False
+    kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": "ERROR"}
+    if args.address is None:
+        kwargs.update(address="local", num_cpus=max(os.cpu_count() or 1, args.num_env_runners))
+    else:
+        kwargs["address"] = args.address
+    ray.init(**kwargs)
+    return True
+
+
+def rllib_config(args: Args) -> Any:
+    """RLlib's ``PPOConfig`` for ``args`` (:func:`agents.rllib.ppo_config`), with the SB3
+    path's hyperparameters: ``n_steps`` decisions per env per update, ``batch_size``
+    transitions per gradient step."""
+    from agents import rllib  # needs the rllib extra
+
+    return rllib.ppo_config(
+        env_config=args.env_config(), level=args.level, hold=args.hold,
+        sector_head=args.sector_head, seed=args.seed, num_env_runners=args.num_env_runners,
+        envs_per_runner=args.envs_per_runner, train_batch_size=args.n_steps * args.n_envs,
+        minibatch_size=args.batch_size, num_epochs=args.n_epochs, lr=args.learning_rate,
+        gamma=args.gamma ** args.steps_per_decision, gae_lambda=args.gae_lambda,
+        entropy_coeff=args.ent_coef, clip_param=args.clip_range,
+        num_gpus=0 if args.device == "cpu" else int(torch.cuda.is_available()))
+
+
+def train_rllib(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[Any, int]:
+    """Train (or resume from ``checkpoint``) with RLlib's PPO on the new API stack; save the
+    algorithm checkpoint ``rllib/``. Returns the policy (:class:`agents.rllib.RLlibPolicy`)
+    and the agent-steps trained."""
+    import ray
+    from torch.utils.tensorboard import SummaryWriter
+
+    from agents import rllib  # needs the rllib extra
+
+    scale = args.steps_per_decision
+    started = _start_ray(args)
+    algo = None
+    writer = SummaryWriter(str(_tb_folder(run_dir / "tb", "rllib_ppo", checkpoint is not None)))
+    try:
+        algo = rllib_config(args).build_algo()
+        steps = 0
+        if checkpoint is not None:
+            algo.restore_from_path(str(checkpoint))
+            steps = rllib.agent_steps(algo) * scale
+        start = steps
+        next_eval, next_checkpoint = (_after(steps, args.eval_every),
+                                      _after(steps, args.checkpoint_every))
+        bar = tqdm(total=args.total_timesteps, initial=steps, unit="step", desc="train",
+                   disable=not args.progress, smoothing=0.05)
+        times = rllib.IterationTimes()
+        t0 = time.perf_counter()
+        while steps < args.total_timesteps:
+            result = algo.train()
+            steps = rllib.agent_steps(algo) * scale
+            bar.update(steps - bar.n)
+            logged = {**rllib.scalars(result),
+                      **times.update(result, restored=checkpoint is not None)}
+            for key, value in logged.items():
+                writer.add_scalar(key, value, steps)
+            writer.add_scalar("time/agent_steps_per_s",
+                              (steps - start) / (time.perf_counter() - t0), steps)
+            if steps >= next_checkpoint:
+                rllib.save_checkpoint(algo, run_dir / "checkpoints" / f"step_{steps:09d}",
+                                      args.level, args.hold)
+                next_checkpoint = _after(steps, args.checkpoint_every)
+            if steps >= next_eval and steps < args.total_timesteps:
+                policy = rllib.RLlibPolicy(algo.get_module(rllib.POLICY_ID), args.hold)
+                _log_eval(writer, evaluate(policy, args, run_dir, steps), steps)
+                next_eval = _after(steps, args.eval_every)
+        bar.close()
+        rllib.save_checkpoint(algo, run_dir / "rllib", args.level, args.hold)
+        policy = rllib.RLlibPolicy(algo.get_module(rllib.POLICY_ID), args.hold)
+    finally:
+        writer.close()
+        if algo is not None:
+            algo.stop()
+        if started:
+            ray.shutdown()
+    return policy, steps
+
+
+def _tb_folder(tb: Path, name: str, resumed: bool) -> Path:
+    """``tb/<name>_<k>``: a new ``k`` per run, the latest one when resuming (as SB3 names
+    its logs)."""
+    taken = [int(p.name.rsplit("_", 1)[1]) for p in tb.glob(f"{name}_*")
+             if p.name.rsplit("_", 1)[1].isdigit()]
+    latest = max(taken, default=0)
+    return tb / f"{name}_{latest if resumed and latest else latest + 1}"
+
+
+def _after(steps: int, every: int) -> float:
+    """The first multiple of ``every`` above ``steps`` (``inf`` when ``every`` is 0)."""
+    return (steps // every + 1) * every if every else math.inf
+
+
+def _log_eval(writer: Any, report: dict[str, Any], steps: int) -> None:
+    for row in report["rows"]:
+        if row["explorer"] == "ppo":
+            for key in ("T50", "T85", "final_coverage"):
+                writer.add_scalar(f"eval/{key}", row[key], steps)
+
+
+# ------------------------------------------------------------------------------- main
+def _resume_checkpoint(resume: Path, backend: str) -> tuple[Path, Path]:
+    """The run folder and the checkpoint to resume from: ``resume`` itself when it is a
+    checkpoint (an SB3 ``.zip``, an RLlib checkpoint folder), else the latest of the run
+    folder's ``checkpoints/`` and final policy."""
+    resume = Path(resume)
+    if backend == "sb3":
+        final, pattern, is_checkpoint = resume / "model.zip", "step_*.zip", resume.is_file()
+    else:
+        from agents.rllib import POLICY_FILE
+
+        final, pattern = resume / "rllib", "step_*"
+        is_checkpoint = (resume / POLICY_FILE).is_file()
+    if is_checkpoint:
+        parent = resume.parent
+        return (parent.parent if parent.name == "checkpoints" else parent), resume
+    candidates = sorted((resume / "checkpoints").glob(pattern)) + (
+        [final] if final.exists() else [])
+    if not candidates:
+        raise ValueError(f"resume: {str(resume)!r} has no checkpoints/{pattern} or "
+                         f"{final.name}")
+    return resume, max(candidates, key=lambda p: p.stat().st_mtime)
+
+
+def main(args: Args) -> Path:
+    """Train (or resume) and return the run folder (see the module docstring)."""
+    torch.set_num_threads(args.torch_threads)
+    if args.resume is not None:
+        run_dir, checkpoint = _resume_checkpoint(args.resume, args.backend)
+    else:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        run_dir = Path(args.runs_dir) / (args.run_name or f"{ENV_ID}__{args.seed}__{stamp}")
+        checkpoint = None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
+
+    train = train_rllib if args.backend == "rllib" else train_sb3
+    policy, steps = train(args, run_dir, checkpoint)
+    evaluate(policy, args, run_dir, steps)
+    final = "model.zip" if args.backend == "sb3" else "rllib"
     print((run_dir / "eval.md").read_text())
-    print(f"run folder: {run_dir}  (policy: {run_dir / 'model.zip'})")
+    print(f"run folder: {run_dir}  (policy: {run_dir / final})")
     return run_dir
 
 

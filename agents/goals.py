@@ -18,6 +18,8 @@ global policy over a local planner):
   every ``hold`` steps), so it evaluates and generates datasets like any explorer.
 * :class:`SectorRule` — the same decisions made by a fixed rule (always ahead, or a random
   sector): the baselines a learnt goal-level policy has to beat.
+* :func:`make_env` — the training env of either level (the plain env, or wrapped), shared by
+  ``train.py``'s SB3 workers and RLlib's env runners.
 
 A policy that picks sectors uniformly at random is already a frontier explorer; PPO learns
 which frontier to prefer.
@@ -249,3 +251,20 @@ class FrontierGoalEnv(ParallelEnv):
 
     def close(self) -> None:
         self.env.close()
+
+
+LEVELS = ("goals", "motion")
+"""What a policy decides: a frontier sector every ``hold`` steps, or the velocity command."""
+
+
+def make_env(config: Mapping[str, Any], level: str = "motion",
+             hold: int = DEFAULT_HOLD) -> ParallelEnv:
+    """One ``two_robot_explore_v0`` ``ParallelEnv`` built from ``config`` (``EnvConfig``
+    fields), wrapped in :class:`FrontierGoalEnv` (holding decisions ``hold`` steps) when
+    ``level`` is ``"goals"``. A top-level function, so it pickles for worker processes."""
+    if level not in LEVELS:
+        raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
+    from envs.two_robot_explore_v0 import parallel_env
+
+    env = parallel_env(**config)
+    return FrontierGoalEnv(env, hold=hold) if level == "goals" else env

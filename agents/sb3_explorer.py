@@ -3,7 +3,9 @@ learned policies drive evaluations and generate map-pair datasets like scripted 
 (``--explorer sb3:PATH``). Motion-level policies (trained on the env) act every step; goal-level
 policies (trained on :class:`agents.goals.FrontierGoalEnv`: a ``frontiers`` observation and
 ``Discrete(SECTORS)`` actions) pick a sector every ``hold`` steps and a
-:class:`agents.goals.GoalFrontier` drives, exactly as in training."""
+:class:`agents.goals.GoalFrontier` drives, exactly as in training. Any policy with SB3's
+``predict(observation, deterministic)`` and ``observation_space`` works the same way: RLlib
+policies come through :class:`agents.rllib.RLlibPolicy`."""
 
 from __future__ import annotations
 
@@ -20,13 +22,18 @@ class SB3Explorer(Explorer):
     """Acts with a saved SB3 model (PPO by default) from the robot's observation.
 
     Args:
-        policy: a loaded SB3 model (``BaseAlgorithm``); load once with :meth:`load_policy` and
-            share it between the two robots (parameter sharing, as trained).
+        policy: a loaded SB3 model (``BaseAlgorithm``; load once with :meth:`load_policy`) or
+            another object with its ``predict`` and ``observation_space`` (an
+            :class:`agents.rllib.RLlibPolicy`); share it between the two robots (parameter
+            sharing, as trained).
         deterministic: use the policy's mode instead of sampling.
         action_type: must match what the model was trained with.
 
     A goal-level model holds each decision for its ``goal_hold`` attribute's steps (saved with
     the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise).
+
+    Raises:
+        TypeError: ``policy`` has no ``predict`` method.
     """
 
     name = "sb3"
@@ -35,8 +42,8 @@ class SB3Explorer(Explorer):
                  action_type: str = "continuous") -> None:
         super().__init__(action_type)
         if not hasattr(policy, "predict"):
-            raise TypeError(f"policy must be a Stable-Baselines3 model, got "
-                            f"{type(policy).__name__}")
+            raise TypeError(f"policy must be a Stable-Baselines3 model or have its "
+                            f"predict(observation, deterministic), got {type(policy).__name__}")
         self.policy = policy
         self.deterministic = bool(deterministic)
         space = getattr(policy, "observation_space", None)

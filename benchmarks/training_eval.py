@@ -8,7 +8,8 @@ Usage::
 
 Each run is evaluated by ``train.evaluate`` (the same worlds and episode length as the run's
 own evaluation: ``eval_max_cycles``, default 3 × ``max_cycles``) into ``OUT/<run name>/``; the
-scripted baselines are computed once per set of worlds. Use it after changing the explorers or
+scripted baselines are computed once per set of worlds. Runs of either backend work (SB3's
+``model.zip``, RLlib's ``rllib/``). Use it after changing the explorers or
 the env, so that every row of a table comes from the same code.
 """
 
@@ -23,6 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import train  # noqa: E402
+from agents.evaluation import eval_worlds, run_explorer, summarise  # noqa: E402
 from agents.goals import SECTOR_RULES, SectorRule  # noqa: E402
 from topo._io import atomic_write_bytes  # noqa: E402
 
@@ -42,18 +44,20 @@ def run_args(run_dir: Path, episodes: int | None) -> train.Args:
 def rule_row(rule: str, args: train.Args, cache: Path) -> dict:
     """The summary row of :class:`SectorRule` ``rule`` on ``args``' evaluation worlds (cached
     per seed in ``cache``, keyed by the worlds and the env config)."""
-    config, seeds, key = train.eval_worlds(args)
+    config, seeds, key = eval_worlds(args.env_config(), args.seed, args.eval_episodes,
+                                     args.eval_max_cycles)
     if cache.exists() and (stored := json.loads(cache.read_text()))["key"] == key:
         return stored["row"]
     team = {a: SectorRule(rule, hold=args.hold) for a in ("robot_0", "robot_1")}
-    row = train._summarise(rule, train.run_explorer(team, config, seeds))
+    row = summarise(rule, run_explorer(team, config, seeds))
     atomic_write_bytes(cache, json.dumps({"key": key, "row": row}).encode())
     return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", type=Path, help="run folders (with model.zip)")
+    parser.add_argument("runs", nargs="+", type=Path,
+                        help="run folders (with model.zip or rllib/)")
     parser.add_argument("--episodes", type=int, default=None,
                         help="evaluation worlds per run (default: the run's eval_episodes)")
     parser.add_argument("--out", type=Path, default=Path("out/training_eval"))
@@ -66,18 +70,24 @@ def main() -> None:
     torch.set_num_threads(1)
     rows = []
     for run in opts.runs:
-        if not (run / "model.zip").is_file():
-            raise SystemExit(f"{run}: no model.zip (not a finished train.py run)")
         args = run_args(run, opts.episodes)
         missing = {"frontier", "random_walk"} - set(args.eval_baselines)
         args.eval_baselines = tuple(args.eval_baselines) + tuple(sorted(missing))
-        model = PPO.load(run / "model.zip", device="cpu")
+        if (run / "model.zip").is_file():
+            model = PPO.load(run / "model.zip", device="cpu")
+            steps = model.num_timesteps * args.steps_per_decision
+        elif (run / "rllib").is_dir():  # --backend rllib: its final evaluation has the count
+            from agents.rllib import RLlibPolicy
+
+            model = RLlibPolicy.load(run / "rllib")
+            steps = json.loads((run / "eval.json").read_text())["step"]
+        else:
+            raise SystemExit(f"{run}: no model.zip or rllib/ (not a finished train.py run)")
         out = opts.out / run.name
         out.mkdir(parents=True, exist_ok=True)
         cache = opts.out / f"baselines_seed{args.seed}.json"  # shared by runs of one seed
         if cache.exists():
             atomic_write_bytes(out / "eval_baselines.json", cache.read_bytes())
-        steps = model.num_timesteps * args.steps_per_decision
         report = train.evaluate(model, args, out, steps)
         atomic_write_bytes(cache, (out / "eval_baselines.json").read_bytes())
         by = {r["explorer"]: r for r in report["rows"]}

@@ -106,11 +106,26 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"level": "joints"}, r"level must be one of \['goals', 'motion'\], got 'joints'"),
         ({"hold": 0}, "hold must be an integer >= 1, got 0"),
         ({"eval_max_cycles": 0}, "eval_max_cycles must be an integer >= 1, got 0"),
+        ({"backend": "jax"}, r"backend must be one of \['sb3', 'rllib'\], got 'jax'"),
+        ({"num_env_runners": 2}, "num_env_runners applies to backend='rllib' only, got 2"),
+        ({"address": "auto"}, "address applies to backend='rllib' only, got 'auto'"),
+        ({"backend": "rllib", "num_env_runners": -1}, "num_env_runners must be an integer >= 0, got -1"),
+        ({"backend": "rllib", "n_envs": 2, "num_env_runners": 3}, r"num_env_runners must be <= n_envs \(2\)"),
+        ({"backend": "rllib", "address": ""}, "address must be a non-empty string, got ''"),
     ],
 )
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Args(**kwargs)
+
+
+def test_rllib_defaults_split_the_envs_between_runners():
+    import os
+
+    args = Args(backend="rllib", n_envs=4)
+    assert args.num_env_runners == max(1, min(os.cpu_count() or 1, 4))
+    assert Args(backend="rllib", n_envs=5, num_env_runners=2).envs_per_runner == 3
+    assert Args(backend="rllib", n_envs=3, num_env_runners=0).envs_per_runner == 3
 
 
 def test_resume_folder_without_checkpoints(tmp_path):

@@ -8,7 +8,14 @@ import pytest
 from pettingzoo.test import parallel_api_test
 
 from agents.base import run_episode
-from agents.goals import SECTORS, FrontierGoalEnv, GoalFrontier, SectorRule, sector_of
+from agents.goals import (
+    SECTORS,
+    FrontierGoalEnv,
+    GoalFrontier,
+    SectorRule,
+    make_env,
+    sector_of,
+)
 from envs import two_robot_explore_v0
 
 SMALL = {"world": {"size": (8.0, 8.0)}, "max_cycles": 60}
@@ -144,3 +151,10 @@ def test_bad_sector_rule_arguments_name_the_problem():
         SectorRule("left")
     with pytest.raises(ValueError, match="hold must be >= 1, got 0"):
         SectorRule("ahead", hold=0)
+
+
+def test_make_env_builds_either_level_and_names_bad_levels():
+    assert isinstance(make_env({"max_cycles": 5}, "goals", hold=3), FrontierGoalEnv)
+    assert not isinstance(make_env({"max_cycles": 5}), FrontierGoalEnv)
+    with pytest.raises(ValueError, match=r"level must be one of \['goals', 'motion'\], got 'x'"):
+        make_env({}, "x")
