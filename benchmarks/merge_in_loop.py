@@ -10,8 +10,9 @@ with a transform in use is checked against the truth (``env.merge_errors()``): *
 more than 5° or 1 m off at robot 1's map centroid — a merge that puts robot 1's rooms on the
 wrong rooms. Per episode: the first step merged, steps merged, steps wrong (and the first
 wrong transform's errors), transforms installed (each accepted merge that changed the one in
-use), merges dropped (``info["merge_drops"]``), steps to 95 % true coverage (``-`` if not
-reached). The summary adds the grid alignment's calls and seconds with no transform in use
+use), merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them
+(the structural merge, checked by the grids, or the grid alignment), steps to 95 % true
+coverage (``-`` if not reached). The summary adds the grid alignment's calls and seconds with no transform in use
 (searching) and with one (re-examining it, ``fusion.grid_merge.recheck``), per env step.
 
 Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the same seeds.
@@ -59,10 +60,15 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)})
     clock.env = env
     row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,
-           "installs": 0, "t95": None}
+           "installs": 0, "t95": None, "structural": 0, "grid": 0}
     last = [None]
+    seen = [None]
 
     def watch(k, _obs, _rewards, infos):
+        if env.merge is not seen[0]:  # a new merge result: who supplied an accepted one
+            seen[0] = env.merge
+            if env.merge is not None and env.merge.accepted:
+                row["structural" if env.merge.evidence is not None else "grid"] += 1
         t = env.shared.transform
         cov = next(iter(infos.values()))["true_coverage"] if infos else 0.0
         if row["t95"] is None and cov >= 0.95:
@@ -96,8 +102,8 @@ def main() -> None:
     print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m, "
           f"{args.steps} steps\n")
     print("| seed | first merged | steps merged | steps wrong | first wrong | installs | "
-          "drops | T95 |")
-    print("|---|---|---|---|---|---|---|---|")
+          "drops | accepted: structural / grids | T95 |")
+    print("|---|---|---|---|---|---|---|---|---|")
     rows = []
     t0 = time.perf_counter()
     for seed in range(args.worlds):
@@ -105,7 +111,7 @@ def main() -> None:
         rows.append(r)
         print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
               f"{r['first_wrong'] or ''} | {r['installs']} | {r['drops']} | "
-              f"{r['t95'] or '-'} |", flush=True)
+              f"{r['structural']} / {r['grid']} | {r['t95'] or '-'} |", flush=True)
     wall = time.perf_counter() - t0
     steps = sum(r["steps"] for r in rows)
     merged = sum(r["merged"] for r in rows)
@@ -114,6 +120,10 @@ def main() -> None:
           f"a wrong transform in use in {sum(r['wrong'] > 0 for r in rows)}; steps wrong / "
           f"merged: {wrong} / {merged} ({wrong / max(merged, 1):.1%}); drops "
           f"{sum(r['drops'] for r in rows)}")
+    structural, grid = sum(r["structural"] for r in rows), sum(r["grid"] for r in rows)
+    print(f"accepted merges supplied by the structural merge (grid-checked): {structural} of "
+          f"{structural + grid} ({structural / max(structural + grid, 1):.0%}); by the grid "
+          f"alignment: {grid}")
     for key, label in (("before", "with no transform in use"), ("after", "with one in use")):
         print(f"grid alignments {label}: {clock.calls[key]} calls, "
               f"{clock.seconds[key]:.1f} s = {clock.seconds[key] / steps * 1e6:.0f} µs per env "

@@ -447,7 +447,7 @@ PATH_CHORD = 0.4
 """Polylines (pixel-fine paths of extracted maps) are read as chords about this long (m): a
 sample per :data:`PATH_STEP` at most, as for straight paths, and a fifth of the raster's work;
 a chord strays from its pixels by a few centimetres, well inside :data:`PATH_TOL`."""
-PATH_FIT_WEIGHT = 1.0
+PATH_FIT_WEIGHT = 10.0
 """Weight of a metre of B's paths lying on A's against a matched node in the final fit."""
 
 

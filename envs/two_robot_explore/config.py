@@ -293,7 +293,7 @@ class MappingConfig:
     """
 
     grid_resolution: float = 0.1
-    topo_every: int = 10
+    topo_every: int = 25
     topo: Any = None
     merge_every: int = 25
     merge_method: str = "hybrid"

@@ -177,7 +177,7 @@ are a ``ValueError``.
 | ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout |
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
-| ``mapping.topo_every`` / ``merge_every`` | int | 10 / 25 | steps (0 = never) |
+| ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
 | ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
