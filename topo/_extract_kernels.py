@@ -166,3 +166,19 @@ def basin_paths(basins: np.ndarray, field: np.ndarray, sources: np.ndarray
                 elif depth[q] == depth[p] + 1 and f[p] > f[parent[q]]:
                     parent[q] = p
     return parent, depth
+
+
+@numba.njit(cache=True)
+def route(parent: np.ndarray, start: int) -> np.ndarray:
+    """The flat pixels from ``start`` along ``parent`` (:func:`basin_paths`) to its source."""
+    n = 1
+    p = start
+    while parent[p] != p:
+        p = parent[p]
+        n += 1
+    out = np.empty(n, np.int64)
+    p = start
+    for i in range(n):
+        out[i] = p
+        p = parent[p]
+    return out

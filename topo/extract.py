@@ -72,7 +72,7 @@ from scipy import ndimage
 from skimage.morphology import remove_small_holes, skeletonize
 
 from topo._checks import check_real
-from topo._extract_kernels import basin_paths, merge_tree
+from topo._extract_kernels import basin_paths, merge_tree, route
 from topo.graph import NodeKind, TopoMap, kinds_from_degree
 from topo.grid import CellState
 
@@ -90,7 +90,7 @@ class ExtractConfig:
         min_hole_area: holes in free space smaller than this are filled.
         open_radius: free space within ``open_near_unknown`` of the unknown is opened by a disc
             of this radius (about the robot's); 0 turns the opening off.
-        open_near_unknown: see ``open_radius``.
+        open_near_unknown: see ``open_radius`` (a square of this half-side).
         min_component_area: free components smaller than this are dropped.
         smoothing: standard deviation of the Gaussian applied to the clearance; 0 = none.
         persistence: a clearance maximum is a place if it stands out by at least this much.
@@ -147,6 +147,9 @@ class ExtractConfig:
         if unknown:
             raise ValueError(f"ExtractConfig has unknown keys {unknown}; allowed: {allowed}")
         return cls(**data)
+
+
+_DEFAULT = ExtractConfig()
 
 
 # ------------------------------------------------------------------------------ input
@@ -224,10 +227,15 @@ def _pool(states: np.ndarray, f: int) -> np.ndarray:
     h, w = -(-states.shape[0] // f), -(-states.shape[1] // f)
     padded = np.zeros((h * f, w * f), dtype=np.int8)
     padded[:states.shape[0], :states.shape[1]] = states
-    blocks = padded.reshape(h, f, w, f)
-    out = np.zeros((h, w), dtype=np.int8)
-    out[2 * (blocks == _FREE).sum(axis=(1, 3)) >= f * f] = _FREE
-    out[(blocks == _OCCUPIED).any(axis=(1, 3))] = _OCCUPIED
+    n_free = np.zeros((h, w), dtype=np.int16)
+    occupied = np.zeros((h, w), dtype=bool)
+    for dy in range(f):  # f² strided views: far cheaper than reducing a (h, f, w, f) array
+        for dx in range(f):
+            cells = padded[dy::f, dx::f]
+            n_free += cells == _FREE
+            occupied |= cells == _OCCUPIED
+    out = np.where(2 * n_free >= f * f, np.int8(_FREE), np.int8(_UNKNOWN))
+    out[occupied] = _OCCUPIED
     return out
 
 
@@ -246,7 +254,8 @@ def _free_space(states: np.ndarray, res: float, cfg: ExtractConfig) -> np.ndarra
     unknown = states == _UNKNOWN
     if r >= 0.5 and unknown.any():
         opened = ndimage.binary_opening(free, structure=_disk(max(r, 1.0)))
-        near = ndimage.binary_dilation(unknown, structure=_disk(cfg.open_near_unknown / res))
+        reach = int(math.ceil(cfg.open_near_unknown / res))  # a square of that half-side
+        near = ndimage.maximum_filter(unknown, size=2 * reach + 1, mode="constant")
         free = np.where(near, opened, free)
     labels, n = ndimage.label(free)
     if n:
@@ -294,10 +303,8 @@ def _passes(basins: np.ndarray, field: np.ndarray
 def _route(parent: np.ndarray, width: int, start: tuple[int, int]) -> np.ndarray:
     """``(K, 2)`` cells ``(row, col)`` from ``start`` along ``parent``
     (:func:`topo._extract_kernels.basin_paths`) to its basin's place."""
-    chain = [start[0] * width + start[1]]
-    while parent[chain[-1]] != chain[-1]:
-        chain.append(int(parent[chain[-1]]))
-    return np.stack(np.divmod(np.array(chain, dtype=np.int64), width), axis=1)
+    chain = route(parent, start[0] * width + start[1])
+    return np.stack(np.divmod(chain, width), axis=1)
 
 
 def _summits(field: np.ndarray, basins: np.ndarray, places: np.ndarray, tolerance: float
@@ -311,9 +318,13 @@ def _summits(field: np.ndarray, basins: np.ndarray, places: np.ndarray, toleranc
     peak = np.full(len(places) + 1, np.inf)
     peak[:-1] = field.ravel()[places]
     top = (basins >= 0) & (field >= peak[basins] - tolerance)
-    lab, _ = ndimage.label(top, structure=np.ones((3, 3)))
+    lab, n = ndimage.label(top, structure=np.ones((3, 3)))
+    rows, cols = np.nonzero(top)
+    which = lab[rows, cols]
+    count = np.bincount(which, minlength=n + 1)
     own = lab.ravel()[places]
-    return np.array(ndimage.center_of_mass(top, lab, own)).reshape(-1, 2)
+    return np.stack([np.bincount(which, rows, n + 1)[own], np.bincount(which, cols, n + 1)[own]],
+                    axis=1) / count[own, None]
 
 
 def _ends(domain: np.ndarray, basins: np.ndarray, parent: np.ndarray, depth: np.ndarray,
@@ -354,6 +365,12 @@ def _ends(domain: np.ndarray, basins: np.ndarray, parent: np.ndarray, depth: np.
     return kept
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
 def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
               wall_distance: np.ndarray, res: float, cfg: ExtractConfig) -> np.ndarray:
     """Whether the edge of the free space around each node (its non-free cells that touch a
@@ -365,7 +382,7 @@ def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
     with open unknown within its clearance less ``frontier_margin`` (a square of that
     half-side: inside its own free disc, which a wall bounds)."""
     free = states == _FREE
-    edge = ~free & ndimage.binary_dilation(free, structure=np.ones((3, 3), bool))
+    edge = ~free & ndimage.maximum_filter(free, size=3, mode="constant")
     open_unknown = edge & (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
     h, w = states.shape
     tables = []
@@ -409,17 +426,18 @@ def extract_topomap(grid: Any, resolution: float | None = None,
             resolution, a bad origin.
     """
     if config is None:
-        config = ExtractConfig()
+        config = _DEFAULT
     elif isinstance(config, dict):
         config = ExtractConfig.from_dict(config)
     elif not isinstance(config, ExtractConfig):
         raise TypeError(f"config must be an ExtractConfig, a dict of its fields or None, got "
                         f"{type(config).__name__}")
     states, res, (ox, oy) = as_states(grid, resolution, origin)
-    known = np.nonzero(states != _UNKNOWN)
-    if not len(known[0]):
+    known = states != _UNKNOWN
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if not len(rows):
         return TopoMap.empty()
-    r0, r1, c0, c1 = known[0].min(), known[0].max() + 1, known[1].min(), known[1].max() + 1
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
     f = max(1, int(round(config.resolution / res)))
     # one working cell of unknown around the known cells: what lies beyond them is unknown
     work = np.pad(_pool(states[r0:r1, c0:c1], f), 1, constant_values=_UNKNOWN)
@@ -449,20 +467,24 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     # a maximum is a place if it persists and is wide enough; the basin of any other drains
     # into the basin it touches where its component merged (so every place's basin stays
     # connected; chains end at a place or at a component's highest maximum)
-    host: dict[int, int] = {}
-    for s, d, k in zip(saddle.tolist(), dying.tolist(), into.tolist(), strict=True):
-        if flat_f[d] - flat_f[s] < cfg.persistence or flat_c[d] < cfg.min_clearance:
-            host[d] = k
-    peaks = np.unique(ascent[ascent >= 0])
-    resolved = np.empty(len(peaks), dtype=np.int64)
-    for i, m in enumerate(peaks.tolist()):
-        while m in host:
-            m = host[m]
-        resolved[i] = m
+    maxima = np.flatnonzero(ascent == np.arange(field.size))
+    index = np.full(field.size, -1, dtype=np.int64)
+    index[maxima] = np.arange(len(maxima))
+    host = np.arange(len(maxima))
+    weak = ((flat_f[dying] - flat_f[saddle] < cfg.persistence)
+            | (flat_c[dying] < cfg.min_clearance))
+    host[index[dying[weak]]] = index[into[weak]]
+    for _ in range(64):  # pointer jumping along the (acyclic) drain chains
+        nxt = host[host]
+        if np.array_equal(nxt, host):
+            break
+        host = nxt
+    resolved = maxima[host]
     places = np.unique(resolved[flat_c[resolved] >= cfg.min_clearance])
-    place_id = {int(m): i for i, m in enumerate(places.tolist())}
+    place_of = np.full(field.size, -1, dtype=np.int64)
+    place_of[places] = np.arange(len(places))
     lut = np.full(field.size, -1, dtype=np.int64)
-    lut[peaks] = [place_id.get(int(m), -1) for m in resolved.tolist()]
+    lut[maxima] = place_of[resolved]
     basins = np.where(ascent >= 0, lut[np.maximum(ascent, 0)], -1).reshape(field.shape)
     h, w = field.shape
     cells = [divmod(int(m), w) for m in places.tolist()]
@@ -513,10 +535,16 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     order = np.lexsort((kind_arr, xy[:, 0], xy[:, 1]))
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
-    paths = [origin + (poly[:, ::-1] + 0.5) * res for poly in polys]
-    for (u, v), pth in zip(edges, paths, strict=True):  # from node to node (places' centres)
-        pth[0], pth[-1] = xy[u], xy[v]
-    lengths = [float(np.hypot(*np.diff(pth, axis=0).T).sum()) for pth in paths]
-    return TopoMap.from_arrays(xy[order], rank[edge_arr], kind_arr[order], lengths if edges
-                               else None, paths if edges else None, node_clear[order],
-                               frontier[order])
+    sizes = np.array([len(poly) for poly in polys], dtype=np.int64)
+    points = origin + (np.concatenate(polys)[:, ::-1] + 0.5) * res if polys else np.empty((0, 2))
+    ends = np.cumsum(sizes)
+    points[ends - sizes] = xy[edge_arr[:, 0]]  # from node to node (places' centres)
+    points[ends - 1] = xy[edge_arr[:, 1]]
+    steps = np.append(np.hypot(*np.diff(points, axis=0).T), 0.0)
+    steps[ends - 1] = 0.0  # the step from one polyline's last point to the next one's first
+    lengths = np.add.reduceat(steps, ends - sizes) if polys else np.empty(0)
+    paths = np.split(points, ends[:-1]) if polys else []
+    # valid by construction (indices in range, no self-loops, polylines from node to node)
+    return TopoMap(_frozen(xy[order]), _frozen(kind_arr[order]), _frozen(rank[edge_arr]),
+                   _frozen(lengths), tuple(_frozen(q) for q in paths), node_clear[order],
+                   frontier[order])

@@ -376,6 +376,7 @@ def test_empty_unwalled_and_all_free_maps():
     assert extract_topomap(np.zeros((20, 20), bool), RES).n_nodes == 0
     room = extract_topomap(np.ones((40, 40), bool), RES)
     assert room.n_nodes == 1 and np.allclose(room.xy, [2.0, 2.0], atol=0.25)
+    assert room.n_edges == 0 and room.paths == () and room.lengths.shape == (0,)
 
 
 def test_bad_config_values():
