@@ -95,13 +95,14 @@ class GridMergeConfig:
                 if not isinstance(self.native_refine, bool):
                     raise TypeError(f"GridMergeConfig.native_refine must be a bool, got "
                                     f"{type(self.native_refine).__name__}")
+            elif f.name == "accept_threshold":
+                check_real(self.accept_threshold, "GridMergeConfig.accept_threshold", low=0.0,
+                           low_inclusive=True, high=1.0)
             elif f.name in ("coarse_factor", "refine_top"):
                 check_int(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=1)
             else:
                 check_real(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=0.0)
         check_real(self.min_wall_agreement, "GridMergeConfig.min_wall_agreement", low=0.0,
-                   high=1.0)
-        check_real(self.accept_threshold, "GridMergeConfig.accept_threshold", low=0.0,
                    high=1.0)
 
 
