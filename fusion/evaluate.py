@@ -1,7 +1,7 @@
 """Evaluate map merging against ground truth and an oracle: ``python -m fusion.evaluate``.
 
     python -m fusion.evaluate --synthetic 200 --methods auto,paper_icp,exhaustive,multistart_icp
-    python -m fusion.evaluate PAIRS_DIR --methods auto,paper_icp --out out/eval_dataset
+    python -m fusion.evaluate PAIRS_DIR [PAIRS_DIR ...] --methods hybrid,grid,auto --out out/eval
 
 For every pair and method it records whether the merge was accepted, the rotation error and the
 translation error (distance between the true and the estimated position of B's centroid in A's
@@ -13,19 +13,29 @@ overlap, any accepted merge is a **false accept**.
 
 Printed: per noise level, success per overlap bin (with the oracle), then per method the success
 on pairs with ≥ 40% overlap, median errors, median time and false-accept rate, and success per
-true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). Written to
-``--out``: ``results.json`` (every record and the summary), ``error_cdf.png``,
-``success_vs_overlap.png``, ``success_vs_rotation.png`` and ``merged_*.png`` pictures.
+true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). For every method
+whose results carry a confidence (``hybrid``, ``grid``, and the structural methods through their
+evidence), the **threshold sweep**: success on ≥ 40 % overlap, wrong accepts (accepted and not
+right, % of all pairs) and false accepts (% of no-overlap pairs) as the accept threshold
+moves (``*`` marks the default, :data:`fusion.grid_merge.DEFAULT_ACCEPT_THRESHOLD`), and the
+**calibration**: per confidence bin, the mean confidence against the observed fraction of
+right transforms (accepted or not), with the Brier score. Written to ``--out``:
+``results.json`` (every record, the summary, the sweep and the calibration),
+``error_cdf.png``, ``success_vs_overlap.png``, ``success_vs_rotation.png``,
+``threshold_curves.png`` (success against wrong accepts, one curve per method),
+``calibration.png`` (the reliability diagram) and ``merged_*.png`` pictures.
 
 Pairs come from :func:`fusion.synthetic.generate_pairs` (``--synthetic N``, once per ``--noise``
 level, with the true correspondences so the oracle can be computed) or from a map-pair dataset
-folder (:func:`load_pair_dir`; the :mod:`fusion.pairs` format that ``agents.dataset`` writes: it
+folder or several evaluated as one set (:func:`load_pair_dir`; the :mod:`fusion.pairs` format
+that ``agents.dataset`` writes: it
 stores no node correspondences, so the oracle column is empty).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import statistics
@@ -643,8 +653,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m fusion.evaluate",
         description="Evaluate topological map merging against ground truth and an oracle.")
-    p.add_argument("pairs_dir", nargs="?", type=Path,
-                   help="map-pair dataset folder (the agents' format); or use --synthetic")
+    p.add_argument("pairs_dir", nargs="*", type=Path,
+                   help="map-pair dataset folders (the agents' format; several are evaluated "
+                        "as one set); or use --synthetic")
     p.add_argument("--synthetic", type=int, metavar="N",
                    help="evaluate N synthetic pairs per noise level instead of a folder")
     p.add_argument("--methods", default="auto,paper_icp,multistart_icp,exhaustive",
@@ -682,7 +693,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI (see the module docstring); returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if (args.pairs_dir is None) == (args.synthetic is None):
+    if (not args.pairs_dir) == (args.synthetic is None):
         parser.error("give either PAIRS_DIR or --synthetic N (exactly one)")
     try:
         methods = parse_methods(args.methods)
@@ -694,7 +705,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             syn = _json_arg(parser, args.synthetic_config, "--synthetic-config")
             pairs = synthetic_pairs(args.synthetic, args.seed, noise, syn)
         else:
-            pairs = load_pair_dir(args.pairs_dir)
+            pairs = []
+            for folder in args.pairs_dir:
+                loaded = load_pair_dir(folder)
+                if len(args.pairs_dir) > 1:
+                    loaded = [dataclasses.replace(p, name=f"{folder.name}/{p.name}")
+                              for p in loaded]
+                pairs += loaded
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         parser.error(str(exc))
     overrides = _json_arg(parser, args.config, "--config")
@@ -714,7 +731,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sweep, calibration = threshold_sweep(records), calibration_summary(records)
     print(format_threshold_tables(sweep, calibration, default))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
-              if args.synthetic is not None else str(args.pairs_dir))
+              if args.synthetic is not None else ", ".join(map(str, args.pairs_dir)))
     atomic_write_json(args.out / "results.json", {
         "source": source, "methods": methods, "config": asdict(config),
         "config_for_noise": args.for_noise,

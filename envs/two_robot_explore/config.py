@@ -30,7 +30,7 @@ about a robot radius, eager spur pruning and node merging: suited to ragged sona
 ``ExtractConfig()``."""
 
 MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "none")
-"""``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.grid_merge.hybrid_merge``: the
+"""``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.hybrid.hybrid_merge``: the
 structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method, or
 ``"none"`` (never merges: each robot alone)."""
 
