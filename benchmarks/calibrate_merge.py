@@ -3,8 +3,8 @@
 
     python benchmarks/calibrate_merge.py [--pairs DIR ...] [--write] [--cache FILE]
 
-For every pair of the tuning datasets (default: ``data/env_pairs/tune_frontier``,
-``tune_coordinated`` and every folder of ``tune_real``; never the ``test_*`` sets) the grids are
+For every pair of the tuning datasets (default: every folder of ``data/env_pairs/tune``; never
+those of ``data/env_pairs/test``) the grids are
 aligned both ways (B onto A and A onto B: two alignments per pair) and each alignment's
 evidence features (``GridMergeResult.features()``) are kept with whether the alignment is right
 (rotation error < 2°, translation error < 0.3 m at the moved map's node centroid, or its wall
@@ -48,19 +48,18 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = Path("/work/main/data/env_pairs")
 L2 = 2.0
 """Ridge penalty of the fit (in pairs)."""
-EXTRA = (DATA / "tune_extra_frontier_s2", DATA / "tune_extra_coord_s3")
-"""Further tuning sets (used when present), made with the dataset CLI from seeds other than the
-test sets' (1), at commit 146727a: ``python -m agents.dataset generate --explorer frontier
---pairs 120 --max-cycles 1500 --seed 2 --out data/env_pairs/tune_extra_frontier_s2`` and the
-same with ``--explorer coordinated_frontier --seed 3 --out …/tune_extra_coord_s3``."""
+TUNE = DATA / "tune"
+"""The tuning sets: every dataset folder in it (``frontier``, ``coordinated_frontier`` — seed 0 —
+and ``real_*``), never those of ``DATA / "test"``. The model of 2026-12-02 was also fitted on
+two more made for it with the dataset CLI at commit 146727a, from seeds other than the test
+sets' (1): ``python -m agents.dataset generate --explorer frontier --pairs 120 --max-cycles
+1500 --seed 2 --out data/env_pairs/tune/frontier_seed2`` and the same with ``--explorer
+coordinated_frontier --seed 3 --out …/coordinated_frontier_seed3``."""
 
 
 def default_dirs() -> list[Path]:
-    """The tuning sets (never ``test_*``): ``tune_frontier``, ``tune_coordinated`` (seed 0),
-    every ``tune_real`` folder, and the extra tuning sets of :data:`EXTRA` when present."""
-    dirs = [DATA / "tune_frontier", DATA / "tune_coordinated"] + [d for d in EXTRA if d.exists()]
-    dirs += sorted(p for p in (DATA / "tune_real").glob("*") if (p / "dataset.json").exists())
-    return [d for d in dirs if (d / "dataset.json").exists()]
+    """The dataset folders of :data:`TUNE`."""
+    return sorted(p for p in TUNE.glob("*") if (p / "dataset.json").exists())
 
 
 def _centre(topo, result) -> np.ndarray | None:
@@ -85,8 +84,7 @@ def alignment_rows(dirs, config=None, both_ways: bool = True) -> list[dict]:
                     rot = math.degrees(r.transform.rotation_error(truth))
                     trans = r.transform.translation_error(truth, at=centre)
                 right = bool(p.overlap > 0 and rot < ROTATION_OK_DEG and trans < TRANSLATION_OK_M)
-                rows.append({"set": str(d.relative_to(d.parents[1]) if "tune_real" in str(d)
-                                        else d.name),
+                rows.append({"set": d.name,
                              "pair": p.pair_id, "world": f"{d.name}:{p.world_id}", "way": way,
                              "overlap": p.overlap, "features": r.features(), "right": right,
                              "rotation_error_deg": rot if math.isfinite(rot) else None,
@@ -181,7 +179,7 @@ def _commit() -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pairs", type=Path, nargs="*", default=None,
-                        help="tuning dataset folders (default: the tune_* sets)")
+                        help="tuning dataset folders (default: those of data/env_pairs/tune)")
     parser.add_argument("--cache", type=Path, default=None,
                         help="JSON file of the features (read if it exists, else written)")
     parser.add_argument("--l2", type=float, default=L2, help="ridge penalty")

@@ -139,9 +139,9 @@ class GridMergeResult:
         wall_hits: how many of B's wall cells (at ``resolution``) land on A's known cells.
         rival_agreement: :attr:`wall_agreement` of that best clearly different alignment.
         native_agreement: fraction of B's wall cells (the grids' own cells) landing on A's
-            known cells that lie within one cell of an A wall cell.
-        native_conflict: fraction of them landing on A's free cells more than three cells
-            from any A wall.
+            known cells that lie within :data:`NATIVE_NEAR_M` of an A wall cell.
+        native_conflict: fraction of them landing on A's free cells farther than
+            :data:`NATIVE_DEEP_M` from any A wall cell.
     """
 
     transform: Rigid2D
@@ -562,6 +562,12 @@ def _local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarra
     return out
 
 
+NATIVE_NEAR_M = 0.15
+"""A wall cell of B within this of an A wall cell agrees (:attr:`GridMergeResult.
+native_agreement`: one cell and its diagonal on the env's 0.1 m grids)."""
+NATIVE_DEEP_M = 0.3
+"""A wall cell of B on A's free space farther than this from any A wall conflicts
+(:attr:`GridMergeResult.native_conflict`)."""
 MAX_NATIVE_POINTS = 6000
 """Most wall cells of B the evidence at the grids' own resolution looks at (a regular subsample
 beyond: a 0.03 m map of a building has tens of thousands); the refinement moves at most
@@ -584,8 +590,10 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
     """At the grids' own cells: ``estimate`` refined (when ``native_refine`` and the cells are
     finer than ``resolution``: real maps of 0.03–0.05 m cells carry walls far sharper than the
     search's pooled cells), and how B's wall cells that land on A's known cells lie: the
-    fraction within one cell of an A wall, and the fraction deep in A's free space (more than
-    three cells from any A wall) — sharper evidence than the pooled layers'."""
+    fraction within :data:`NATIVE_NEAR_M` of an A wall cell, and the fraction in A's free
+    space farther than :data:`NATIVE_DEEP_M` from any — sharper evidence than the pooled
+    layers'. The distances are fixed in metres so that the calibrated confidence reads the same
+    evidence on grids of any cell size."""
     walls_a, fine_a = _native_walls(grid_a)
     walls_b, fine_b = _native_walls(grid_b)
     if len(walls_a) < 3 or len(walls_b) < 3:
@@ -609,9 +617,10 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
     if not known.any():
         return estimate, 0.0, 0.0
     pts = (ij[known] + 0.5) * fine_a + np.asarray(grid_a.origin)
-    d = cKDTree(walls_a).query(pts, k=1, distance_upper_bound=3.5 * fine_a, workers=1)[0]
-    near = float(np.mean(d <= 1.5 * fine_a))
-    deep = float(np.mean((d > 3.0 * fine_a) & (on[known] == FREE)))
+    d = cKDTree(walls_a).query(pts, k=1, distance_upper_bound=NATIVE_DEEP_M + fine_a,
+                               workers=1)[0]
+    near = float(np.mean(d <= NATIVE_NEAR_M))
+    deep = float(np.mean((d > NATIVE_DEEP_M) & (on[known] == FREE)))
     return estimate, near, deep
 
 
