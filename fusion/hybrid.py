@@ -57,7 +57,9 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     ``try_grids``, the grid alignment (:func:`fusion.grid_merge.merge_grids`): accepted when its
     calibrated confidence reaches ``accept_threshold``; an accepted grid alignment fuses the
     topological maps at nodes within :data:`HYBRID_EPS`. A rejection keeps the grids' best
-    alignment (or without grids the structural one) with the reasons."""
+    alignment (no matches, ``merged`` = ``map_a``; ``evidence`` stays the structural merge's),
+    or without grids the structural one, with the reasons; ``score`` is the log-odds of
+    ``confidence`` for a grid alignment, the structural score otherwise."""
     return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config)
 
 
@@ -121,6 +123,7 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
     grid = gm.merge_grids(grid_a, grid_b, cfg)
     if not grid.accepted:
         return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,
+                               "matches": np.empty((0, 2), dtype=np.int64), "merged": map_a,
                                "score": _log_odds(grid.confidence), "method": "hybrid",
                                "time_s": time.perf_counter() - t0,
                                "reason": f"topology: {fields['reason']}; grids: {grid.reason}"},
