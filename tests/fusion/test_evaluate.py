@@ -195,3 +195,22 @@ def test_threshold_sweep_counts_what_each_threshold_accepts():
     assert cal["merges"] == 6 and cal["max_gap_bins_ge_20"] is None
     assert cal["brier"] == pytest.approx(np.mean(
         [(0.95 - 1) ** 2, 0.3 ** 2, 0.6 ** 2, 0.8 ** 2, 0.01 ** 2, 0.7 ** 2]))
+
+
+def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
+    import fusion.pairs as pairs_mod
+
+    grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
+    for folder in ("one", "two"):
+        root = tmp_path / folder
+        pairs_mod.atomic_write_json(root / "dataset.json", {
+            "format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
+        p = make_pair(np.random.default_rng(len(folder)), overlap=0.8, nodes=(20, 20))
+        pairs_mod.write_pair(root, pairs_mod.MapPair(
+            0, p.map_a, p.map_b, grid, grid, p.transform, p.overlap, "w", 0, "test", 0, 0, 0))
+    out = tmp_path / "eval"
+    assert main([str(tmp_path / "one"), str(tmp_path / "two"), "--methods", "auto",
+                 "--out", str(out), "--quiet", "--no-plots"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert [r["pair"] for r in data["records"]] == ["one/pair_000000", "two/pair_000000"]
+    assert str(tmp_path / "two") in data["source"]
