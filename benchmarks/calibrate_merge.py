@@ -14,8 +14,9 @@ cross-validation gives the reliability table and Brier score of predictions on w
 did not see. The default ``accept_threshold`` is the smallest on a 0.05 grid at which no more
 than 1 % of the no-overlap alignments (and of all alignments, wrong ones) are accepted in
 cross-validation. ``--write`` stores the model fitted on all pairs, with the date, commit and
-data, in ``fusion/calibration.json``; ``--cache`` keeps the features (a JSON file) so that a
-refit with other settings does not re-run the merges.
+data, in ``fusion/calibration.json``; ``--plot PNG`` writes the cross-validated reliability
+diagram; ``--cache`` keeps the features (a JSON file) so that a refit with other settings does
+not re-run the merges.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from fusion.calibration import (  # noqa: E402
     brier_score,
     fit_logistic,
     max_calibration_gap,
+    plot_reliability,
     reliability_table,
     write_model,
 )
@@ -185,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--l2", type=float, default=L2, help="ridge penalty")
     parser.add_argument("--write", action="store_true",
                         help="store the model in fusion/calibration.json")
+    parser.add_argument("--plot", type=Path, default=None,
+                        help="write the cross-validated reliability diagram to this PNG")
     args = parser.parse_args(argv)
     dirs = args.pairs or default_dirs()
     if args.cache is not None and args.cache.exists():
@@ -210,6 +214,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['low']:.1f}–{r['high']:.1f} | {r['n']} | {r['predicted']:.3f} | "
               f"{r['observed']:.3f} |")
     print(f"largest gap in bins of ≥ 20: {max_calibration_gap(table):.3f}")
+    if args.plot is not None:
+        out = plot_reliability({"grid (cross-validated)": (p, y)}, args.plot,
+                               title="grid model, leave-one-world-out on the tuning pairs")
+        print(f"wrote {out}")
     thresholds = threshold_table(rows, p, cfg.min_overlap_m2)
     print("\n| threshold | success ≥ 40 % | wrong accepts (all) | false accepts (no overlap) |"
           "\n|---|---|---|---|")
