@@ -15,7 +15,7 @@ installed (each accepted merge that changed the one in use), merges dropped
 the median first merged and first right step over the episodes (an episode never merged counts
 as ``steps + 1``). ``--accept-threshold`` sets ``mapping.accept_threshold`` (versions that have
 it). The summary adds the grid alignment's calls and seconds with no transform in use
-(searching) and with one (re-examining it, ``fusion.grid_merge.recheck``), per env step.
+(searching) and with one (re-examining it, ``fusion.hybrid.recheck``), per env step.
 
 Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the same seeds.
 """

@@ -81,7 +81,9 @@ class GridMergeConfig:
     wider than ``resolution`` (1: at full resolution); ``refine_top``: how many clearly
     different coarse alignments are scored again at full resolution (the best and its rivals);
     ``native_refine``: refine the alignment on the grids' own cells (finer than
-    ``resolution``: 0.03–0.1 m)."""
+    ``resolution``: 0.03–0.1 m). The confidence model was fitted with the default search
+    settings (``resolution`` … ``refine_top``): other values change the evidence it reads, so
+    refit it (``benchmarks/calibrate_merge.py``) before trusting its probabilities."""
 
     resolution: float = 0.2
     step_deg: float = 3.0
