@@ -9,11 +9,15 @@ For each seed ``0..worlds-1`` (its own procedural ``size`` m building) one episo
 with a transform in use is checked against the truth (``env.merge_errors()``): **wrong** is
 more than 5° or 1 m off at robot 1's map centroid — a merge that puts robot 1's rooms on the
 wrong rooms. Per episode: the first step merged, steps merged, steps wrong (and the first
-wrong transform's errors), transforms installed (each accepted merge that changed the one in
-use), merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them
-(the structural merge, checked by the grids, or the grid alignment), steps to 95 % true
-coverage (``-`` if not reached). The summary adds the grid alignment's calls and seconds with no transform in use
-(searching) and with one (re-examining it, ``fusion.grid_merge.recheck``), per env step.
+wrong transform's errors), the first step on a right transform (not wrong), transforms
+installed (each accepted merge that changed the one in use), merges dropped
+(``info["merge_drops"]``), accepted merge results by what supplied them (the structural merge,
+checked by the grids, or the grid alignment), steps to 95 % true coverage (``-`` if not
+reached). The summary gives the median first merged and first right step over the episodes (an
+episode never merged counts as ``steps + 1``). ``--accept-threshold`` sets
+``mapping.accept_threshold`` (versions that have it). The summary adds the grid alignment's
+calls and seconds with no transform in use (searching) and with one (re-examining it,
+``fusion.hybrid.recheck``), per env step.
 
 Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the same seeds.
 """
@@ -21,6 +25,7 @@ Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the 
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -46,21 +51,24 @@ class _GridClock:
         self._real = grid_merge.merge_grids
         grid_merge.merge_grids = self
 
-    def __call__(self, grid_a, grid_b, config=None):
+    def __call__(self, grid_a, grid_b, config=None, **kw):
         t0 = time.perf_counter()
-        out = self._real(grid_a, grid_b, config)
+        out = self._real(grid_a, grid_b, config, **kw)
         key = "after" if self.env.shared.transform is not None else "before"
         self.calls[key] += 1
         self.seconds[key] += time.perf_counter() - t0
         return out
 
 
-def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock) -> dict:
+def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock,
+            threshold: float | None = None) -> dict:
     """One episode's row of the table (module docstring), watched step by step."""
-    env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)})
+    mapping = {} if threshold is None else {"accept_threshold": threshold}
+    env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
+                                            mapping=mapping)
     clock.env = env
     row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,
-           "installs": 0, "t95": None, "structural": 0, "grid": 0}
+           "first_right": None, "installs": 0, "t95": None, "structural": 0, "grid": 0}
     last = [None]
     seen = [None]
 
@@ -85,6 +93,8 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
         if rot > WRONG_DEG or trans > WRONG_M:
             row["wrong"] += 1
             row["first_wrong"] = row["first_wrong"] or f"step {k}: {rot:.0f}° / {trans:.1f} m"
+        else:
+            row["first_right"] = row["first_right"] or k
 
     out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
     row.update(steps=out["steps"], drops=env.merge_drops)
@@ -97,21 +107,22 @@ def main() -> None:
     parser.add_argument("--worlds", type=int, default=20)
     parser.add_argument("--size", type=float, default=20.0)
     parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--accept-threshold", type=float, default=None)
     args = parser.parse_args()
     clock = _GridClock()
     print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m, "
-          f"{args.steps} steps\n")
-    print("| seed | first merged | steps merged | steps wrong | first wrong | installs | "
-          "drops | accepted: structural / grids | T95 |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          f"{args.steps} steps, accept_threshold {args.accept_threshold or 'default'}\n")
+    print("| seed | first merged | steps merged | steps wrong | first wrong | first right | "
+          "installs | drops | accepted: structural / grids | T95 |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     t0 = time.perf_counter()
     for seed in range(args.worlds):
-        r = episode(seed, args.explorer, args.steps, args.size, clock)
+        r = episode(seed, args.explorer, args.steps, args.size, clock, args.accept_threshold)
         rows.append(r)
         print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
-              f"{r['first_wrong'] or ''} | {r['installs']} | {r['drops']} | "
-              f"{r['structural']} / {r['grid']} | {r['t95'] or '-'} |", flush=True)
+              f"{r['first_wrong'] or ''} | {r['first_right'] or '-'} | {r['installs']} | "
+              f"{r['drops']} | {r['structural']} / {r['grid']} | {r['t95'] or '-'} |", flush=True)
     wall = time.perf_counter() - t0
     steps = sum(r["steps"] for r in rows)
     merged = sum(r["merged"] for r in rows)
@@ -124,6 +135,10 @@ def main() -> None:
     print(f"accepted merges supplied by the structural merge (grid-checked): {structural} of "
           f"{structural + grid} ({structural / max(structural + grid, 1):.0%}); by the grid "
           f"alignment: {grid}")
+    never = args.steps + 1
+    print(f"median first merged step {statistics.median(r['first'] or never for r in rows):g}, "
+          f"median first right step {statistics.median(r['first_right'] or never for r in rows):g}"
+          f" (never: {args.steps + 1})")
     for key, label in (("before", "with no transform in use"), ("after", "with one in use")):
         print(f"grid alignments {label}: {clock.calls[key]} calls, "
               f"{clock.seconds[key]:.1f} s = {clock.seconds[key] / steps * 1e6:.0f} µs per env "

@@ -13,7 +13,8 @@ of ``auto`` (what the merge costs when it has a core to itself). The exhaustive 
 
 With ``--grids PAIRS_DIR`` (a map-pair dataset that ``python -m agents.dataset generate`` wrote)
 it times the occupancy-grid merges the environment runs instead: ``merge_grids`` and
-``hybrid_merge`` (with and without ``try_grids``), median and 90th percentile over the pairs.
+``hybrid_merge`` (with and without ``try_grids``), median and 90th percentile over the pairs;
+with ``--reference REV`` also those of that revision, interleaved, and the median ratio.
 
 With ``--reference REV`` (a git revision of this repository) it times ``auto`` against the
 ``fusion`` package of that revision instead, in this one process, interleaved pair by pair (wall
@@ -43,8 +44,9 @@ from fusion.merge import METHODS, merge_maps
 from fusion.synthetic import SyntheticConfig, make_pair
 
 
-def grid_times(pairs_dir: Path) -> None:
-    """Print the time of the grid merges on every pair of ``pairs_dir``."""
+def grid_times(pairs_dir: Path, rev: str | None = None) -> None:
+    """Print the time of the grid merges on every pair of ``pairs_dir`` (with ``rev``, also
+    those of the ``fusion`` package at that git revision, interleaved pair by pair)."""
     from fusion.evaluate import load_pair_dir
     from fusion.grid_merge import hybrid_merge, merge_grids
 
@@ -55,21 +57,33 @@ def grid_times(pairs_dir: Path) -> None:
         "hybrid (no grids)": lambda p: hybrid_merge(p.map_a, p.map_b, *p.grids,
                                                     try_grids=False),
     }
-    for run in runs.values():  # compiled kernels load on the first call
-        run(pairs[0])
-    times: dict[str, list[float]] = {name: [] for name in runs}
-    accepted = dict.fromkeys(runs, 0)
-    for p in pairs:  # interleaved, so a busy machine slows every method alike
-        for name, run in runs.items():
-            t0 = time.perf_counter()
-            accepted[name] += run(p).accepted
-            times[name].append(time.perf_counter() - t0)
+    with tempfile.TemporaryDirectory() as tmp:
+        if rev is not None:
+            _reference_merge(rev, Path(tmp))
+            ref = importlib.import_module("fusion_ref.grid_merge")
+            runs[f"merge_grids@{rev}"] = lambda p: ref.merge_grids(*p.grids)
+            runs[f"hybrid_merge@{rev}"] = lambda p: ref.hybrid_merge(p.map_a, p.map_b, *p.grids,
+                                                                     try_grids=True)
+        for run in runs.values():  # compiled kernels load on the first call
+            run(pairs[0])
+        times: dict[str, list[float]] = {name: [] for name in runs}
+        accepted = dict.fromkeys(runs, 0)
+        for p in pairs:  # interleaved, so a busy machine slows every method alike
+            for name, run in runs.items():
+                t0 = time.perf_counter()
+                accepted[name] += run(p).accepted
+                times[name].append(time.perf_counter() - t0)
     print(f"{len(pairs)} pairs from {pairs_dir}")
-    print(f"{'method':>20}{'median ms':>11}{'p90 ms':>9}{'accepted':>10}")
+    print(f"{'method':>26}{'median ms':>11}{'p90 ms':>9}{'accepted':>10}")
     for name, t in times.items():
         p90 = float(np.percentile(t, 90))
-        print(f"{name:>20}{1000 * statistics.median(t):>11.1f}{1000 * p90:>9.1f}"
+        print(f"{name:>26}{1000 * statistics.median(t):>11.1f}{1000 * p90:>9.1f}"
               f"{accepted[name]:>7}/{len(pairs)}")
+    if rev is not None:
+        for name in ("merge_grids", "hybrid_merge"):
+            ratio = statistics.median(a / b for a, b in zip(times[name], times[f"{name}@{rev}"],
+                                                            strict=True))
+            print(f"{name}: median per-pair time ratio now / {rev}: {ratio:.2f}")
 
 
 def _reference_merge(rev: str, into: Path):
@@ -233,7 +247,7 @@ def main() -> None:
                              "(seeds 0-2) against REV instead, checking identical results")
     args = parser.parse_args()
     if args.grids is not None:
-        grid_times(args.grids)
+        grid_times(args.grids, args.reference)
         return
     sizes = [int(s) for s in args.sizes.split(",")]
     if args.env:

@@ -29,24 +29,49 @@ def known_box(states, unknown):
 
 
 @njit(cache=True, nogil=True)
-def pool(states, r0, c0, h, w, f, free, occupied):
-    """The ``(h, w)`` wall and free masks of the blocks of ``f × f`` cells from ``(r0, c0)``
-    (cells past the grid's edge count as unknown): a wall where any cell is ``occupied``, free
-    where more than half are ``free`` and none is ``occupied``."""
+def _per_block(n_blocks, ratio):
+    """How many fine cells fall in each of ``n_blocks`` blocks (cell ``n`` in block
+    ``int((n + 0.5) * ratio)``), counting cells past the grid's edge."""
+    counts = np.zeros(n_blocks, dtype=np.int64)
+    n = 0
+    while True:
+        i = int((n + 0.5) * ratio)
+        if i >= n_blocks:
+            break
+        counts[i] += 1
+        n += 1
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def pool(states, r0, c0, h, w, ratio, free, occupied):
+    """The ``(h, w)`` wall and free masks of blocks ``1 / ratio`` fine cells wide from
+    ``(r0, c0)`` (``ratio`` = fine cell / block cell; fine cell ``(r, c)`` falls in block
+    ``(int((r - r0 + 0.5) · ratio), int((c - c0 + 0.5) · ratio))``, so a block covers a whole
+    or fractional number of cells and the blocks keep their true size; cells past the grid's
+    edge count as unknown): a wall where any cell is ``occupied``, free where more than half
+    are ``free`` and none is ``occupied``."""
     wall = np.zeros((h, w), dtype=np.bool_)
     n_free = np.zeros((h, w), dtype=np.int64)
-    for r in range(r0, min(r0 + h * f, states.shape[0])):
-        i = (r - r0) // f
-        for c in range(c0, min(c0 + w * f, states.shape[1])):
+    rows_in = _per_block(h, ratio)
+    cols_in = _per_block(w, ratio)
+    for r in range(r0, states.shape[0]):
+        i = int((r - r0 + 0.5) * ratio)
+        if i >= h:
+            break
+        for c in range(c0, states.shape[1]):
+            j = int((c - c0 + 0.5) * ratio)
+            if j >= w:
+                break
             v = states[r, c]
             if v == occupied:
-                wall[i, (c - c0) // f] = True
+                wall[i, j] = True
             elif v == free:
-                n_free[i, (c - c0) // f] += 1
+                n_free[i, j] += 1
     is_free = np.empty((h, w), dtype=np.bool_)
     for i in range(h):
         for j in range(w):
-            is_free[i, j] = n_free[i, j] * 2 > f * f and not wall[i, j]
+            is_free[i, j] = n_free[i, j] * 2 > rows_in[i] * cols_in[j] and not wall[i, j]
     return wall, is_free
 
 

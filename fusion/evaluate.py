@@ -1,7 +1,7 @@
 """Evaluate map merging against ground truth and an oracle: ``python -m fusion.evaluate``.
 
     python -m fusion.evaluate --synthetic 200 --methods auto,paper_icp,exhaustive,multistart_icp
-    python -m fusion.evaluate PAIRS_DIR --methods auto,paper_icp --out out/eval_dataset
+    python -m fusion.evaluate PAIRS_DIR [PAIRS_DIR ...] --methods hybrid,grid,auto --out out/eval
 
 For every pair and method it records whether the merge was accepted, the rotation error and the
 translation error (distance between the true and the estimated position of B's centroid in A's
@@ -13,19 +13,29 @@ overlap, any accepted merge is a **false accept**.
 
 Printed: per noise level, success per overlap bin (with the oracle), then per method the success
 on pairs with ≥ 40% overlap, median errors, median time and false-accept rate, and success per
-true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). Written to
-``--out``: ``results.json`` (every record and the summary), ``error_cdf.png``,
-``success_vs_overlap.png``, ``success_vs_rotation.png`` and ``merged_*.png`` pictures.
+true-rotation bin (where the paper's ICP, which starts from ``R = I``, fails). For every method
+whose results carry a confidence (``hybrid``, ``grid``, and the structural methods through their
+evidence), the **threshold sweep**: success on ≥ 40 % overlap, wrong accepts (accepted and not
+right, % of all pairs) and false accepts (% of no-overlap pairs) as the accept threshold
+moves (``*`` marks the default, :data:`fusion.grid_merge.DEFAULT_ACCEPT_THRESHOLD`), and the
+**calibration**: per confidence bin, the mean confidence against the observed fraction of
+right transforms (accepted or not), with the Brier score. Written to ``--out``:
+``results.json`` (every record, the summary, the sweep and the calibration),
+``error_cdf.png``, ``success_vs_overlap.png``, ``success_vs_rotation.png``,
+``threshold_curves.png`` (success against wrong accepts, one curve per method),
+``calibration.png`` (the reliability diagram) and ``merged_*.png`` pictures.
 
 Pairs come from :func:`fusion.synthetic.generate_pairs` (``--synthetic N``, once per ``--noise``
 level, with the true correspondences so the oracle can be computed) or from a map-pair dataset
-folder (:func:`load_pair_dir`; the :mod:`fusion.pairs` format that ``agents.dataset`` writes: it
+folder or several evaluated as one set (:func:`load_pair_dir`; the :mod:`fusion.pairs` format
+that ``agents.dataset`` writes: it
 stores no node correspondences, so the oracle column is empty).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import statistics
@@ -105,6 +115,8 @@ class Record:
     reason: str | None
     nodes_a: int
     nodes_b: int
+    confidence: float | None = None
+    gated: bool = True
 
 
 # ----------------------------------------------------------------------------------- pairs
@@ -170,7 +182,8 @@ def is_success(errors: tuple[float, float] | None) -> bool:
 
 # ------------------------------------------------------------------------------ evaluation
 def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bool,
-            time_s: float, score: float | None, reason: str | None) -> Record:
+            time_s: float, score: float | None, reason: str | None,
+            confidence: float | None = None, gated: bool = True) -> Record:
     errors = transform_errors(transform, pair) if transform is not None else None
     good = pair.kind == "overlap" and is_success(errors)
     return Record(
@@ -178,7 +191,25 @@ def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bo
         None if pair.transform is None else pair.transform.degrees, bool(accepted),
         None if errors is None else errors[0], None if errors is None else errors[1],
         bool(accepted and good), float(time_s), score, reason, pair.map_a.n_nodes,
-        pair.map_b.n_nodes)
+        pair.map_b.n_nodes, confidence, bool(gated))
+
+
+def _confidence(result: Any) -> tuple[float | None, bool]:
+    """A merge result's confidence (``None`` if it has none) and whether it passed the
+    method's hard gates (accepted at any threshold it would be: the grid alignment's
+    ``min_overlap_m2``; structural merges have none here)."""
+    conf = getattr(result, "confidence", None)
+    if conf is None and getattr(result, "evidence", None) is not None:
+        conf = result.evidence.confidence
+    grid = result if hasattr(result, "overlap_m2") else getattr(result, "grid", None)
+    gated = True
+    if grid is not None:
+        from fusion.grid_merge import GridMergeConfig
+
+        gated = bool(grid.overlap_m2 >= GridMergeConfig().min_overlap_m2)
+    elif getattr(result, "method", None) == "hybrid":
+        gated = bool(result.accepted)
+    return (None if conf is None or math.isnan(conf) else float(conf)), gated
 
 
 def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
@@ -214,7 +245,7 @@ def evaluate(pairs: Sequence[EvalPair], methods: Sequence[str],
             else:
                 r = merge_maps(pair.map_a, pair.map_b, method=method, config=cfg)
             records.append(_record(pair, method, r.transform, r.accepted, r.time_s, r.score,
-                                   r.reason))
+                                   r.reason, *_confidence(r)))
             bar.update()
     bar.close()
     return records
@@ -393,6 +424,145 @@ def format_tables(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+# ------------------------------------------------------------------ thresholds, calibration
+SWEEP_THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(20)) + (0.99,)
+"""Accept thresholds of :func:`threshold_sweep`."""
+
+
+def is_right(record: Record) -> bool:
+    """Whether the record's transform is right (overlapping pair, both errors within the
+    success thresholds), accepted or not: what a calibrated confidence predicts."""
+    if record.kind != "overlap" or record.rotation_error_deg is None:
+        return False
+    return is_success((record.rotation_error_deg, record.translation_error_m))
+
+
+def _with_confidence(records: Sequence[Record]) -> dict[str, list[Record]]:
+    """Records per method, for the methods whose every record has a confidence."""
+    out: dict[str, list[Record]] = {}
+    for m in dict.fromkeys(r.method for r in records):
+        rows = [r for r in records if r.method == m]
+        if m != ORACLE and all(r.confidence is not None for r in rows):
+            out[m] = rows
+    return out
+
+
+def threshold_sweep(records: Sequence[Record],
+                    thresholds: Sequence[float] = SWEEP_THRESHOLDS) -> dict[str, list[dict]]:
+    """Per method with confidences, per threshold ``t``: the merges accepted by the rule
+    ``confidence >= t`` (and the method's hard gates, :attr:`Record.gated`), and of them the
+    success rate on pairs with ≥ 40 % overlap, the wrong accepts (accepted and not right) as a
+    share of all pairs, and the false accepts as a share of no-overlap pairs (percent). For
+    the structural methods this is what a pure confidence rule would do (their own rule
+    ignored)."""
+    out = {}
+    for m, rows in _with_confidence(records).items():
+        hi = [r for r in rows if r.kind == "overlap" and r.overlap >= 0.4]
+        none = [r for r in rows if r.kind in NO_OVERLAP_KINDS]
+        table = []
+        for t in thresholds:
+            acc = [r for r in rows if r.gated and r.confidence >= t]
+            table.append({
+                "threshold": float(t),
+                "success_overlap_ge_40": (100.0 * sum(r.gated and r.confidence >= t
+                                                      and is_right(r) for r in hi) / len(hi)
+                                          if hi else None),
+                "wrong_accepts": 100.0 * sum(not is_right(r) for r in acc) / len(rows),
+                "false_accepts": (100.0 * sum(r.gated and r.confidence >= t for r in none)
+                                  / len(none) if none else None)})
+        out[m] = table
+    return out
+
+
+def calibration_summary(records: Sequence[Record], bins: int = 10) -> dict[str, dict]:
+    """Per method with confidences: the reliability table of its confidence against whether
+    the transform is right (:func:`is_right`), the Brier score, and the largest
+    ``|predicted − observed|`` over bins of ≥ 20 merges (``None`` if no bin has 20)."""
+    from fusion.calibration import brier_score, max_calibration_gap, reliability_table
+
+    out = {}
+    for m, rows in _with_confidence(records).items():
+        p = [r.confidence for r in rows]
+        y = [float(is_right(r)) for r in rows]
+        table = reliability_table(p, y, bins)
+        gap = max_calibration_gap(table)
+        out[m] = {"brier": brier_score(p, y), "bins": table,
+                  "max_gap_bins_ge_20": None if math.isnan(gap) else gap, "merges": len(rows)}
+    return out
+
+
+def format_threshold_tables(sweep: dict[str, list[dict]], calibration: dict[str, dict],
+                            default: float | None = None) -> str:
+    """The threshold sweep and the calibration as plain-text tables (``*`` marks the
+    default threshold)."""
+    lines = []
+    for m, table in sweep.items():
+        lines += [f"\n== {m}: success against wrong accepts as accept_threshold moves ==",
+                  f"{'threshold':>10}{'succ≥40% %':>12}{'wrong acc % (all)':>19}"
+                  f"{'false acc % (no ovl)':>22}"]
+        for row in table:
+            mark = "*" if default is not None and abs(row["threshold"] - default) < 1e-9 else ""
+            lines.append(f"{row['threshold']:>9.2f}{mark:1}"
+                         f"{_fmt(row['success_overlap_ge_40']):>12}"
+                         f"{_fmt(row['wrong_accepts'], '.2f'):>19}"
+                         f"{_fmt(row['false_accepts'], '.2f'):>22}")
+    for m, cal in calibration.items():
+        gap = cal["max_gap_bins_ge_20"]
+        lines += [f"\n== {m}: calibration of confidence (Brier {cal['brier']:.4f}, "
+                  f"largest gap in bins of ≥ 20: {_fmt(gap, '.3f')}) ==",
+                  f"{'bin':>10}{'merges':>8}{'predicted':>11}{'observed':>10}"]
+        for b in cal["bins"]:
+            lines.append(f"{b['low']:>4.1f}–{b['high']:<4.1f}{b['n']:>9}"
+                         f"{b['predicted']:>11.3f}{b['observed']:>10.3f}")
+    return "\n".join(lines)
+
+
+def plot_thresholds(sweep: dict[str, list[dict]], records: Sequence[Record], out: str | Path,
+                    default: float | None = None) -> list[Path]:
+    """``threshold_curves.png`` (success on ≥ 40 % overlap against wrong accepts of all
+    pairs, one curve per method, thresholds labelled, the default ringed) and
+    ``calibration.png`` (the reliability diagram of every method with confidences)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fusion.calibration import plot_reliability
+    from topo.plotting import save_figure
+
+    out = Path(out)
+    files = []
+    if sweep:
+        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        for m, table in sweep.items():
+            x = [r["wrong_accepts"] for r in table]
+            y = [np.nan if r["success_overlap_ge_40"] is None else r["success_overlap_ge_40"]
+                 for r in table]
+            ax.plot(x, y, marker=".", label=m)
+            for r, xi, yi in zip(table, x, y, strict=True):
+                if round(r["threshold"] * 20) % 4 == 2 or r["threshold"] == 0.99:
+                    ax.annotate(f"{r['threshold']:g}", (xi, yi), fontsize=7,
+                                textcoords="offset points", xytext=(3, 3))
+                if default is not None and abs(r["threshold"] - default) < 1e-9:
+                    ax.scatter([xi], [yi], s=90, facecolors="none", edgecolors="k", zorder=5)
+        ax.axvline(1.0, color="k", ls=":", lw=1)
+        ax.set_xlabel("wrong accepts (% of all pairs)")
+        ax.set_ylabel("success on pairs with ≥ 40 % overlap (%)")
+        ax.set_title("success against wrong accepts as accept_threshold moves"
+                     + ("" if default is None else f" (ringed: default {default:g})"),
+                     fontsize=9)
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        files.append(save_figure(fig, out / "threshold_curves.png"))
+        plt.close(fig)
+        curves = {m: ([r.confidence for r in rows], [float(is_right(r)) for r in rows])
+                  for m, rows in _with_confidence(records).items()}
+        files.append(plot_reliability(curves, out / "calibration.png",
+                                      title="calibration of the merge confidence"))
+    return files
+
+
 # ---------------------------------------------------------------------------------- output
 def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str | Path,
                  config: MergeConfig | dict | None = None, pictures: int = 4) -> list[Path]:
@@ -483,8 +653,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m fusion.evaluate",
         description="Evaluate topological map merging against ground truth and an oracle.")
-    p.add_argument("pairs_dir", nargs="?", type=Path,
-                   help="map-pair dataset folder (the agents' format); or use --synthetic")
+    p.add_argument("pairs_dir", nargs="*", type=Path,
+                   help="map-pair dataset folders (the agents' format; several are evaluated "
+                        "as one set); or use --synthetic")
     p.add_argument("--synthetic", type=int, metavar="N",
                    help="evaluate N synthetic pairs per noise level instead of a folder")
     p.add_argument("--methods", default="auto,paper_icp,multistart_icp,exhaustive",
@@ -522,7 +693,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI (see the module docstring); returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if (args.pairs_dir is None) == (args.synthetic is None):
+    if (not args.pairs_dir) == (args.synthetic is None):
         parser.error("give either PAIRS_DIR or --synthetic N (exactly one)")
     try:
         methods = parse_methods(args.methods)
@@ -534,7 +705,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             syn = _json_arg(parser, args.synthetic_config, "--synthetic-config")
             pairs = synthetic_pairs(args.synthetic, args.seed, noise, syn)
         else:
-            pairs = load_pair_dir(args.pairs_dir)
+            pairs = []
+            for folder in args.pairs_dir:
+                loaded = load_pair_dir(folder)
+                if len(args.pairs_dir) > 1:
+                    loaded = [dataclasses.replace(p, name=f"{folder.name}/{p.name}")
+                              for p in loaded]
+                pairs += loaded
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         parser.error(str(exc))
     overrides = _json_arg(parser, args.config, "--config")
@@ -548,15 +725,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                        for_noise=args.for_noise)
     summary = summarise(records)
     print(format_tables(summary))
+    from fusion.grid_merge import GridMergeConfig
+
+    default = GridMergeConfig().accept_threshold
+    sweep, calibration = threshold_sweep(records), calibration_summary(records)
+    print(format_threshold_tables(sweep, calibration, default))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
-              if args.synthetic is not None else str(args.pairs_dir))
+              if args.synthetic is not None else ", ".join(map(str, args.pairs_dir)))
     atomic_write_json(args.out / "results.json", {
         "source": source, "methods": methods, "config": asdict(config),
         "config_for_noise": args.for_noise,
         "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
-        "summary": summary, "records": [asdict(r) for r in records]}, allow_nan=False)
+        "summary": summary, "threshold_sweep": sweep, "calibration": calibration,
+        "accept_threshold": default, "records": [asdict(r) for r in records]}, allow_nan=False)
     if not args.no_plots:
         plot_results(records, pairs, args.out, config)
+        plot_thresholds(sweep, records, args.out, default)
     print(f"\nwrote {args.out / 'results.json'}" + ("" if args.no_plots else " and plots"))
     return 0
 

@@ -25,7 +25,7 @@ ACTION_TYPES = ("continuous", "discrete")
 """``EnvConfig.action_type`` values."""
 
 MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "none")
-"""``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.grid_merge.hybrid_merge``: the
+"""``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.hybrid.hybrid_merge``: the
 structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method, or
 ``"none"`` (never merges: each robot alone)."""
 
@@ -287,6 +287,9 @@ class MappingConfig:
         grid_merge_growth: after a grid alignment, the next one waits (beyond
             ``grid_merge_every``) until the two robots' maps together know this fraction more
             cells: the same maps would only give the same answer. ``0`` runs on schedule.
+        accept_threshold: with ``"hybrid"``, a merge is accepted only when its calibrated
+            confidence (probability that the transform is right) reaches this, in ``[0, 1]``;
+            default ``fusion.grid_merge.DEFAULT_ACCEPT_THRESHOLD`` (0.9).
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).
@@ -299,6 +302,7 @@ class MappingConfig:
     merge_method: str = "hybrid"
     grid_merge_every: int = 100
     grid_merge_growth: float = 0.2
+    accept_threshold: float = 0.9
     local_map_size: int = 64
     local_map_resolution: float = 0.15
     max_nodes: int = 32
@@ -321,6 +325,9 @@ class MappingConfig:
         _set(self, "grid_merge_growth", check_real(self.grid_merge_growth,
                                                    "mapping.grid_merge_growth", low=0.0,
                                                    low_inclusive=True, high=10.0))
+        _set(self, "accept_threshold", check_real(self.accept_threshold,
+                                                  "mapping.accept_threshold", low=0.0,
+                                                  low_inclusive=True, high=1.0))
         _set(self, "local_map_size", check_int(self.local_map_size, "mapping.local_map_size",
                                                low=64))
         if self.local_map_size > 512:

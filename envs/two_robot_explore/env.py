@@ -81,23 +81,29 @@ them; a node that touches the unknown is flagged (its ``frontier`` feature) and 
 merge leaves it out, since it moves as the map grows. Two robots that know the same rooms put
 the same places there, whatever else each has seen (``benchmarks/topo_repeatability.py``).
 
-Merging (``mapping.merge_method``): ``"hybrid"`` (default) runs the structural global merge
-``fusion.merge_maps(method="auto")`` on the two topological maps every ``merge_every`` steps
-and every ``grid_merge_every`` steps also the occupancy-grid alignment
-``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, the costly part; only
-once the maps have grown by ``grid_merge_growth``, 20 %, since its last run), which is what
-succeeds on most sonar map pairs: sonar topological maps of the same place differ too much for
-the structural merge to be confident. Both refuse ambiguous alignments (the procedural
-buildings are lattices of rooms), yet small maps of a self-similar building can be confidently
-wrong (a room row turned 180° or shifted onto its twin), so the grid alignment keeps running
-after a merge is accepted (``fusion.grid_merge.recheck``): an accepted alignment replaces the
-transform in use (refined, or a different one), and a rejected one whose best alignment is
-clearly different from the transform in use drops it (info ``merge_drops``): the shared map is
-robot 0's cells alone again until the next accepted merge. Other values run one
-``fusion.merge_maps`` method; ``"none"`` never merges. ``"exhaustive"`` (the paper's search)
-suits small maps only: beyond ``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of
-about 166 path endpoints) it raises a ``ValueError`` from ``step()`` instead of running for
-minutes.
+Merging (``mapping.merge_method``): ``"hybrid"`` (default, ``fusion.hybrid.hybrid_merge``)
+runs the structural global merge ``fusion.merge_maps(method="auto")`` on the two topological
+maps every ``merge_every`` steps and every ``grid_merge_every`` steps also the occupancy-grid
+alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, refined on the
+grids' own cells; the costly part, so only once the maps have grown by ``grid_merge_growth``,
+20 %, since its last run), which is what succeeds on most sonar map pairs: sonar topological
+maps of the same place differ too much for the structural merge to be confident. Every merge
+result carries a **confidence**, the calibrated probability that its transform is right
+(rotation < 2°, translation < 0.3 m; fitted on tuning map pairs, ``fusion.calibration``), and
+is accepted only when ``confidence >= mapping.accept_threshold`` (default 0.9: no wrong
+accept on the 156 held-out map pairs, 70 % of the pairs sharing ≥ 40 % merged right; lower it
+to merge sooner and more often at the price of wrong merges — 0.7: 80 % and 1.7 % — see the
+threshold table in ``benchmarks/fusion.md``). Small maps of a self-similar building
+(the procedural buildings are lattices of rooms) can still be confidently wrong (a room row
+turned 180° or shifted onto its twin), so the grid alignment keeps running after a merge is
+accepted (``fusion.hybrid.recheck``): an accepted alignment replaces the transform in use
+(refined, or a different one), and a rejected one whose best alignment is clearly different
+from the transform in use drops it (info ``merge_drops``): the shared map is robot 0's cells
+alone again until the next accepted merge. Other values run one ``fusion.merge_maps`` method
+(its own accept rule; ``accept_threshold`` is not used); ``"none"`` never merges.
+``"exhaustive"`` (the paper's search) suits small maps only: beyond
+``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of about 166 path endpoints) it
+raises a ``ValueError`` from ``step()`` instead of running for minutes.
 
 ## Rewards
 
@@ -182,6 +188,7 @@ are a ``ValueError``.
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
 | ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
+| ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (see Maps) |
 | ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
 | ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
 | ``mapping.max_nodes`` | int | 32 | graph nodes observed |
@@ -584,7 +591,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._install_merge(*run_merge(self.maps[0].topomap, self.maps[1].topomap,
                                        self.config.mapping.merge_method, self.maps[0].grid,
                                        self.maps[1].grid, try_grids=try_grids,
-                                       in_use=self.shared.transform))
+                                       in_use=self.shared.transform,
+                                       accept_threshold=self.config.mapping.accept_threshold))
 
     def _merge_due(self) -> bool | None:
         """``None`` if no merge is due this step, else whether it also tries the grids (and

@@ -180,6 +180,8 @@ def test_step_before_reset_and_after_the_end_tell_to_reset():
     ({"mapping": {"topo": {"spur": 1}}}, ValueError, r"mapping.topo: ExtractConfig has unknown keys \[.spur.\]"),
     ({"mapping": {"grid_merge_growth": -0.1}}, ValueError,
      "mapping.grid_merge_growth must be >= 0.0, got -0.1"),
+    ({"mapping": {"accept_threshold": 1.5}}, ValueError,
+     "mapping.accept_threshold must be <= 1.0, got 1.5"),
     ({"render_mode": "ansi"}, ValueError, "render_mode must be one of"),
 ])
 def test_bad_config_names_the_problem(kwargs, error, match):

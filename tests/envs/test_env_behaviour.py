@@ -251,3 +251,26 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     assert "the grids refute the transform in use" in info["merge"].reason
     assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
     assert par._observe_one(0, par._poses_across())["teammate"][4] == 0.0
+
+
+def test_the_accept_threshold_reaches_the_grid_alignment(monkeypatch):
+    """``mapping.accept_threshold`` is the threshold the env's merges are decided with, and
+    its default is the library's."""
+    import fusion.grid_merge as gm
+    from envs.two_robot_explore.config import MappingConfig
+
+    assert MappingConfig().accept_threshold == gm.DEFAULT_ACCEPT_THRESHOLD
+    seen = []
+    real = gm.merge_grids
+
+    def watched(grid_a, grid_b, config=None):
+        seen.append(config.accept_threshold)
+        out = real(grid_a, grid_b, config)
+        assert out.accepted == (out.confidence >= config.accept_threshold
+                                and out.overlap_m2 >= config.min_overlap_m2)
+        return out
+
+    monkeypatch.setattr(gm, "merge_grids", watched)
+    _episode(3, 60, mapping={"merge_every": 5, "grid_merge_every": 10,
+                             "grid_merge_growth": 0.0, "accept_threshold": 0.42})
+    assert seen and set(seen) == {0.42}

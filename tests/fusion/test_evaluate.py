@@ -43,8 +43,13 @@ def test_cli_writes_results_and_plots(tmp_path, capsys):
     assert data["methods"] == ["auto", "paper_icp"]
     assert {r["method"] for r in data["records"]} == {"oracle", "auto", "paper_icp"}
     assert len(data["records"]) == 5 * 3
-    for name in ("error_cdf.png", "success_vs_overlap.png", "success_vs_rotation.png"):
+    for name in ("error_cdf.png", "success_vs_overlap.png", "success_vs_rotation.png",
+                 "threshold_curves.png", "calibration.png"):
         assert (out / name).stat().st_size > 0
+    assert "success against wrong accepts as accept_threshold moves" in printed
+    assert "calibration of confidence (Brier" in printed
+    assert [r["threshold"] for r in data["threshold_sweep"]["auto"]][:3] == [0.0, 0.05, 0.1]
+    assert set(data["calibration"]) == {"auto", "paper_icp"}
     assert list(out.glob("merged_*.png"))
     assert not list(out.glob(".*"))  # no temporary files left behind
 
@@ -160,3 +165,52 @@ def test_grid_methods_need_grids():
     records = evaluate(pairs, ["grid"], progress=False)
     grid_records = [r for r in records if r.method == "grid"]
     assert grid_records and all(not r.accepted for r in grid_records)
+
+
+def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
+    from fusion.evaluate import Record
+
+    err = (0.5, 0.1) if right else (30.0, 3.0)
+    return Record(name, "m", kind, overlap, None, 10.0, conf >= 0.5, *err,
+                  bool(conf >= 0.5 and right), 0.01, None, None, 5, 5, conf, gated)
+
+
+def test_threshold_sweep_counts_what_each_threshold_accepts():
+    from fusion.evaluate import calibration_summary, is_right, threshold_sweep
+
+    records = [_rec("p0", 0.95, True), _rec("p1", 0.7, True), _rec("p2", 0.6, False),
+               _rec("p3", 0.8, False, kind="no_overlap", overlap=0.0),
+               _rec("p4", 0.99, True, gated=False), _rec("p5", 0.3, True, overlap=0.2)]
+    assert [is_right(r) for r in records] == [True, True, False, False, True, True]
+    rows = {r["threshold"]: r for r in threshold_sweep(records, (0.0, 0.65, 0.9))["m"]}
+    # >= 40 % overlap: p0, p1, p2, p4 (p4 fails its hard gate at any threshold)
+    assert rows[0.0]["success_overlap_ge_40"] == pytest.approx(50.0)
+    assert rows[0.65]["success_overlap_ge_40"] == pytest.approx(50.0)
+    assert rows[0.9]["success_overlap_ge_40"] == pytest.approx(25.0)
+    # wrong accepts of all 6 pairs: p2 and p3 at 0, p3 at 0.65, none at 0.9
+    assert [rows[t]["wrong_accepts"] for t in (0.0, 0.65, 0.9)] == pytest.approx(
+        [200 / 6, 100 / 6, 0.0])
+    assert [rows[t]["false_accepts"] for t in (0.0, 0.65, 0.9)] == [100.0, 100.0, 0.0]
+    cal = calibration_summary(records)["m"]
+    assert cal["merges"] == 6 and cal["max_gap_bins_ge_20"] is None
+    assert cal["brier"] == pytest.approx(np.mean(
+        [(0.95 - 1) ** 2, 0.3 ** 2, 0.6 ** 2, 0.8 ** 2, 0.01 ** 2, 0.7 ** 2]))
+
+
+def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
+    import fusion.pairs as pairs_mod
+
+    grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
+    for folder in ("one", "two"):
+        root = tmp_path / folder
+        pairs_mod.atomic_write_json(root / "dataset.json", {
+            "format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
+        p = make_pair(np.random.default_rng(len(folder)), overlap=0.8, nodes=(20, 20))
+        pairs_mod.write_pair(root, pairs_mod.MapPair(
+            0, p.map_a, p.map_b, grid, grid, p.transform, p.overlap, "w", 0, "test", 0, 0, 0))
+    out = tmp_path / "eval"
+    assert main([str(tmp_path / "one"), str(tmp_path / "two"), "--methods", "auto",
+                 "--out", str(out), "--quiet", "--no-plots"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert [r["pair"] for r in data["records"]] == ["one/pair_000000", "two/pair_000000"]
+    assert str(tmp_path / "two") in data["source"]

@@ -91,7 +91,10 @@ def test_a_symmetric_room_is_ambiguous():
     s[20:100, 30:90] = 1  # a plain rectangle looks the same after a half turn
     g = GridSnapshot(s, RES, (0.0, 0.0))
     res = merge_grids(g, g)
-    assert not res.accepted and "ambiguous" in res.reason
+    # a perfect fit, but the half turn fits as well: the confidence says so
+    assert res.wall_agreement == 1.0 and res.margin == pytest.approx(1.0, abs=0.01)
+    assert not res.accepted and res.confidence < 0.5
+    assert "margin 1.00 over a distinct alignment" in res.reason
 
 
 def test_nothing_known_is_a_reason_not_an_error():
@@ -234,3 +237,74 @@ def test_rotated_raster_kernel_is_the_numpy_form(seed):
     layer = np.broadcast_to(np.arange(5)[:, None], ix.shape)
     want[layer, side - 1 - iy, side - 1 - ix] = 1.0
     np.testing.assert_array_equal(got, want)
+
+
+def test_acceptance_is_the_confidence_against_the_threshold():
+    a, b, truth = overlapping_views(37.0)
+    res = merge_grids(a, b)
+    assert 0.0 <= res.confidence <= 1.0
+    assert res.confidence == pytest.approx(
+        __import__("fusion.calibration", fromlist=["load_model"]).load_model("grid")(
+            res.features()))
+    assert res.accepted == (res.confidence >= GridMergeConfig().accept_threshold
+                            and res.overlap_m2 >= GridMergeConfig().min_overlap_m2)
+    strict = merge_grids(a, b, GridMergeConfig(accept_threshold=1.0))
+    assert strict.transform.allclose(res.transform)  # the threshold only decides
+    assert not strict.accepted and "accept_threshold=1.0" in strict.reason
+    assert merge_grids(a, b, GridMergeConfig(accept_threshold=0.0)).accepted
+    gated = merge_grids(a, b, GridMergeConfig(accept_threshold=0.0, min_overlap_m2=1e6))
+    assert not gated.accepted and "min_overlap_m2" in gated.reason
+
+
+def test_threshold_and_refinement_settings_are_checked():
+    with pytest.raises(ValueError, match="GridMergeConfig.accept_threshold must be <= 1.0, got"
+                                         " 1.5"):
+        GridMergeConfig(accept_threshold=1.5)
+    with pytest.raises(TypeError, match="GridMergeConfig.native_refine must be a bool, got int"):
+        GridMergeConfig(native_refine=1)
+
+
+def _fine(snapshot: GridSnapshot, factor: int) -> GridSnapshot:
+    """The same grid with cells ``factor`` times finer (walls one fine cell thick)."""
+    s = np.asarray(snapshot.states)
+    up = np.kron(s, np.ones((factor, factor), np.int8))
+    wall = up == 2
+    up[wall & ndimage.binary_erosion(wall, iterations=1)] = 0  # thin walls: what a fine map sees
+    return GridSnapshot(up, snapshot.resolution / factor, snapshot.origin)
+
+
+def test_fine_grids_are_pooled_to_exact_cells_and_refined_on_their_own_cells():
+    """Cells of 0.1 / 3 m do not pool to whole 0.2 m cells: rounding to 7 fine cells would
+    stretch the map by 5 %; and the refinement on the grids' own cells is finer than the
+    pooled alignment."""
+    from fusion.grid_merge import _pooled
+
+    s = np.zeros((10, 300), np.int8)
+    s[:, 180] = 2  # a wall at x = 6.0–6.033 m
+    s[:, :180] = 1
+    wall, free, origin = _pooled(GridSnapshot(s, 0.1 / 3, (0.0, 0.0)), 0.2)
+    assert np.flatnonzero(wall[0]).tolist() == [30]  # 6.0 m / 0.2 m
+    assert free[0, :30].all() and not free[0, 31:].any()
+
+    a, b, truth = overlapping_views(37.0, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
+    fa, fb = _fine(a, 3), _fine(b, 3)
+    centre = np.array([15.0, 12.0])
+    fine = merge_grids(fa, fb)
+    coarse = merge_grids(fa, fb, GridMergeConfig(native_refine=False))
+    err = fine.transform.translation_error(truth, at=centre)
+    assert err < 0.06 and math.degrees(fine.transform.rotation_error(truth)) < 0.3
+    assert err <= coarse.transform.translation_error(truth, at=centre) + 0.01
+
+
+def test_hybrid_results_carry_the_grid_confidence_and_obey_the_threshold():
+    from fusion.hybrid import HybridResult
+
+    a, b, truth = overlapping_views(90.0)
+    res = hybrid_merge(TINY, TINY, a, b)
+    assert isinstance(res, HybridResult) and res.grid is not None
+    assert res.confidence == res.grid.confidence and res.accepted == res.grid.accepted
+    assert res.score == pytest.approx(math.log(res.confidence / (1 - res.confidence)))
+    strict = hybrid_merge(TINY, TINY, a, b, config=GridMergeConfig(accept_threshold=1.0))
+    assert not strict.accepted and "accept_threshold=1.0" in strict.reason
+    without = hybrid_merge(TINY, TINY, a, b, try_grids=False)
+    assert without.grid is None and not without.accepted and without.confidence == 0.0

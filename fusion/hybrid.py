@@ -1,0 +1,145 @@
+"""``hybrid_merge``: the environment's merge — the structural merge of the topological maps
+checked by the grids, and the occupancy-grid alignment with its calibrated confidence — and
+``recheck``, which re-examines a transform in use as the maps grow.
+
+Sonar topological maps of the same place differ too much for the structural merge
+(:func:`fusion.merge_maps`) to be confident often (it accepted 2 of 240 tuning env pairs); the
+grid alignment (:func:`fusion.grid_merge.merge_grids`) is what merges most pairs. Every result
+carries ``confidence``, the probability that its transform is right (< 2°, < 0.3 m); it is
+accepted only when ``confidence >= accept_threshold``
+(:class:`fusion.grid_merge.GridMergeConfig`) and the hard gates pass (the grid alignment's
+``min_overlap_m2``; for a structural merge, its own rule and the grids' check), so a rejected
+result may still report a confidence above the threshold.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fusion import grid_merge as gm
+from fusion.merge import MergeResult, fuse_maps, merge_maps
+from fusion.rigid import Rigid2D
+
+HYBRID_EPS = 0.6
+"""Node fusion radius (m) when a grid alignment builds the merged topological map: sonar
+topological maps of the same place put their nodes ~0.5 m apart."""
+
+
+@dataclass(frozen=True, slots=True)
+class HybridResult(MergeResult):
+    """A :class:`fusion.MergeResult` (``method="hybrid"``) with its calibrated confidence.
+
+    Attributes:
+        confidence: probability that ``transform`` is right (< 2°, < 0.3 m at B's centroid):
+            the grid alignment's calibrated :attr:`GridMergeResult.confidence` when the grids
+            were aligned, else the structural merge's own (:attr:`MergeEvidence.confidence`,
+            0 without evidence).
+        grid: the grid alignment behind the result (``None`` if the grids were not aligned).
+    """
+
+    confidence: float = 0.0
+    grid: gm.GridMergeResult | None = None
+
+
+def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
+                 try_grids: bool = True, config: gm.GridMergeConfig | None = None
+                 ) -> HybridResult:
+    """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``): kept if it is
+    accepted, its confidence reaches ``config.accept_threshold`` and the grids agree with it
+    (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate). Otherwise, when
+    ``try_grids``, the grid alignment (:func:`fusion.grid_merge.merge_grids`): accepted when its
+    calibrated confidence reaches ``accept_threshold``; an accepted grid alignment fuses the
+    topological maps at nodes within :data:`HYBRID_EPS`. A rejection keeps the grids' best
+    alignment (no matches, ``merged`` = ``map_a``; ``evidence`` stays the structural merge's),
+    or without grids the structural one, with the reasons; ``score`` is the log-odds of
+    ``confidence`` for a grid alignment, the structural score otherwise."""
+    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config)
+
+
+def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
+            config: gm.GridMergeConfig | None = None) -> tuple[HybridResult, str | None]:
+    """:func:`hybrid_merge` (grids tried) for maps already merged by ``in_use``, and whether
+    the grids now refute ``in_use``: ``(result, None)``, or with the result rejected and the
+    grids' best alignment clearly different from ``in_use`` (``distinct_deg`` / ``distinct_m``
+    at B's wall centroid) — the evidence no longer supports it though nothing is confident
+    enough to replace it — ``(result, why)``, ``why`` also appended to the result's reason.
+
+    An accepted result (the same alignment refined, or a distinct one) is for the caller to
+    use instead. This is how a merge accepted early on small, self-similar maps (a building's
+    180°-turned or shifted copy of a room row) gets undone once the maps have grown.
+
+    Raises:
+        TypeError: ``in_use`` is not a :class:`fusion.Rigid2D`.
+    """
+    if not isinstance(in_use, Rigid2D):
+        raise TypeError(f"in_use must be a fusion.Rigid2D (the transform in use), got "
+                        f"{type(in_use).__name__}")
+    cfg = config or gm.GridMergeConfig()
+    result = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg)
+    grid = result.grid
+    if result.accepted or grid is None or grid.centre is None:
+        return result, None
+    if not gm.distinct(grid.transform, in_use, grid.centre, cfg):
+        return result, None
+    why = (f"the grids refute the transform in use: their best alignment is "
+           f"{math.degrees(grid.transform.rotation_error(in_use)):.0f}° / "
+           f"{grid.transform.translation_error(in_use, at=grid.centre):.1f} m from it")
+    return dataclasses.replace(result, reason=f"{result.reason}; {why}"), why
+
+
+def _log_odds(p: float) -> float:
+    p = min(max(p, 1e-12), 1 - 1e-12)
+    return math.log(p / (1 - p))
+
+
+def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
+            config: gm.GridMergeConfig | None) -> HybridResult:
+    t0 = time.perf_counter()
+    cfg = config or gm.GridMergeConfig()
+    topo = merge_maps(map_a, map_b, method="auto")
+    topo_conf = topo.evidence.confidence if topo.evidence is not None else 0.0
+    fields = {f.name: getattr(topo, f.name) for f in dataclasses.fields(MergeResult)}
+    if topo.accepted:
+        # sonar topological maps fool the structural merge now and then: the grids must agree
+        why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
+        if why is None and topo_conf < cfg.accept_threshold:
+            why = f"confidence {topo_conf:.2f} < accept_threshold={cfg.accept_threshold}"
+        if why is None:
+            return HybridResult(**{**fields, "method": "hybrid",
+                                   "time_s": time.perf_counter() - t0},
+                                confidence=topo_conf)
+        fields.update(accepted=False, merged=map_a,
+                      reason=f"structural merge refuted by the grids: {why}")
+    if not try_grids:
+        return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0},
+                            confidence=topo_conf)
+    grid = gm.merge_grids(grid_a, grid_b, cfg)
+    if not grid.accepted:
+        return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,
+                               "matches": np.empty((0, 2), dtype=np.int64), "merged": map_a,
+                               "score": _log_odds(grid.confidence), "method": "hybrid",
+                               "time_s": time.perf_counter() - t0,
+                               "reason": f"topology: {fields['reason']}; grids: {grid.reason}"},
+                            confidence=grid.confidence, grid=grid)
+    moved = grid.transform.apply(map_b.xy)
+    matches = np.empty((0, 2), dtype=np.int64)
+    if map_a.n_nodes and map_b.n_nodes:
+        d, idx = cKDTree(map_a.xy).query(moved, distance_upper_bound=HYBRID_EPS)
+        keep = np.isfinite(d)
+        matches = np.stack([idx[keep], np.flatnonzero(keep)], axis=1).astype(np.int64)
+        # one B node per A node: the closest
+        order = np.argsort(d[keep], kind="stable")
+        _, first = np.unique(matches[order, 0], return_index=True)
+        matches = matches[order[first]]
+    merged = fuse_maps(map_a, map_b, grid.transform, matches, HYBRID_EPS)
+    return HybridResult(transform=grid.transform, accepted=True,
+                        score=_log_odds(grid.confidence), matches=matches, merged=merged,
+                        method="hybrid", time_s=time.perf_counter() - t0, reason=None,
+                        evidence=None, confidence=grid.confidence, grid=grid)
