@@ -47,7 +47,7 @@ from fusion.evaluate import ROTATION_OK_DEG, TRANSLATION_OK_M  # noqa: E402
 from fusion.pairs import atomic_write_json, load_pairs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path("/work/main/data/env_pairs")
+DATA = ROOT / "data" / "env_pairs"
 L2 = 2.0
 """Ridge penalty of the fit (in pairs)."""
 TUNE = DATA / "tune"

@@ -6,7 +6,9 @@ Two splits, so that what is tuned on is never what is reported:
 
 * ``tune`` (seed 0) and ``test`` (seed 1), each with
   - ``frontier`` and ``coordinated_frontier``: 60 pairs each (20 episodes × 3 snapshots) in
-    procedural 20 × 20 m buildings, 1500 steps;
+    procedural 20 × 20 m buildings, 1500 steps (``tune`` also ``frontier_seed2`` and
+    ``coordinated_frontier_seed3``: 120 pairs each from seeds 2 and 3, for fitting the merges'
+    calibrated confidences);
   - ``real_<map>``: 6 pairs (2 episodes × 3 snapshots) on each real map of ``../shared/maps``
     (DungeonMaps at 0.1 m/pixel, ROS maps at their own resolution), split between the two.
 
@@ -42,6 +44,12 @@ def jobs(out: Path, split: str) -> list[list[str]]:
     common = ["--snapshots", "3", "--max-cycles", "1500", "--seed", seed, "--no-progress"]
     out_jobs = [["generate", "--explorer", explorer, "--pairs", "60", "--world-size", "20", "20",
                  "--out", str(out / split / explorer), *common] for explorer in PROCEDURAL]
+    if split == "tune":
+        for explorer, extra_seed in zip(PROCEDURAL, ("2", "3"), strict=True):
+            out_jobs.append(["generate", "--explorer", explorer, "--pairs", "120",
+                             "--world-size", "20", "20", "--out",
+                             str(out / split / f"{explorer}_seed{extra_seed}"),
+                             *common[:4], "--seed", extra_seed, "--no-progress"])
     for name in REAL_MAPS[split]:
         path = MAPS / name
         if not path.is_file():

@@ -3,7 +3,7 @@ the grids' own cells (``GridMergeConfig.native_refine``) make them as precise as
 
     python benchmarks/fine_maps.py [--pairs 8] [--seed 0]
 
-Pairs are cut from the real maps of ``/work/shared/maps`` at their own scale: the ROS maps
+Pairs are cut from the real maps of ``../shared/maps`` at their own scale: the ROS maps
 (depot, tb3_sandbox, turtlebot3_world: 0.05 m/px) and the DungeonMaps PNGs read at 0.03 m/px
 (640 × 480 px = 19 × 14 m; the format gives no scale). Each pair is two overlapping windows of
 the map (each 55–75 % of its width and height), robot B's turned by a random angle: every cell
@@ -35,7 +35,7 @@ from fusion.pairs import GridSnapshot  # noqa: E402
 from fusion.rigid import Rigid2D  # noqa: E402
 from topo.maps import load_floor_plan  # noqa: E402
 
-MAPS = Path("/work/shared/maps")
+MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 SOURCES = ([(MAPS / "ros" / f"{n}.yaml", None) for n in ("depot", "tb3_sandbox",
                                                           "turtlebot3_world")]
            + [(p, 0.03) for p in sorted((MAPS / "dungeon").glob("*.png"))])
