@@ -1,7 +1,19 @@
-"""Fit the calibrated confidence of ``fusion.merge_grids`` (model ``"grid"`` of
-``fusion/calibration.json``) on tuning pairs, and report how well it is calibrated.
+"""Fit the merges' calibrated models on tuning pairs, and report how well they are calibrated.
 
-    python benchmarks/calibrate_merge.py [--pairs DIR ...] [--write] [--cache FILE]
+    python benchmarks/calibrate_merge.py [--model grid|structural|ranking] [--pairs DIR ...]
+        [--write] [--cache FILE] [--synthetic N]
+
+``--model grid`` (the default) fits ``fusion.merge_grids``' confidence (model ``"grid"`` of
+``fusion/calibration.json``), as below. ``--model structural`` fits the structural merge's
+confidence (model ``"structural"``: ``fusion.merge.CALIBRATION_FEATURES`` of
+``merge_maps(method="auto")``'s result) on the tuning env pairs, their maps extracted again
+with the current ``topo.extract_topomap``, and ``--synthetic N`` synthetic pairs per noise level
+(``fusion.evaluate.synthetic_pairs``, seed 100: the evaluation's seeds are 0 and 7), with the
+same cross-validation and threshold rule. ``--model ranking`` fits the weights that rank the
+structural search's candidates (``fusion.merge.CONFIDENCE_WEIGHTS``: every candidate of
+``fusion.merge.candidate_features`` labelled right or wrong, near misses within 5° and 1 m left
+out) and prints them to paste, with how often the top-ranked candidate is right under the old
+and the new weights.
 
 For every pair of the tuning datasets (default: every folder of ``data/env_pairs/tune``; never
 those of ``data/env_pairs/test``) the grids are
@@ -35,6 +47,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion.grid_merge as gm  # noqa: E402
+import fusion.merge as fm  # noqa: E402
 from fusion.calibration import (  # noqa: E402
     brier_score,
     fit_logistic,
@@ -43,8 +56,9 @@ from fusion.calibration import (  # noqa: E402
     reliability_table,
     write_model,
 )
-from fusion.evaluate import ROTATION_OK_DEG, TRANSLATION_OK_M  # noqa: E402
+from fusion.evaluate import ROTATION_OK_DEG, TRANSLATION_OK_M, synthetic_pairs  # noqa: E402
 from fusion.pairs import atomic_write_json, load_pairs  # noqa: E402
+from topo.extract import extract_topomap  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data" / "env_pairs"
@@ -95,6 +109,97 @@ def alignment_rows(dirs, config=None, both_ways: bool = True) -> list[dict]:
     return rows
 
 
+SYNTHETIC_SEED = 100
+"""Seed of the synthetic tuning pairs (the evaluation uses 0 and 7)."""
+NEAR_MISS = (5.0, 1.0)
+"""Candidates within these (degrees, metres) of the truth but not right are left out of the
+ranking fit: neither right nor clearly wrong."""
+
+
+def _errors(transform, truth, centre) -> tuple[float, float]:
+    return (math.degrees(transform.rotation_error(truth)),
+            transform.translation_error(truth, at=centre))
+
+
+def _structural_pairs(dirs, n_synthetic: int):
+    """``(set, world, overlap, map_a, map_b, truth or None)`` of the tuning env pairs (maps
+    extracted again) and the synthetic tuning pairs."""
+    for d in dirs:
+        for p in load_pairs(d):
+            maps = [extract_topomap(np.asarray(g.states), g.resolution, g.origin)
+                    for g in (p.grid_a, p.grid_b)]
+            yield (d.name, f"{d.name}:{p.world_id}", p.overlap, *maps,
+                   p.transform if p.overlap > 0 else None)
+    if n_synthetic:
+        for p in synthetic_pairs(n_synthetic, seed=SYNTHETIC_SEED):
+            yield ("synthetic", f"synthetic:{p.name}", p.overlap if p.kind == "overlap" else 0.0,
+                   p.map_a, p.map_b, p.transform if p.kind == "overlap" else None)
+
+
+def structural_rows(dirs, n_synthetic: int) -> list[dict]:
+    """One row per pair the structural merge tried: its result's calibration features and
+    whether its transform is right."""
+    rows = []
+    for name, world, overlap, map_a, map_b, truth in _structural_pairs(dirs, n_synthetic):
+        r = fm.merge_maps(map_a, map_b)
+        if r.evidence is None or not map_b.n_nodes:
+            continue
+        rot, trans = (math.inf, math.inf) if truth is None else _errors(
+            r.transform, truth, map_b.xy.mean(axis=0))
+        rows.append({"set": name, "world": world, "pair": f"{world}:{overlap}", "way": "ab",
+                     "overlap": overlap, "features": r.evidence.calibration_features(),
+                     "right": bool(rot < ROTATION_OK_DEG and trans < TRANSLATION_OK_M),
+                     "gated": bool(r.evidence.inliers < fm.MergeConfig().min_inliers
+                                   or r.evidence.collinear
+                                   or r.evidence.margin < fm.MergeConfig().min_margin)})
+    return rows
+
+
+def ranking_rows(dirs, n_synthetic: int) -> list[dict]:
+    """One row per candidate of the structural search: its score features and label (1 right,
+    0 wrong, -1 near miss)."""
+    rows = []
+    for name, world, overlap, map_a, map_b, truth in _structural_pairs(dirs, n_synthetic):
+        transforms, X = fm.candidate_features(map_a, map_b)
+        if not transforms or not map_b.n_nodes:
+            continue
+        centre = map_b.xy.mean(axis=0)
+        for t, x in zip(transforms, X.tolist(), strict=True):
+            label = 0
+            if truth is not None:
+                rot, trans = _errors(t, truth, centre)
+                label = 1 if rot < ROTATION_OK_DEG and trans < TRANSLATION_OK_M else (
+                    -1 if rot < NEAR_MISS[0] and trans < NEAR_MISS[1] else 0)
+            rows.append({"set": name, "world": world, "pair": f"{world}:{overlap}",
+                         "label": label, "x": x})
+    return rows
+
+
+def top_right(rows: list[dict], weights: np.ndarray, synthetic: bool) -> tuple[int, int]:
+    """Pairs whose top-ranked candidate under ``weights`` is right, and pairs."""
+    by_pair: dict[str, list[dict]] = {}
+    for r in rows:
+        if (r["set"] == "synthetic") == synthetic:
+            by_pair.setdefault(r["pair"], []).append(r)
+    right = sum(rs[int(np.argmax(np.array([r["x"] for r in rs]) @ weights))]["label"] == 1
+                for rs in by_pair.values())
+    return right, len(by_pair)
+
+
+def fit_ranking(rows: list[dict], l2: float) -> dict[str, float]:
+    """Weights of :data:`fusion.merge.CONFIDENCE_WEIGHTS` (raw feature units) from a logistic
+    fit on the candidates (the bias column is the intercept)."""
+    names = list(fm.CONFIDENCE_WEIGHTS)[1:]
+    kept = [r for r in rows if r["label"] != -1]
+    X = np.array([r["x"][1:] for r in kept])
+    y = np.array([r["label"] for r in kept], dtype=np.float64)
+    model = fit_logistic(X, y, names, l2=l2)
+    coef, mean, scale = (np.array(v) for v in (model.coef, model.mean, model.scale))
+    raw = coef / scale
+    return {"bias": float(model.intercept - np.sum(coef * mean / scale)),
+            **{n: float(w) for n, w in zip(names, raw, strict=True)}}
+
+
 MODEL_FEATURES = ("log_margin", "log_overlap", "native_agreement", "log_wall_hits")
 """The evidence the ``"grid"`` model weighs (a subset of ``fusion.grid_merge.FEATURES``): in
 leave-one-world-out cross-validation on the tuning pairs (2026-12-02) these four gave the
@@ -106,13 +211,13 @@ THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 MAX_FALSE_ACCEPTS = 0.01
 
 
-def unique_rows(rows: list[dict]) -> list[dict]:
+def unique_rows(rows: list[dict], key_feature: str = "log_score") -> list[dict]:
     """``rows`` without repeats: the procedural tuning sets of one seed share their first
     snapshots (the same world, step and maps, so the same alignment), which would count twice."""
     seen, out = set(), []
     for r in rows:
         key = (_group(r), r["way"], round(r["overlap"], 9),
-               round(r["features"]["log_score"], 9))
+               round(r["features"][key_feature], 9))
         if key not in seen:
             seen.add(key)
             out.append(r)
@@ -143,8 +248,12 @@ def cross_validated(rows: list[dict], l2: float = L2, names=MODEL_FEATURES) -> n
 
 def accepted_mask(rows: list[dict], p: np.ndarray, threshold: float,
                   min_overlap_m2: float) -> np.ndarray:
-    """Which alignments ``merge_grids`` accepts at ``threshold`` given confidences ``p``."""
-    return (p >= threshold) & np.array([r["overlap_m2"] >= min_overlap_m2 for r in rows])
+    """Which alignments the merge accepts at ``threshold`` given confidences ``p``: past its
+    hard gate too (``merge_grids``: ``min_overlap_m2``; the structural merge: enough
+    non-collinear matches and a margin, ``gated`` rows fail it)."""
+    passed = [not r.get("gated", False) and r.get("overlap_m2", math.inf) >= min_overlap_m2
+              for r in rows]
+    return (p >= threshold) & np.array(passed)
 
 
 def threshold_table(rows: list[dict], p: np.ndarray, min_overlap_m2: float) -> list[dict]:
@@ -178,10 +287,17 @@ def _commit() -> str:
         return "unknown"
 
 
+MODELS = {"grid": MODEL_FEATURES, "structural": fm.CALIBRATION_FEATURES}
+"""The features of each calibrated model."""
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--model", choices=[*MODELS, "ranking"], default="grid")
     parser.add_argument("--pairs", type=Path, nargs="*", default=None,
                         help="tuning dataset folders (default: those of data/env_pairs/tune)")
+    parser.add_argument("--synthetic", type=int, default=150,
+                        help="synthetic tuning pairs per noise level (structural, ranking)")
     parser.add_argument("--cache", type=Path, default=None,
                         help="JSON file of the features (read if it exists, else written)")
     parser.add_argument("--l2", type=float, default=L2, help="ridge penalty")
@@ -191,21 +307,27 @@ def main(argv: list[str] | None = None) -> int:
                         help="write the cross-validated reliability diagram to this PNG")
     args = parser.parse_args(argv)
     dirs = args.pairs or default_dirs()
+    collect = {"grid": lambda: alignment_rows(dirs),
+               "structural": lambda: structural_rows(dirs, args.synthetic),
+               "ranking": lambda: ranking_rows(dirs, args.synthetic)}[args.model]
     if args.cache is not None and args.cache.exists():
         rows = json.loads(args.cache.read_text())
     else:
         t0 = time.perf_counter()
-        rows = alignment_rows(dirs)
-        print(f"{len(rows)} alignments in {time.perf_counter() - t0:.0f} s")
+        rows = collect()
+        print(f"{len(rows)} rows in {time.perf_counter() - t0:.0f} s")
         if args.cache is not None:
             atomic_write_json(args.cache, rows)
-    cfg = gm.GridMergeConfig()
+    if args.model == "ranking":
+        return _ranking(rows, args.l2)
+    names = MODELS[args.model]
+    min_overlap = gm.GridMergeConfig().min_overlap_m2 if args.model == "grid" else 0.0
     n_all = len(rows)
-    rows = unique_rows(rows)
+    rows = unique_rows(rows, "log_score" if args.model == "grid" else "score")
     print(f"{n_all - len(rows)} repeated alignments left out")
-    p = cross_validated(rows, args.l2)
-    _, y = matrix(rows)
-    print(f"\n{len(rows)} alignments of {len({(r['set'], r['pair']) for r in rows})} pairs, "
+    p = cross_validated(rows, args.l2, names)
+    _, y = matrix(rows, names)
+    print(f"\n{len(rows)} alignments of {len({(r['set'], r.get('pair')) for r in rows})} pairs, "
           f"{int(y.sum())} right; leave-one-world-out Brier {brier_score(p, y):.4f} "
           f"(base rate's {y.mean() * (1 - y.mean()):.4f})")
     table = reliability_table(p, y)
@@ -215,20 +337,20 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['observed']:.3f} |")
     print(f"largest gap in bins of ≥ 20: {max_calibration_gap(table):.3f}")
     if args.plot is not None:
-        out = plot_reliability({"grid (cross-validated)": (p, y)}, args.plot,
-                               title="grid model, leave-one-world-out on the tuning pairs")
+        out = plot_reliability({f"{args.model} (cross-validated)": (p, y)}, args.plot,
+                               title=f"{args.model} model, leave-one-world-out on the "
+                                     f"tuning pairs")
         print(f"wrote {out}")
-    thresholds = threshold_table(rows, p, cfg.min_overlap_m2)
+    thresholds = threshold_table(rows, p, min_overlap)
     print("\n| threshold | success ≥ 40 % | wrong accepts (all) | false accepts (no overlap) |"
           "\n|---|---|---|---|")
     for r in thresholds:
         print(f"| {r['threshold']:.2f} | {100 * r['success']:.1f} % | {100 * r['wrong']:.2f} % "
               f"| {100 * r['false']:.2f} % |")
     chosen = choose_threshold(thresholds)
-    print(f"\nchosen accept_threshold: {chosen} (GridMergeConfig's default: "
-          f"{cfg.accept_threshold})")
-    X, y = matrix(rows)
-    model = fit_logistic(X, y, MODEL_FEATURES, l2=args.l2, meta={
+    print(f"\nchosen accept_threshold: {chosen}")
+    X, y = matrix(rows, names)
+    model = fit_logistic(X, y, names, l2=args.l2, meta={
         "fitted": datetime.date.today().isoformat(), "commit": _commit(),
         "data": sorted({r["set"] for r in rows}), "alignments": len(rows),
         "right": int(y.sum()), "l2": args.l2, "cv_brier": round(brier_score(p, y), 4),
@@ -237,7 +359,22 @@ def main(argv: list[str] | None = None) -> int:
           {n: round(c, 3) for n, c in zip(model.names, model.coef, strict=True)},
           f"intercept {model.intercept:.3f}")
     if args.write:
-        print(f"wrote {write_model('grid', model)}")
+        print(f"wrote {write_model(args.model, model)}")
+    return 0
+
+
+def _ranking(rows: list[dict], l2: float) -> int:
+    weights = fit_ranking(rows, l2)
+    old = np.array(list(fm.CONFIDENCE_WEIGHTS.values()))
+    new = np.array(list(weights.values()))
+    for label, synthetic in (("env pairs", False), ("synthetic pairs", True)):
+        (o, n), (w, _) = top_right(rows, old, synthetic), top_right(rows, new, synthetic)
+        print(f"{label}: top-ranked candidate right in {o} of {n} pairs with the current "
+              f"weights, {w} with the refit")
+    print("CONFIDENCE_WEIGHTS = {")
+    for name, w in weights.items():
+        print(f'    "{name}": {w:.4g},')
+    print("}")
     return 0
 
 

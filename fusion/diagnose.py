@@ -10,7 +10,7 @@ a miss of ``auto`` is put in one class:
   for any accept rule on these matches (the oracle fits the true correspondences, 2–3 of
   which are enough for it);
 - ``truth_below_threshold``: the refined true alignment has the matches but scores below
-  ``min_score`` — no search could be accepted there with this evidence;
+  ``accept_threshold`` — no search could be accepted there with this evidence;
 - ``right_rejected``: ``auto`` found the right alignment and the accept rule refused it;
 - ``refine_off``: ``auto`` is near the truth (< 5°, < 1 m) but not within the thresholds;
 - ``search_miss``: ``auto`` settled on a wrong alignment that scores below the true one (the
@@ -58,7 +58,7 @@ def classify(pair: EvalPair, config: MergeConfig) -> str | None:
     truth = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
     if truth.collinear or truth.inliers < config.min_inliers:
         return "truth_too_few_matches"
-    if truth.score < config.min_score:
+    if truth.confidence < config.accept_threshold:
         return "truth_below_threshold"
     if is_success(errors):
         return "right_rejected"

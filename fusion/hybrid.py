@@ -2,14 +2,13 @@
 checked by the grids, and the occupancy-grid alignment with its calibrated confidence — and
 ``recheck``, which re-examines a transform in use as the maps grow.
 
-Sonar topological maps of the same place differ too much for the structural merge
-(:func:`fusion.merge_maps`) to be confident often (it accepted 2 of 240 tuning env pairs); the
-grid alignment (:func:`fusion.grid_merge.merge_grids`) is what merges most pairs. Every result
-carries ``confidence``, the probability that its transform is right (< 2°, < 0.3 m); it is
-accepted only when ``confidence >= accept_threshold``
-(:class:`fusion.grid_merge.GridMergeConfig`) and the hard gates pass (the grid alignment's
-``min_overlap_m2``; for a structural merge, its own rule and the grids' check), so a rejected
-result may still report a confidence above the threshold.
+The structural merge (:func:`fusion.merge_maps` on the robots' topological maps) runs first;
+the grids check what it accepts, and the grid alignment (:func:`fusion.grid_merge.merge_grids`)
+searches when it finds nothing. Every result carries ``confidence``, the probability that its
+transform is right (< 2°, < 0.3 m); one threshold, ``accept_threshold``
+(:class:`fusion.grid_merge.GridMergeConfig`), decides for both, with the hard gates (the grid
+alignment's ``min_overlap_m2``; for a structural merge, its matches and the grids' check), so a
+rejected result may still report a confidence above the threshold.
 """
 
 from __future__ import annotations
@@ -34,25 +33,26 @@ topological maps of the same place put their nodes ~0.5 m apart."""
 
 @dataclass(frozen=True, slots=True)
 class HybridResult(MergeResult):
-    """A :class:`fusion.MergeResult` (``method="hybrid"``) with its calibrated confidence.
+    """A :class:`fusion.MergeResult` (``method="hybrid"``) and the grid alignment behind it.
+
+    ``confidence`` is the grid alignment's calibrated :attr:`GridMergeResult.confidence` when
+    the grids were aligned, else the structural merge's own.
 
     Attributes:
-        confidence: probability that ``transform`` is right (< 2°, < 0.3 m at B's centroid):
-            the grid alignment's calibrated :attr:`GridMergeResult.confidence` when the grids
-            were aligned, else the structural merge's own (:attr:`MergeEvidence.confidence`,
-            0 without evidence).
         grid: the grid alignment behind the result (``None`` if the grids were not aligned).
+        supplied_by: what supplied an accepted transform: ``"structural"`` (the structural
+            merge, checked by the grids) or ``"grid"``; ``None`` when rejected.
     """
 
-    confidence: float = 0.0
     grid: gm.GridMergeResult | None = None
+    supplied_by: str | None = None
 
 
 def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
                  try_grids: bool = True, config: gm.GridMergeConfig | None = None
                  ) -> HybridResult:
-    """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``): kept if it is
-    accepted, its confidence reaches ``config.accept_threshold`` and the grids agree with it
+    """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``, at
+    ``config.accept_threshold``): kept if it is accepted and the grids agree with it
     (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate). Otherwise, when
     ``try_grids``, the grid alignment (:func:`fusion.grid_merge.merge_grids`): accepted when its
     calibrated confidence reaches ``accept_threshold``; an accepted grid alignment fuses the
@@ -103,31 +103,28 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
             config: gm.GridMergeConfig | None) -> HybridResult:
     t0 = time.perf_counter()
     cfg = config or gm.GridMergeConfig()
-    topo = merge_maps(map_a, map_b, method="auto")
-    topo_conf = topo.evidence.confidence if topo.evidence is not None else 0.0
+    topo = merge_maps(map_a, map_b, method="auto",
+                      config={"accept_threshold": cfg.accept_threshold})
     fields = {f.name: getattr(topo, f.name) for f in dataclasses.fields(MergeResult)}
     if topo.accepted:
-        # sonar topological maps fool the structural merge now and then: the grids must agree
+        # the structural merge is accepted only if the grids agree with it (a hard gate)
         why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
-        if why is None and topo_conf < cfg.accept_threshold:
-            why = f"confidence {topo_conf:.2f} < accept_threshold={cfg.accept_threshold}"
         if why is None:
             return HybridResult(**{**fields, "method": "hybrid",
                                    "time_s": time.perf_counter() - t0},
-                                confidence=topo_conf)
+                                supplied_by="structural")
         fields.update(accepted=False, merged=map_a,
                       reason=f"structural merge refuted by the grids: {why}")
     if not try_grids:
-        return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0},
-                            confidence=topo_conf)
+        return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0})
     grid = gm.merge_grids(grid_a, grid_b, cfg)
     if not grid.accepted:
         return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,
                                "matches": np.empty((0, 2), dtype=np.int64), "merged": map_a,
                                "score": _log_odds(grid.confidence), "method": "hybrid",
                                "time_s": time.perf_counter() - t0,
-                               "reason": f"topology: {fields['reason']}; grids: {grid.reason}"},
-                            confidence=grid.confidence, grid=grid)
+                               "reason": f"topology: {fields['reason']}; grids: {grid.reason}",
+                               "confidence": grid.confidence}, grid=grid)
     moved = grid.transform.apply(map_b.xy)
     matches = np.empty((0, 2), dtype=np.int64)
     if map_a.n_nodes and map_b.n_nodes:
@@ -142,4 +139,5 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
     return HybridResult(transform=grid.transform, accepted=True,
                         score=_log_odds(grid.confidence), matches=matches, merged=merged,
                         method="hybrid", time_s=time.perf_counter() - t0, reason=None,
-                        evidence=None, confidence=grid.confidence, grid=grid)
+                        evidence=None, confidence=grid.confidence, grid=grid,
+                        supplied_by="grid")

@@ -62,6 +62,12 @@ from fusion.search import exhaustive_search
 from topo._checks import check_int, check_real
 from topo.graph import NodeKind, TopoMap
 
+DEFAULT_ACCEPT_THRESHOLD = 0.8
+"""Default :attr:`MergeConfig.accept_threshold`: the smallest (on a 0.05 grid) at which the
+cross-validated tuning pairs of ``benchmarks/calibrate_merge.py --model structural`` (env pairs
+and synthetic pairs) had at most 1 % false accepts on no-overlap pairs and 1 % wrong accepts of
+all pairs."""
+
 METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp")
 """Names accepted by :func:`merge_maps` ``method``."""
 
@@ -182,13 +188,15 @@ class MergeConfig:
             differ by at least ``distinct_angle_deg`` or they put B's centroid at least
             ``distinct_distance`` apart.
         icp_max_iter: iteration cap of the ICP-SVD refinement.
-        min_inliers: accept only with at least this many matched nodes (3, with the path
-            evidence to tell them from chance),
-        min_score: ... a :attr:`MergeEvidence.score` (log-odds of being right) at least this
-            (the default: 0.44% false accepts on 4500 no-overlap pairs, 1.2% in the worst
-            map size × noise cell; :data:`CONFIDENCE_WEIGHTS`),
-        min_margin: ... and the best *distinct* alternative scoring at least this much less
-            (log-odds; else the merge is ambiguous: symmetric maps, repeated corridors).
+        min_inliers: accept only with at least this many matched nodes, not collinear (hard
+            gates: fewer do not fix a rotation) ...
+        min_margin: ... the best *distinct* alternative scoring at least this much less
+            (log-odds; a hard gate: else the merge is ambiguous — a symmetric map, repeated
+            corridors — however strong the evidence for both) ...
+        accept_threshold: ... and a calibrated :attr:`MergeEvidence.confidence` (probability
+            of being right) at least this: :data:`DEFAULT_ACCEPT_THRESHOLD`, the smallest with
+            at most 1 % false and 1 % wrong accepts on the tuning pairs (symmetric maps, whose
+            distinct alternatives score as well, get a low confidence).
         multistart_starts: starting rotations of ``"multistart_icp"``.
         exhaustive_step_deg: rotation step of ``"exhaustive"`` (the paper's 2°).
     """
@@ -209,8 +217,8 @@ class MergeConfig:
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
     min_inliers: int = 3
-    min_score: float = -1.0
-    min_margin: float = 2.0
+    min_margin: float = 1.0
+    accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     multistart_starts: int = 12
     exhaustive_step_deg: float = 2.0
 
@@ -220,7 +228,8 @@ class MergeConfig:
             check_real(getattr(self, name), name, low=0.0)
         check_real(self.min_pair_distance, "min_pair_distance", low=0.0, low_inclusive=True)
         check_real(self.exhaustive_step_deg, "exhaustive_step_deg", low=0.0, high=360.0)
-        check_real(self.min_score, "min_score")
+        check_real(self.accept_threshold, "accept_threshold", low=0.0, low_inclusive=True,
+                   high=1.0)
         check_real(self.min_margin, "min_margin", low=0.0, low_inclusive=True)
         for name, low in (("knn", 0), ("max_hypotheses", 1), ("path_pool", 1), ("sparse_pool", 0),
                           ("candidates", 1), ("icp_max_iter", 1), ("scored", 1),
@@ -250,8 +259,7 @@ class MergeConfig:
         if 3.0 * sigma > base.eps:
             scaled = {"eps": 3.0 * sigma, "fit_eps": max(base.fit_eps, 4.0 * sigma),
                       "pair_tolerance": max(base.pair_tolerance, 4.0 * sigma),
-                      "coarse_tolerance": max(base.coarse_tolerance, 10.0 * sigma / 3.0),
-                      "min_score": 2.5}
+                      "coarse_tolerance": max(base.coarse_tolerance, 10.0 * sigma / 3.0)}
         return config_from(cls, {**scaled, **overrides}, "MergeConfig")
 
 
@@ -273,46 +281,27 @@ CONFIDENCE_WEIGHTS: dict[str, float] = {
     "path_agree": 0.0799,
     "path_off": -0.0509,
 }
-"""Weights of :attr:`MergeEvidence.score`, the log-odds that an alignment is right: a logistic
-regression (L2 10⁻⁴ on standardised features) fitted on the alignments ``"auto"`` weighs — its 24
-refined candidates, its best, and the refined true alignment — on 900 synthetic pairs
-(:mod:`fusion.synthetic`, seed 100, overlap 20–80%, node noise 0.05 and 0.15 m) and 2700
-no-overlap pairs (seed 9100, maps of 5–15, 15–60 and 60–80 nodes, noise 0.05, 0.15 and 0.3 m),
-labelled right when within 2° and 0.3 m of the truth (near misses, within 5° and 1 m, left out).
-The evaluation uses other seeds. Most of those alignments are wrong candidates, so the score is
-the log-odds among the candidates of a search, and the default ``min_score`` is negative.
-
-``path_agree`` and ``path_off`` (the path evidence, :attr:`MergeEvidence.path_agree`) are what
-the refit added: a metre of path of one map on a path of the other is worth +0.08, a metre
-running beside one −0.05 (a right alignment of a 20–40% overlap pair lays 32–127 m of paths on
-the other map's, 10–90th percentile; the wrong candidates 9–54 m).
-
-The defaults (``min_inliers`` 3, ``min_score`` −1.0, chosen on the tuning pairs for fewer false
-accepts than before), with the path evidence in the score, the re-ranking (``path_pool``) and the
-final fit (:data:`PATH_FIT_WEIGHT`), measured on the pairs of :mod:`fusion.evaluate` (450 per
-noise level, overlap 20–80%, seed 0; before the path evidence → now), success at σ = 0.05 m,
-20–40/40–60/60–80% overlap: 83.8/93.4/100 → 84.5/93.4/100 (oracle 99.3/98.7/100); σ = 0.15 m:
-56.8/84.9/94.2 → 60.1/86.8/94.9 (oracle 84.5/95.4/98.5); on a fresh seed (7): σ = 0.05 m
-76.8/98.6/99.3 → 79.6/98.6/99.3 (oracle 98.6/100/100), σ = 0.15 m 51.4/86.0/96.0 →
-57.7/88.1/96.7 (oracle 80.3/95.8/100). False accepts on 4500 no-overlap pairs (seed 9000, half
-``"disjoint"``, half ``"other_world"``; maps of 5–15, 15–60 and 60–80 nodes × noise 0.05, 0.15
-and 0.3 m, 500 per cell): 20 (0.44%; were 29): 5/1500 for 5–15 nodes, 10/1500 for 15–60,
-5/1500 for 60–80; the worst cell 6/500 (15–60 nodes, σ = 0.15 m). With the sparse pool
-(``MergeConfig.sparse_pool``, the same weights): seed 0 σ = 0.05 m 85.1/94.1/100, σ = 0.15 m
-60.1/86.8/94.9; seed 7 80.3/99.3/99.3 and 59.2/88.1/96.7; false accepts unchanged (20 of seed
-9000, 21 of seed 9007).
-
-What is left: at 20–40% overlap and σ = 0.15 m the right alignment is found for 70% of the
-seed-0 pairs (oracle 84.5%) but a third of those score too low to be told from the best chance
-alignment of a no-overlap pair: their evidence (3–6 shared nodes, 35–55 m of agreeing paths)
-is what the strongest chance alignments of corridor lattices also show, feature by feature.
-Measured and not kept: a regression refit on the bests alone (more false accepts at equal
-success), 3-pair coarse hypotheses in the one ranking (+1.3 points at σ = 0.05 m, −1.4 at
-σ = 0.15 m; pooled apart they are kept: ``sparse_pool``), the path
-fit both ways or iterated 6 times, the length of A's paths inside B's hull that B does not
-have (no separation)."""
+"""Weights of :attr:`MergeEvidence.score`, which ranks the search's candidates: a logistic
+regression (L2 on standardised features) of right (< 2°, < 0.3 m) against wrong candidates
+of the search on synthetic pairs (seed 100 overlap, 9100 no-overlap; near misses within 5° and
+1 m left out). Most candidates are wrong, so the score is low. The accept rule reads the
+calibrated :attr:`MergeEvidence.confidence`, not the score. ``benchmarks/calibrate_merge.py
+--model ranking`` refits the weights on env and synthetic pairs and compares them (a refit on
+2026-12-02 was not kept: ``benchmarks/fusion.md``)."""
 
 _SCORE_WEIGHTS = tuple(CONFIDENCE_WEIGHTS.values())
+
+MARGIN_CAP = 10.0
+"""The margin over the best distinct alternative counts up to this (log-odds)."""
+
+CALIBRATION_FEATURES = ("score", "margin", "inliers", "rmse", "path_agree", "described",
+                        "score_pos", "described_score", "described_margin",
+                        "described_inliers")
+"""What the structural merge's calibrated :attr:`MergeEvidence.confidence` weighs: the search's
+score, its margin over a distinct alternative, the matches, their rmse (capped at 1 m), the
+agreeing paths, and — for maps from ``topo.extract_topomap`` (``described``) — the score,
+margin and matches again: their evidence weighs differently from hand-made maps' (in
+cross-validation the products brought the largest calibration gap from 0.20 to 0.09)."""
 """The weights of :data:`CONFIDENCE_WEIGHTS` in order (:attr:`MergeEvidence.score`)."""
 
 
@@ -353,6 +342,9 @@ class MergeEvidence:
         path_off: metres of path of either map between :data:`PATH_OFF` and
             :data:`PATH_REACH` from the other's paths (running beside a corridor of the other
             map: the same corridor, misplaced).
+        described: share of the two maps' matched-from nodes that carry a clearance
+            (``topo.extract_topomap`` maps: 1; hand-made or synthetic ones: 0): the kind of map
+            the evidence comes from.
     """
 
     inliers: int
@@ -372,6 +364,7 @@ class MergeEvidence:
     likelihood: float = 0.0
     path_agree: float = 0.0
     path_off: float = 0.0
+    described: float = 0.0
 
     def _feature_values(self) -> tuple[float, ...]:
         """The inputs of :attr:`score`, in the order of :data:`CONFIDENCE_WEIGHTS`."""
@@ -396,9 +389,33 @@ class MergeEvidence:
         return float(total)
 
     @property
+    def margin(self) -> float:
+        """How much the best distinct alternative scores less (:data:`MARGIN_CAP` when there is
+        none, and at most that)."""
+        if not math.isfinite(self.runner_up):
+            return MARGIN_CAP
+        return min(self.score - self.runner_up, MARGIN_CAP)
+
+    def calibration_features(self) -> dict[str, float]:
+        """The inputs of :attr:`confidence`, by the names of :data:`CALIBRATION_FEATURES`."""
+        score, margin, inliers, described = self.score, self.margin, float(self.inliers), \
+            self.described
+        return {"score": score, "margin": margin, "inliers": inliers,
+                "rmse": min(self.rmse, 1.0), "path_agree": self.path_agree,
+                "described": described, "score_pos": max(score, 0.0),
+                "described_score": described * score, "described_margin": described * margin,
+                "described_inliers": described * inliers}
+
+    @property
     def confidence(self) -> float:
-        """``1 / (1 + exp(−score))``: the calibrated probability that the alignment is right."""
-        return 1.0 / (1.0 + math.exp(-min(max(self.score, -700.0), 700.0)))
+        """The calibrated probability that the alignment is right (< 2°, < 0.3 m at B's
+        centroid): the stored ``"structural"`` model of :mod:`fusion.calibration` of
+        :meth:`calibration_features` (``benchmarks/calibrate_merge.py --model structural``).
+        Fitted on maps that are rarely symmetric: an alignment with a distinct alternative
+        nearly as good may read confident; :func:`decide` rejects it as ambiguous."""
+        from fusion.calibration import load_model
+
+        return load_model("structural")(self.calibration_features())
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -407,7 +424,8 @@ class MergeResult:
 
     Attributes:
         transform: B → A motion (``p_A = R p_B + T``); the best estimate even when rejected.
-        accepted: whether the merge passed :func:`decide`.
+        accepted: whether the merge passed :func:`decide` (``confidence >= accept_threshold``
+            and the hard gates).
         score: :attr:`MergeEvidence.score` of ``transform``.
         matches: ``(K, 2)`` int node index pairs ``(a, b)`` matched at ``transform``.
         merged: if accepted, A with B moved onto it (matched nodes fused at their mean, other
@@ -417,6 +435,8 @@ class MergeResult:
         time_s: wall time of the call in seconds.
         reason: why the merge was rejected (``None`` when accepted).
         evidence: the numbers behind the decision (``None`` for maps too small to try).
+        confidence: calibrated probability that ``transform`` is right (< 2°, < 0.3 m at B's
+            centroid; :attr:`MergeEvidence.confidence`); 0 when nothing was tried.
     """
 
     transform: Rigid2D
@@ -428,6 +448,7 @@ class MergeResult:
     time_s: float
     reason: str | None = None
     evidence: MergeEvidence | None = None
+    confidence: float = 0.0
 
 
 # --------------------------------------------------------------------------- preparation
@@ -703,7 +724,9 @@ score 0.89–1.0 per node at σ ≤ 0.15 m). Without it a chance 3-node alignmen
 the tuning and held-out no-overlap seeds, at the same success."""
 
 
-def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
+def _candidates(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> tuple | str:
+    """Steps 1–4 of the module docstring: the ``scored`` candidates' motions, evidence
+    features and path evidence, and how many hypotheses there were (or why there are none)."""
     b_i, b_j = pb.both_i, pb.both_j
     hyp_p, hyp_q, weight = K.pair_candidates(pa.kinds, pa.pair_i, pa.pair_j, pa.pair_len,
                                              pb.kinds, b_i, b_j, pb.both_len,
@@ -744,11 +767,63 @@ def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
     features = K.evidence_batch(*_evidence_args(pa, pb), th, txc, tyc, cfg.eps, pa.compat,
                                 pa.loose, _BRANCH_TOL, _MIN_CROSSING_SIN,
                                 cfg.near_miss)
-    scores = _scores(features, _path_evidence(pa, pb, th, txc, tyc), len(pa.xy), len(pb.xy))
+    return th, txc, tyc, features, _path_evidence(pa, pb, th, txc, tyc), n_hyp
+
+
+def _auto(pa: _Prepared, pb: _Prepared, cfg: MergeConfig) -> _Eval | str:
+    found = _candidates(pa, pb, cfg)
+    if isinstance(found, str):
+        return found
+    th, txc, tyc, features, paths, n_hyp = found
+    scores = _scores(features, paths, len(pa.xy), len(pb.xy))
     k = int(np.argmax(scores))
     best = _polish(pa, pb, _evaluate(pa, pb, th[k], np.array([txc[k], tyc[k]]), cfg), cfg)
     runner = _runner_up(best, th, txc, tyc, scores, pb.xy, cfg)
     return _with(best, runner_up=runner, hypotheses=n_hyp)
+
+
+def _score_matrix(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
+    """``(H, len(CONFIDENCE_WEIGHTS))`` rows of :meth:`MergeEvidence.features` values of the
+    candidates (the inputs of their :attr:`MergeEvidence.score`)."""
+    out = np.empty((len(features), len(CONFIDENCE_WEIGHTS)))
+    out[:, 0] = 1.0
+    for j, name in enumerate(CONFIDENCE_WEIGHTS):
+        if name in _FEATURE_COLUMNS:
+            out[:, j] = features[:, _FEATURE_COLUMNS[name]]
+    names = list(CONFIDENCE_WEIGHTS)
+    out[:, names.index("log_pairs")] = math.log(max(1, n_a * n_b))
+    out[:, names.index("likelihood")] = features[:, _LIKELIHOOD].max(axis=1)
+    out[:, names.index("path_agree")] = paths[:, 0]
+    out[:, names.index("path_off")] = paths[:, 1]
+    return out
+
+
+def candidate_features(map_a: TopoMap, map_b: TopoMap, config: MergeConfig | dict | None = None
+                       ) -> tuple[list[Rigid2D], np.ndarray]:
+    """The alignments ``"auto"`` scores last before refining the best (its search's candidates)
+    and their :meth:`MergeEvidence.features` values, one row each (columns in the order of
+    :data:`CONFIDENCE_WEIGHTS`): what ``benchmarks/calibrate_merge.py --model ranking`` fits
+    those weights on. Empty when ``merge_maps`` would not search (too few nodes, degenerate
+    maps, no hypothesis).
+
+    Raises:
+        TypeError, ValueError: as :func:`merge_maps` for bad maps or config.
+    """
+    map_a, map_b = _check_map(map_a, "map_a"), _check_map(map_b, "map_b")
+    cfg = _DEFAULT_CONFIG if config is None else config_from(MergeConfig, config)
+    (view_a, _), (view_b, _) = matchable(map_a), matchable(map_b)
+    empty = ([], np.empty((0, len(CONFIDENCE_WEIGHTS))))
+    if min(view_a.n_nodes, view_b.n_nodes) < 3 or degeneracy(view_a.xy, "map_a") or \
+            degeneracy(view_b.xy, "map_b"):
+        return empty
+    pa, pb = _prepare_pair(view_a, view_b, cfg)
+    found = _candidates(pa, pb, cfg)
+    if isinstance(found, str):
+        return empty
+    th, txc, tyc, features, paths, _ = found
+    transforms = [Rigid2D(float(a), (float(x), float(y))) for a, x, y in zip(th, txc, tyc,
+                                                                             strict=True)]
+    return transforms, _score_matrix(features, paths, len(pa.xy), len(pb.xy))
 
 
 def _with(ev: _Eval, **changes) -> _Eval:
@@ -808,25 +883,27 @@ def _multistart(map_a: TopoMap, map_b: TopoMap, pa: _Prepared, pb: _Prepared,
 def decide(evidence: MergeEvidence, config: MergeConfig | None = None) -> str | None:
     """The accept rule: ``None`` to accept, else the reasons to reject (``"; "``-joined).
 
-    Rejects when: fewer than ``min_inliers`` matched nodes; the matched nodes are collinear;
-    :attr:`MergeEvidence.score` (calibrated log-odds) below ``min_score``; or a distinct
-    alternative within ``min_margin`` of it (ambiguous).
+    Rejects when: fewer than ``min_inliers`` matched nodes; the matched nodes are collinear
+    (the rotation is not determined); a distinct alternative within ``min_margin`` of the
+    score (ambiguous); or the calibrated :attr:`MergeEvidence.confidence` is below
+    ``accept_threshold`` (weak evidence).
     """
     cfg = _DEFAULT_CONFIG if config is None else config_from(MergeConfig, config)
     e = evidence
-    score = e.score  # a sum of 13 products: once
     reasons = []
     if e.inliers < cfg.min_inliers:
         reasons.append(f"too few matched nodes: {e.inliers} < min_inliers={cfg.min_inliers}")
     if e.collinear:
         reasons.append("matched nodes are collinear: rotation not determined")
-    if score < cfg.min_score:
-        reasons.append(f"weak evidence: score {score:.2f} < min_score={cfg.min_score} "
-                       f"({e.inliers} matches, {e.matched_edges} matched paths, "
-                       f"{e.conflicts} conflicts, {e.crossings} crossings, rmse {e.rmse:.2f} m)")
-    if e.runner_up > score - cfg.min_margin:
+    if e.margin < cfg.min_margin:
         reasons.append(f"ambiguous: a distinct alignment scores {e.runner_up:.2f} against "
-                       f"{score:.2f} (margin < min_margin={cfg.min_margin})")
+                       f"{e.score:.2f} (margin < min_margin={cfg.min_margin})")
+    confidence = e.confidence
+    if confidence < cfg.accept_threshold:
+        reasons.append(f"weak evidence: confidence {confidence:.2f} < accept_threshold="
+                       f"{cfg.accept_threshold} (score {e.score:.2f}, {e.inliers} matches, "
+                       f"{e.matched_edges} matched paths, {e.conflicts} conflicts, "
+                       f"{e.crossings} crossings, rmse {e.rmse:.2f} m)")
     return "; ".join(reasons) or None
 
 
@@ -932,9 +1009,12 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
         found = _multistart(view_a, view_b, pa, pb, cfg)
     if isinstance(found, str):
         return _not_tried(map_a, method, start, found)
+    described = float(np.mean(np.concatenate([view_a.clearance, view_b.clearance]) > 0))
+    found = _with(found, described=described)
     reason = decide(found.evidence, cfg)
     transform = found.transform
     matches = np.stack([index_a[found.matches[:, 0]], index_b[found.matches[:, 1]]], axis=1)
     merged = map_a if reason else fuse_maps(map_a, map_b, transform, matches, cfg.eps)
     return MergeResult(transform, reason is None, found.evidence.score, matches, merged,
-                       method, time.perf_counter() - start, reason, found.evidence)
+                       method, time.perf_counter() - start, reason, found.evidence,
+                       found.evidence.confidence)

@@ -19,20 +19,20 @@ def test_a_clear_pair_is_no_failure():
 
 
 def test_an_unreachable_threshold_blames_the_evidence_not_the_search():
-    # the right alignment is found but nothing can pass min_score: the truth fails it too
-    assert classify(_pair(), MergeConfig(min_score=1e6)) == "truth_below_threshold"
+    # the right alignment is found but nothing can pass accept_threshold=1: the truth fails it too
+    assert classify(_pair(), MergeConfig(accept_threshold=1.0)) == "truth_below_threshold"
 
 
 def test_a_pair_sharing_too_few_nodes_is_told_from_weak_evidence():
     # no alignment can match 1000 nodes: the truth lacks the matches, not the score
     assert classify(_pair(), MergeConfig(min_inliers=1000)) == "truth_too_few_matches"
-    assert classify(_pair(), MergeConfig(min_inliers=1000, min_score=1e6)) == (
+    assert classify(_pair(), MergeConfig(min_inliers=1000, accept_threshold=1.0)) == (
         "truth_too_few_matches")
 
 
 def test_table_counts_every_pair_once(capsys):
     pairs = [_pair(s) for s in range(3)]
-    table, fixable = diagnose(pairs, MergeConfig(min_score=1e6))
+    table, fixable = diagnose(pairs, MergeConfig(accept_threshold=1.0))
     rows = list(table.values())
     assert sum(r["pairs"] for r in rows) == 3
     assert all(r["oracle"] == r["auto"] + sum(r[c] for c in CLASSES) for r in rows)

@@ -237,13 +237,20 @@ def test_decide_names_every_failed_criterion():
     for part in ("too few matched nodes", "collinear", "weak evidence", "ambiguous"):
         assert part in reason
     assert 0.0 < weak.confidence < 0.5
+    # the threshold alone: nothing else fails a strong, unambiguous alignment
+    import dataclasses
+    strong = dataclasses.replace(weak, inliers=12, closeness=10.0, collinear=False,
+                                 runner_up=float("nan"), path_agree=80.0, conflicts=0,
+                                 crossings=0, branches_disagree=0, near_misses=0)
+    assert decide(strong, MergeConfig(accept_threshold=0.0)) is None
+    assert decide(strong, MergeConfig(accept_threshold=1.0)).startswith("weak evidence")
 
 
-def test_config_for_noise_scales_tolerances_and_bar():
+def test_config_for_noise_scales_tolerances():
     assert MergeConfig.for_noise(0.1) == MergeConfig()
     noisy = MergeConfig.for_noise(0.3)
     assert noisy.eps == pytest.approx(0.9) and noisy.fit_eps == pytest.approx(1.2)
-    assert noisy.min_score > MergeConfig().min_score
+    assert noisy.accept_threshold == MergeConfig().accept_threshold
     assert MergeConfig.for_noise(0.3, eps=1.0).eps == 1.0
     with pytest.raises(ValueError, match="sigma must be >= 0.0, got -0.1"):
         MergeConfig.for_noise(-0.1)
