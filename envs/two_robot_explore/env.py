@@ -47,8 +47,8 @@ m/pixel; 0 occupied, 128 unknown, 255 free.
 (c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
 is accepted; all 0 before).
 
-Before a merge is accepted a robot's ``local_map`` shows only its own map. Raw maps are in
-``infos`` (below).
+Before a merge is accepted a robot's ``local_map`` shows only its own map. The raw maps are
+read through the env (Infos, below).
 
 ## Sensors
 
@@ -124,20 +124,75 @@ After that ``agents`` is empty and ``step()`` raises until ``reset()``.
 
 ## Infos
 
-Per robot: ``true_coverage`` — the fraction of the reachable free area the sonars have truly
-swept: the world cells the robots' inverse sensor model updates for each scan taken from the
+Small, numeric and comparable (no NaN, no wall clock, no live objects: under 1 kB pickled per
+step; equal episodes give equal infos, as PettingZoo's ``parallel_seed_test`` checks, and
+TorchRL turns every entry into a tensor). Per robot:
+
+| key | type | meaning |
+|---|---|---|
+| ``true_coverage`` | float | fraction of the reachable free area the sonars have truly swept (d) |
+| ``true_area_m2`` | float | area truly swept (walls included), m² |
+| ``shared_area_m2`` | float | known area of the shared map, m² |
+| ``shared_coverage`` | float | shared area / reachable area (the robots' estimate, e) |
+| ``own_area_m2`` | float | known area of the robot's own map, m² |
+| ``overlap`` | float | fraction of the smaller robot's true sweep the other also swept |
+| ``collisions`` | int | contacts of this robot so far |
+| ``merge_accepted`` | bool | a merge transform is in use |
+| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) |
+| ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
+| ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
+| ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
+| ``merges`` | int | merge calls so far |
+| ``merge_drops`` | int | transforms dropped because the grids refuted them (see Maps) |
+| ``pose`` | (3,) f64 | true world pose ``x, y, θ`` (for metrics; explorers must not use it) |
+| ``odometry`` | (3,) f64 | odometry pose in the robot's own start frame |
+
+(d) the world cells the robots' inverse sensor model updates for each scan taken from the
 robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
-dropped echo that "sees through" a wall, or odometry drift, does not count; ``true_area_m2``
-(swept area, walls included), ``shared_area_m2``, ``shared_coverage`` (shared area / reachable
-area; the robots' estimate, it includes walls, phantom free space behind dropped echoes and
-mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot's true sweep also
-swept by the other), ``collisions``, ``merge_accepted`` (a transform is in use),
-``merge_rotation_error_deg`` / ``merge_translation_error_m`` (of the transform in use against
-ground truth, translation error measured at the centroid of robot 1's map; NaN before a
-merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``merge_drops`` (merges
-dropped because the grids refuted them, see Maps), ``pose`` (true world pose),
-``odometry``, ``topomap`` (own ``topo.TopoMap``), ``grid`` (own ``topo.OccupancyGrid``, live:
-do not modify), ``merge`` (the last ``fusion.MergeResult`` or ``None``).
+dropped echo that "sees through" a wall, or odometry drift, does not count. (e) it includes
+walls, phantom free space behind dropped echoes and mis-merged area. (f) against ground
+truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare).
+
+The maps are read through the env, not handed out every step (a grid is megabytes; explorers
+need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
+:class:`~envs.two_robot_explore.mapping.RobotMapSnapshot` of the robot's own maps (a copy of
+its ``topo.OccupancyGrid``, its ``topo.TopoMap``, odometry; later steps never change it; taken
+once per step, about 0.1 ms at the defaults), and ``env.unwrapped.merge_state()`` a
+:class:`MergeState` (the transform in use, the method that supplied it, the last
+``fusion.MergeResult``, counts and the last merge call's wall time, ``time_s``). Explorers
+that plan on maps are given read access this way (``agents.base.Explorer.bind``).
+
+## State
+
+``state()`` is a global view for centralised critics (MAPPO-style): a float32 vector in
+``state_space`` (a ``Box`` of ``STATE_SCALARS + 3 · STATE_MAP_SIZE²`` = 3084 values), in the
+world frame, the same layout for every world (positions as fractions of the world's extent):
+
+| index | meaning | min | max |
+|---|---|---|---|
+| 0–3 | robot 0's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
+| 4–7 | robot 1: the same | 0, -1 | 1 |
+| 8 | ``true_coverage`` | 0 | 1 |
+| 9 | ``overlap`` | 0 | 1 |
+| 10 | a merge transform is in use (0/1) | 0 | 1 |
+| 11 | steps / ``max_cycles`` | 0 | 1 |
+| 12 + k | swept: share of world block ``k`` truly swept | 0 | 1 |
+| 12 + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
+| 12 + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
+
+The world's extent is cut into ``STATE_MAP_SIZE × STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
+· 32 + column``, row 0 at the bottom; each share is measured at 4 × 4 points evenly spread in
+the block. (g) the shared map placed in the world by robot 0's true start pose: a wrong merge
+shows as known cells where nothing was swept. The reachable channel is fixed per world.
+``state()`` costs about 80 µs; the AEC ``env()`` forwards ``state()`` and ``state_space``.
+
+## Copies
+
+The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as
+the original would (same observations, rewards and infos for the same actions): the pymunk
+space is pickled with the solver state pymunk leaves out and uses a broadphase whose contact
+order does not depend on the episode's history (``robot.HashSpace``). A render window is not
+copied.
 
 ## Arguments
 
@@ -187,13 +242,17 @@ robots; other keys are ignored with a warning.
 
 ## Version History
 
-* v0: initial release.
+* v0: initial release. (Unreleased changes within v0: small numeric infos, maps read through
+  ``robot_map``/``merge_state``, ``state()``; the spatial-hash broadphase changes the order in
+  which contacts at corners are solved, so trajectories differ in the last bits from the first
+  such contact.)
 """
 
 from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium
@@ -202,13 +261,15 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore._map_kernels import adjacency, nearest_nodes
+from envs.two_robot_explore._map_kernels import adjacency, block_fractions, nearest_nodes
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
+    RobotMapSnapshot,
     SharedMap,
+    cell_indices,
     compose_pose,
     run_merge,
 )
@@ -229,17 +290,58 @@ MAX_DEGREE = 16
 
 N_NODE_FEATURES = 2 + len(NodeKind) + 1
 
+MERGE_METHODS = ("none", "hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp")
+"""The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
+the merge result that supplied the transform in use (``"none"``: no transform in use)."""
+
+STATE_MAP_SIZE = 32
+"""Side of the world-frame maps in :meth:`TwoRobotExploreEnv.state` (blocks per side)."""
+
+STATE_SAMPLES = 4
+"""Each state map block is the mean of ``STATE_SAMPLES²`` points sampled evenly inside it."""
+
+STATE_SCALARS = 12
+"""Entries of the state vector before its maps (manual, State)."""
+
+
+@dataclass(frozen=True, slots=True)
+class MergeState:
+    """The merge state at one env step (:meth:`TwoRobotExploreEnv.merge_state`).
+
+    Attributes:
+        transform: the robot-1 → robot-0 transform in use (``fusion.Rigid2D``, ``p_0 = R p_1 +
+            T``), ``None`` when none is (never merged, or dropped).
+        method: ``method`` of the merge result that supplied it (``"none"`` without one).
+        last: the last merge call's ``fusion.MergeResult`` (``None`` before the first).
+        merges: merge calls this episode; ``drops``: transforms dropped (the grids refuted them).
+        time_s: wall time of the last merge call, seconds (NaN before the first).
+    """
+
+    transform: Rigid2D | None
+    method: str
+    last: Any
+    merges: int
+    drops: int
+    time_s: float
+
 
 class TwoRobotExploreEnv(ParallelEnv):
     """The two-robot sonar exploration env; the module docstring is its manual.
 
-    Read-only state for metrics, datasets and rendering (valid after ``reset``):
-    ``world`` (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``,
-    ``maps`` (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
+    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`merge_state`; the global
+    state for centralised critics: :meth:`state`, :attr:`state_space`.
+
+    Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
+    every step; read, never modify): ``world``
+    (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``, ``maps``
+    (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
     (:class:`~envs.two_robot_explore.mapping.SharedMap`), ``oracle``
     (:class:`~envs.two_robot_explore.mapping.OracleCoverage`), ``frames`` (each robot's map
     frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
-    transform), ``merge`` (the last ``MergeResult``), ``steps``.
+    transform), ``merge`` (the last ``MergeResult``), ``merge_time_s``, ``steps``.
+
+    The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
+    the original would (the render window is not copied).
     """
 
     metadata = {
@@ -278,6 +380,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             diag = math.hypot(*cfg.world.size)
         self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
         self._build_spaces()
+        self.state_space = self._state_space()
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
         self._extract_config = (ExtractConfig.for_sonar() if cfg.mapping.topo_preset == "sonar"
@@ -286,6 +389,15 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._renderer = None
         self._ready = False
         self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
+        self._snapshots: list[RobotMapSnapshot | None] = [None, None]  # this step's, if taken
+
+    def __getstate__(self) -> dict:
+        """The state for ``pickle`` and ``copy``: everything but the render window and this
+        step's map snapshots (taken again on demand)."""
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        state["_snapshots"] = [None, None]
+        return state
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
@@ -323,6 +435,13 @@ class TwoRobotExploreEnv(ParallelEnv):
         if self.config.action_type == "continuous":
             return spaces.Box(-1.0, 1.0, (2,), np.float32)
         return spaces.Discrete(len(DISCRETE_ACTIONS))
+
+    def _state_space(self) -> spaces.Box:
+        """The :meth:`state` vector's space (manual, State)."""
+        n = STATE_SCALARS + 3 * STATE_MAP_SIZE ** 2
+        low = np.zeros(n, dtype=np.float32)
+        low[[2, 3, 6, 7]] = -1.0  # cos, sin of the headings
+        return spaces.Box(low, np.ones(n, dtype=np.float32), dtype=np.float32)
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object every call)."""
@@ -393,9 +512,12 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.merge = None
         self.merges = 0
         self.merge_drops = 0
+        self._merge_method = "none"  # method of the result that supplied the transform in use
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self.merge_time_s = math.nan
         self.steps = 0
+        self._snapshots = [None, None]
+        self._prepare_state()
         self._prev_collisions = [0, 0]
         self._shared_delta = 0
         self._own_delta = [0, 0]
@@ -455,6 +577,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._apply_actions(commands)
         self._simulate()
         self.steps += 1
+        self._snapshots = [None, None]
         travelled = [0.0, 0.0]
         for i, robot in enumerate(self.robots):
             before = robot.travelled
@@ -595,10 +718,15 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.merge_time_s = float(result.time_s)
         if result.accepted and (self.shared.transform is None
                                 or not result.transform.allclose(self.shared.transform)):
+            if result.method not in MERGE_METHODS:
+                raise ValueError(f"merge result method {result.method!r} has no merge_method "
+                                 f"code; known: {list(MERGE_METHODS)}")
+            self._merge_method = result.method
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
                                                       result.transform)
         elif refuted is not None and self.shared.transform is not None:
             self.merge_drops += 1
+            self._merge_method = "none"
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1], None)
 
     # ------------------------------------------------------------------ rewards, ends
@@ -725,21 +853,23 @@ class TwoRobotExploreEnv(ParallelEnv):
         return errors
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        world_area = self._world_area
-        rot_err, trans_err = self.merge_errors()
+        """Small, numeric, comparable infos (manual, Infos): no NaN, no wall clock, no live
+        objects, so that equal episodes give equal infos and infos are cheap to send."""
+        in_use = self.shared.transform is not None
+        rot_err, trans_err = self.merge_errors() if in_use else (0.0, 0.0)
         common = {
             "true_coverage": self.oracle.fraction,
             "true_area_m2": self.oracle.area,
             "shared_area_m2": self.shared.area,
-            "shared_coverage": self.shared.area / world_area,
+            "shared_coverage": self.shared.area / self._world_area,
             "overlap": self.oracle.overlap,
-            "merge_accepted": self.shared.transform is not None,
+            "merge_accepted": in_use,
+            "merge_method": MERGE_METHODS.index(self._merge_method),
+            "merge_errors_valid": in_use,
             "merge_rotation_error_deg": rot_err,
             "merge_translation_error_m": trans_err,
-            "merge_time_s": self.merge_time_s,
             "merges": self.merges,
             "merge_drops": self.merge_drops,
-            "merge": self.merge,
         }
         out = {}
         for i, a in enumerate(AGENTS):
@@ -753,10 +883,82 @@ class TwoRobotExploreEnv(ParallelEnv):
                 "collisions": robot.collisions,
                 "pose": robot.true_pose(),
                 "odometry": robot.odometry.copy(),
-                "topomap": rmap.topomap,
-                "grid": rmap.grid,
             }
         return out
+
+    # ------------------------------------------------------------------ snapshots, state
+    def robot_map(self, agent: str) -> RobotMapSnapshot:
+        """``agent``'s own maps now: a read-only
+        :class:`~envs.two_robot_explore.mapping.RobotMapSnapshot` (a copy of its occupancy
+        grid, its topological map, odometry) that later steps never change.
+
+        What map-planning explorers read (manual, Infos); the copy is taken on the first call
+        of a step and shared by that step's later calls.
+        """
+        self._require_reset()
+        try:
+            i = AGENTS.index(agent)
+        except ValueError:
+            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+        snap = self._snapshots[i]
+        if snap is None:
+            snap = RobotMapSnapshot.of(self.maps[i], self.robots[i].odometry, self.steps)
+            self._snapshots[i] = snap
+        return snap
+
+    def merge_state(self) -> MergeState:
+        """The merge state now (:class:`MergeState`: the transform in use, the method that
+        supplied it, the last merge result, counts, the last merge call's wall time)."""
+        self._require_reset()
+        return MergeState(self.shared.transform, self._merge_method, self.merge, self.merges,
+                          self.merge_drops, self.merge_time_s)
+
+    def _prepare_state(self) -> None:
+        """Per episode: the world points :meth:`state` samples, as cell indices of the world
+        grid and of the shared map (robot 0's frame), and the static reachable channel."""
+        s, k = STATE_MAP_SIZE, STATE_SAMPLES
+        x0, y0, x1, y1 = self._world.extent
+        # sample (a, b) of block (r, c) at row r·k + a, column c·k + b of an (s·k)² lattice
+        # (row 0 at the bottom, like the grids), listed block by block so that a block's
+        # samples are contiguous
+        r, c, a, b = np.meshgrid(*(np.arange(n) for n in (s, s, k, k)), indexing="ij")
+        points = np.stack([x0 + ((c * k + b).ravel() + 0.5) * ((x1 - x0) / (s * k)),
+                           y0 + ((r * k + a).ravel() + 0.5) * ((y1 - y0) / (s * k))], axis=1)
+        self._state_world_cells = cell_indices(points, self.oracle.geometry)
+        self._state_shared_cells = cell_indices(self.frames[0].inverse().apply(points),
+                                                self.shared.geometry)
+        self._state_reachable = self._state_blocks(self.oracle.reachable,
+                                                   self._state_world_cells)
+
+    @staticmethod
+    def _state_blocks(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Mean of ``mask`` at the sampled ``cells`` (listed block by block; ``-1``: outside,
+        False) per state block, ``(STATE_MAP_SIZE**2,)`` float32, row-major, row 0 at the
+        bottom."""
+        out = np.empty(STATE_MAP_SIZE ** 2, dtype=np.float32)
+        block_fractions(mask, cells, out)
+        return out
+
+    def state(self) -> np.ndarray:
+        """The global state for centralised critics: a ``(STATE_SCALARS + 3 ·
+        STATE_MAP_SIZE²,)`` float32 vector in :attr:`state_space` (manual, State)."""
+        self._require_reset()
+        x0, y0, x1, y1 = self._world.extent
+        head = np.zeros(STATE_SCALARS, dtype=np.float64)
+        for i, robot in enumerate(self.robots):
+            x, y, th = robot._pose()
+            head[4 * i: 4 * i + 4] = ((x - x0) / (x1 - x0), (y - y0) / (y1 - y0),
+                                      math.cos(th), math.sin(th))
+        head[[0, 1, 4, 5]] = np.clip(head[[0, 1, 4, 5]], 0.0, 1.0)
+        head[8:] = (self.oracle.fraction, self.oracle.overlap,
+                    float(self.shared.transform is not None),
+                    min(self.steps / self._max_cycles, 1.0))
+        return np.concatenate([
+            head.astype(np.float32),
+            self._state_blocks(self.oracle.union, self._state_world_cells),
+            self._state_blocks(self.shared.ever, self._state_shared_cells),
+            self._state_reachable,
+        ])
 
     # ------------------------------------------------------------------ render, close
     def render(self) -> np.ndarray | None:
