@@ -21,7 +21,7 @@ $(VENV)/.deps-base: pyproject.toml $(VENV)/.torch
 	touch $@
 
 $(VENV)/.deps-test: pyproject.toml $(VENV)/.torch
-	$(PIP) install -e ".[dev,render,ray]"
+	$(PIP) install -e ".[dev,render,ray,torchrl]"
 	touch $@
 
 $(VENV)/.deps-bench: pyproject.toml $(VENV)/.torch
