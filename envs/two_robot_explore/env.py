@@ -262,6 +262,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from envs.two_robot_explore._map_kernels import adjacency, block_fractions, nearest_nodes
+from envs.two_robot_explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
@@ -290,9 +291,10 @@ MAX_DEGREE = 16
 
 N_NODE_FEATURES = 2 + len(NodeKind) + 1
 
-MERGE_METHODS = ("none", "hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp")
+MERGE_METHODS = ("none", *(m for m in CONFIG_MERGE_METHODS if m != "none"))
 """The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
-the merge result that supplied the transform in use (``"none"``: no transform in use)."""
+the merge result that supplied the transform in use (``"none"``: no transform in use); the
+``mapping.merge_method`` values, "none" first."""
 
 STATE_MAP_SIZE = 32
 """Side of the world-frame maps in :meth:`TwoRobotExploreEnv.state` (blocks per side)."""
@@ -719,8 +721,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         if result.accepted and (self.shared.transform is None
                                 or not result.transform.allclose(self.shared.transform)):
             if result.method not in MERGE_METHODS:
-                raise ValueError(f"merge result method {result.method!r} has no merge_method "
-                                 f"code; known: {list(MERGE_METHODS)}")
+                raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
+                                   f"code; known: {list(MERGE_METHODS)}")
             self._merge_method = result.method
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
                                                       result.transform)
