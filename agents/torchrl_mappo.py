@@ -153,7 +153,7 @@ def main(args: MappoArgs) -> dict[str, Any]:
     env = make_env(args)
     actor, critic = make_modules(env, args)
     collector = Collector(env, actor, frames_per_batch=args.frames_per_batch,
-                          total_frames=args.frames)
+                          total_frames=args.frames, auto_register_policy_transforms=True)
     buffer = ReplayBuffer(storage=LazyTensorStorage(args.frames_per_batch),
                           sampler=SamplerWithoutReplacement(), batch_size=args.minibatch)
     loss = ClipPPOLoss(actor_network=actor, critic_network=critic, clip_epsilon=args.clip,
@@ -200,6 +200,7 @@ def main(args: MappoArgs) -> dict[str, Any]:
 if __name__ == "__main__":
     import tyro
 
+    torch.set_num_threads(1)  # small networks: one thread is faster on a shared machine
     result = main(tyro.cli(MappoArgs))
     for row in result["iterations"]:
         print(f"frames {row['frames']:>7}  mean reward {row['mean_reward']:+.4f}  episode "
