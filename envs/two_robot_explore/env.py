@@ -112,7 +112,8 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 Two random drivable cells at least ``world.start_clearance`` (0.45 m) from any wall and
 ``world.min_start_separation`` (2 m) apart, in the same connected region, random headings;
 each robot's odometry starts at ``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first
-scan is taken at reset.
+scan is taken at reset. A ``reset`` that raises (bad ``start_poses``) leaves no episode:
+``agents`` is empty and ``step()`` raises until a ``reset`` succeeds.
 
 ## Episode End
 
@@ -189,10 +190,29 @@ shows as known cells where nothing was swept. The reachable channel is fixed per
 ## Copies
 
 The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as
-the original would (same observations, rewards and infos for the same actions): the pymunk
-space is pickled with the solver state pymunk leaves out and uses a broadphase whose contact
-order does not depend on the episode's history (``robot.HashSpace``). A render window is not
-copied.
+the original would (same observations, rewards and infos for the same actions), also after
+the episode's end (``agents`` empty) and into the next unseeded ``reset`` (its generator is
+where the original's is).
+
+A copy is made by **replay**, not by copying the physics: what is pickled is the config, the
+render mode, the loaded world file, the generator's state at the last ``reset``, the start
+poses given to it, each step's ``(v, ω)`` commands since (32 bytes a step: about 33 kB after
+1000 steps) and any later ``max_cycles`` change. Restoring builds a fresh env, resets it from
+that generator state and steps it through the commands, building no observations, no
+rendering and no warnings. Why: pymunk pickles bodies and contacts but not what a step leaves
+to the next (the solver's bias velocities and joint impulses, the broadphase's pair order), so
+an unpickled space drifts from the original after a contact; the env is deterministic given
+the generator, the start poses and the commands, so a replay rebuilds that state exactly.
+
+Cost: restoring takes about as long as the steps since ``reset`` took, less their outputs —
+about 0.3 s of CPU per 1000 steps at the defaults, 0.1 s with ``topo_every = merge_every =
+0`` (``benchmarks/copy_speed.py``) — and grows with the step count: copy early in an episode
+where copies are frequent (tree search, say), or keep the actions and replay them yourself.
+
+Not copied: the render window; the wall time in ``merge_state().time_s`` (the replay's own);
+changes made to the env's internals from outside ``step``/``reset``. The replay checks the
+step count, agents, poses, contact counts and generator state it ends in against the
+original's, and a copy that does not reproduce them raises ``RuntimeError``.
 
 ## Arguments
 
@@ -242,17 +262,16 @@ robots; other keys are ignored with a warning.
 
 ## Version History
 
-* v0: initial release. (Unreleased changes within v0: small numeric infos, maps read through
-  ``robot_map``/``merge_state``, ``state()``; the spatial-hash broadphase changes the order in
-  which contacts at corners are solved, so trajectories differ in the last bits from the first
-  such contact.)
+* v0: initial release. (Unreleased changes within v0, observations and dynamics unchanged:
+  small numeric infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact
+  copies by replay.)
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium
@@ -327,6 +346,27 @@ class MergeState:
     time_s: float
 
 
+@dataclass(slots=True)
+class _History:
+    """How the current episode came about, all a copy needs to replay it (manual, Copies):
+    the generator's state at ``reset``, the start poses given (``None``: drawn), ``max_cycles``
+    at ``reset``, each step's parsed ``(v, ω)`` commands, and ``(step, value)`` of every later
+    ``max_cycles`` change."""
+
+    rng_state: dict[str, Any]
+    starts: np.ndarray | None
+    max_cycles: int
+    commands: list[list[tuple[float, float]]] = field(default_factory=list)
+    max_cycles_changes: list[tuple[int, int]] = field(default_factory=list)
+
+
+def _generator(state: dict[str, Any]) -> np.random.Generator:
+    """A ``numpy.random.Generator`` in ``state`` (a ``bit_generator.state``)."""
+    rng = np.random.Generator(getattr(np.random, state["bit_generator"])())
+    rng.bit_generator.state = state
+    return rng
+
+
 class TwoRobotExploreEnv(ParallelEnv):
     """The two-robot sonar exploration env; the module docstring is its manual.
 
@@ -343,7 +383,8 @@ class TwoRobotExploreEnv(ParallelEnv):
     transform), ``merge`` (the last ``MergeResult``), ``merge_time_s``, ``steps``.
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
-    the original would (the render window is not copied).
+    the original would. A copy replays the episode since ``reset`` (manual, Copies), so
+    restoring one costs about 0.3 s of CPU per 1000 steps since ``reset`` at the defaults.
     """
 
     metadata = {
@@ -366,6 +407,12 @@ class TwoRobotExploreEnv(ParallelEnv):
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
                 f"got {render_mode!r}"
             )
+        self._setup(config, render_mode, None)
+
+    def _setup(self, config: EnvConfig, render_mode: str | None,
+               file_world: World | None) -> None:
+        """Everything ``__init__`` builds from a checked config (a copy passes the world file
+        it already loaded: ``file_world``)."""
         self.config = config
         self.render_mode = render_mode
         self.possible_agents = list(AGENTS)
@@ -373,9 +420,10 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._max_cycles = config.max_cycles
         cfg = config
         # A world file is loaded (and validated) once, here; procedural worlds every reset.
-        self._file_world: World | None = None
+        self._file_world = file_world
         if cfg.world.source != "procedural":
-            self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
+            if self._file_world is None:
+                self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
             x0, y0, x1, y1 = self._file_world.extent
             diag = math.hypot(x1 - x0, y1 - y0)
         else:
@@ -392,14 +440,93 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._ready = False
         self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
         self._snapshots: list[RobotMapSnapshot | None] = [None, None]  # this step's, if taken
+        self._history: _History | None = None  # how this episode came about (Copies)
 
-    def __getstate__(self) -> dict:
-        """The state for ``pickle`` and ``copy``: everything but the render window and this
-        step's map snapshots (taken again on demand)."""
-        state = self.__dict__.copy()
-        state["_renderer"] = None
-        state["_snapshots"] = [None, None]
-        return state
+    # ------------------------------------------------------------------ copies
+    def __getstate__(self) -> dict[str, Any]:
+        """The state for ``pickle`` and ``copy`` (manual, Copies): the config, the render mode,
+        the loaded world file, the generator's state, and how the episode came about — the
+        generator's state at ``reset``, the start poses given, the commands of every step
+        since (a ``(steps, 2, 2)`` float64 array) and ``max_cycles`` changes — plus the
+        original's step count, agents, poses and contact counts, which the restored env must
+        reproduce. No physics, grids or cffi objects: :meth:`__setstate__` replays."""
+        h = self._history
+        episode = None
+        if h is not None:
+            episode = {
+                "rng": h.rng_state,
+                "starts": h.starts,
+                "max_cycles": h.max_cycles,
+                "commands": np.array(h.commands, dtype=np.float64).reshape(-1, 2, 2),
+                "max_cycles_changes": list(h.max_cycles_changes),
+                "check": self._replay_check(),
+            }
+        return {
+            "config": self.config,
+            "render_mode": self.render_mode,
+            "file_world": self._file_world,
+            "rng": None if self._rng is None else self._rng.bit_generator.state,
+            "episode": episode,
+        }
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Rebuild the env from :meth:`__getstate__`'s state: construct it, restore the
+        generator as it was at ``reset``, reset and replay the recorded commands (no
+        rendering, no warnings), so that it ends in exactly the original's state. The time
+        grows with the steps since ``reset``: about 0.3 s of CPU per 1000 steps at the defaults
+        (manual, Copies).
+
+        Raises:
+            RuntimeError: the replay did not reproduce the original (step count, agents,
+                poses, contacts or generator state differ: its internals were changed from
+                outside, or the code it runs differs from the original's).
+        """
+        config, episode = state["config"], state["episode"]
+        self._setup(config, state["render_mode"], state["file_world"])
+        if episode is not None:
+            self._rng = _generator(episode["rng"])
+            self._max_cycles = episode["max_cycles"]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the original has shown them already
+                self._begin(episode["starts"])
+                self._replay(episode["commands"], episode["max_cycles_changes"])
+            got = self._replay_check()
+            if got != episode["check"]:
+                raise RuntimeError(
+                    f"the restored env does not reproduce the original: (steps, agents, "
+                    f"poses, contacts) {got} after the replay, the original had "
+                    f"{episode['check']}; was the original's state changed from outside "
+                    f"step()/reset(), or does this process run other code?")
+            self.config, self._max_cycles = config, config.max_cycles
+        if state["rng"] is not None:
+            if self._rng is None:
+                self._rng = _generator(state["rng"])
+            elif self._rng.bit_generator.state != state["rng"]:
+                raise RuntimeError(
+                    "the restored env does not reproduce the original: its generator drew a "
+                    "different number of values during the replay")
+
+    def _replay(self, commands: np.ndarray,
+                max_cycles_changes: list[tuple[int, int]]) -> None:
+        """Advance a freshly reset episode by the recorded ``commands`` (the outputs, which
+        change no state, are not built), setting ``max_cycles`` where it was set."""
+        changes = sorted(max_cycles_changes)  # stable: same-step changes keep their order
+        c = 0
+        for k, step_commands in enumerate(commands.tolist()):
+            while c < len(changes) and changes[c][0] <= k:
+                self.max_cycles = changes[c][1]
+                c += 1
+            self._advance(step_commands)
+            if self._terminated() or self._truncated():
+                self.agents = []
+        for _, value in changes[c:]:
+            self.max_cycles = value
+
+    def _replay_check(self) -> tuple:
+        """What a replay must reproduce: steps, agents, both robots' exact poses and
+        contact counts."""
+        return (self.steps, tuple(self.agents), tuple(r._pose() for r in self.robots),
+                tuple(r.collisions for r in self.robots))
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
@@ -468,6 +595,8 @@ class TwoRobotExploreEnv(ParallelEnv):
     def max_cycles(self, value: int) -> None:
         self.config = self.config.replace(max_cycles=value)
         self._max_cycles = self.config.max_cycles
+        if self._history is not None:  # replayed by copies at this step
+            self._history.max_cycles_changes.append((self.steps, self._max_cycles))
 
     @property
     def world(self) -> World:
@@ -481,7 +610,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
-        starts = self._parse_options(options)
+        self._begin(self._parse_options(options))
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), self._infos()
+
+    def _begin(self, starts: np.ndarray | None) -> None:
+        """Build a new episode from the generator as it is now, at the given start poses
+        (``None``: drawn), and start recording its history (Copies)."""
+        history = _History(self._rng.bit_generator.state,
+                           None if starts is None else starts.copy(), self._max_cycles)
+        self._ready = False  # until the episode is built (a reset that raises leaves none)
+        self.agents = []
+        self._history = None
         cfg = self.config
         rng = self._rng
         if self._file_world is not None:
@@ -529,9 +670,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.agents = list(AGENTS)
         self._ready = True
         self._sense_and_map(travelled=[0.0, 0.0])
-        if self.render_mode == "human":
-            self.render()
-        return self._observe(), self._infos()
+        self._history = history
 
     def _parse_options(self, options: dict[str, Any] | None) -> np.ndarray | None:
         if options is None:
@@ -575,7 +714,21 @@ class TwoRobotExploreEnv(ParallelEnv):
             raise RuntimeError(
                 "step() called after the episode ended (all agents terminated or truncated); "
                 "call reset() to start a new episode")
-        commands = self._parse_actions(actions)
+        self._advance(self._parse_actions(actions))
+        rewards = self._rewards()
+        terminations = self._terminations()
+        truncations = self._truncations()
+        observations = self._observe()
+        infos = self._infos()
+        if any(terminations.values()) or any(truncations.values()):
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def _advance(self, commands: list[tuple[float, float]]) -> None:
+        """One step's state change from both robots' parsed ``(v, ω)`` commands (recorded
+        for copies): physics, odometry, sensing, mapping, merging; no outputs."""
         self._apply_actions(commands)
         self._simulate()
         self.steps += 1
@@ -587,16 +740,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             travelled[i] = robot.travelled - before
         self._sense_and_map(travelled)
         self._fuse()
-        rewards = self._rewards()
-        terminations = self._terminations()
-        truncations = self._truncations()
-        observations = self._observe()
-        infos = self._infos()
-        if any(terminations.values()) or any(truncations.values()):
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return observations, rewards, terminations, truncations, infos
+        self._history.commands.append(commands)
 
     def _require_reset(self) -> None:
         if not self._ready:
@@ -748,12 +892,17 @@ class TwoRobotExploreEnv(ParallelEnv):
                   - cfg.time_penalty)
         return dict.fromkeys(self.agents, r)
 
+    def _terminated(self) -> bool:
+        return bool(self.oracle.fraction >= self.config.target_coverage)
+
+    def _truncated(self) -> bool:
+        return self.steps >= self._max_cycles
+
     def _terminations(self) -> dict[str, bool]:
-        done = self.oracle.fraction >= self.config.target_coverage
-        return dict.fromkeys(self.agents, bool(done))
+        return dict.fromkeys(self.agents, self._terminated())
 
     def _truncations(self) -> dict[str, bool]:
-        return dict.fromkeys(self.agents, self.steps >= self._max_cycles)
+        return dict.fromkeys(self.agents, self._truncated())
 
     # ------------------------------------------------------------------ observations
     def _poses_across(self) -> list[np.ndarray] | None:

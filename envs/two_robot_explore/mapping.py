@@ -160,17 +160,6 @@ class RobotMap:
         self.bbox: list[int] | None = None
         self.topomap = TopoMap.empty()
 
-    def __getstate__(self) -> dict:
-        """The state for ``pickle`` and ``copy``, without the views of the grid's arrays
-        (a view would come back as a copy): :meth:`__setstate__` makes them anew."""
-        return {k: getattr(self, k) for k in self.__slots__ if k not in ("states", "_cells")}
-
-    def __setstate__(self, state: dict) -> None:
-        for key, value in state.items():
-            setattr(self, key, value)
-        self.states = self.grid.states()
-        self._cells = self.grid._states
-
     def integrate(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
                   mount_radius: float, max_range: float, half_cone: float) -> np.ndarray:
         """Fold one sonar scan (taken at odometry ``pose``) into the grid and :attr:`ever`.

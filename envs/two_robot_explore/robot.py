@@ -1,11 +1,10 @@
 """Robots: Pioneer3-DX-like differential-drive discs in pymunk, and their odometry.
 
 :func:`build_space` makes a fresh ``pymunk.Space`` for an episode (walls from the world's
-segments, one dynamic disc per robot, contacts counted; a spatial-hash broadphase, so that a
-pickled or copied space steps exactly as the original: :class:`HashSpace`), and
-:class:`Robot` wraps one disc: it turns a ``(v, ω)`` command into body velocities before each
-physics substep, and keeps the robot's odometry in its own start frame. The physics is stepped
-once per substep for the whole space (never per robot).
+segments, one dynamic disc per robot, contacts counted), and :class:`Robot` wraps one disc: it
+turns a ``(v, ω)`` command into body velocities before each physics substep, and keeps the
+robot's odometry in its own start frame. The physics is stepped once per substep for the whole
+space (never per robot).
 
 The per-substep body reads and writes (:meth:`Robot.drive`, :meth:`Robot.true_pose`) call
 chipmunk's getters and setters through pymunk's own cffi binding, as pymunk's ``Body``
@@ -23,7 +22,6 @@ import pymunk
 # pymunk's cffi binding of chipmunk (pymunk 7.x), as in sonar.py
 from pymunk._chipmunk_cffi import lib as _lib
 
-from envs.two_robot_explore import _solver_state
 from envs.two_robot_explore.config import RobotConfig
 
 _GET_POSITION = _lib.cpBodyGetPosition
@@ -91,20 +89,6 @@ class Robot:
         self._w = 0.0
         self._last_true = tuple(self.start.tolist())  # true pose at the last odometry update
 
-    def __getstate__(self) -> dict:
-        """The state for ``pickle`` and ``copy``: the slots, plus the solver state of the disc
-        and its joints that pymunk does not pickle (:mod:`._solver_state`)."""
-        state = {k: getattr(self, k) for k in self.__slots__}
-        state["_solver"] = _solver_state.read((self.body, *self.joints))
-        return state
-
-    def __setstate__(self, state: dict) -> None:
-        state = dict(state)
-        solver = state.pop("_solver")
-        for key, value in state.items():
-            setattr(self, key, value)
-        _solver_state.write((self.body, *self.joints), solver)
-
     def command(self, v: float, w: float) -> None:
         """Set the forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) for the next step."""
         self._v = v
@@ -168,56 +152,10 @@ def start_frame_pose(start: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(th), math.cos(th))])
 
 
-_ARBITER_FIRST_COLLISION = 0
-_ARBITER_NORMAL = 1
-"""chipmunk's ``cpArbiterState`` codes (``CP_ARBITER_STATE_FIRST_COLLISION``, ``..._NORMAL``)."""
-
-HASH_CELL = 1.0
-"""Cell side (m) of the spaces' spatial hash: about two robot diameters."""
-
-HASH_COUNT = 2048
-"""Minimum number of cells of the spaces' spatial hash table."""
-
-
-class HashSpace(pymunk.Space):
-    """A ``pymunk.Space`` whose broadphase is chipmunk's spatial hash, also once unpickled or
-    copied.
-
-    Chipmunk's default broadphase, a bounding-box tree, caches overlapping pairs per shape
-    between steps; the order of its cached pairs, and hence of the contacts the solver visits
-    when a robot touches two walls at once, depends on the episode's history, which a pickled
-    space does not carry, so a restored space drifts from the original after such a contact.
-    The spatial hash rebuilds its pairs from the shapes every step (in the order they were
-    added, which a pickled space keeps): a restored space steps exactly as the original. It is
-    as fast here (two dynamic discs, a few hundred wall segments; ``benchmarks/env_speed.py``).
-    """
-
-    _pickle_attrs_init = ["threaded", "_hash_cell", "_hash_count"]
-
-    def __init__(self, threaded: bool = False, hash_cell: float = HASH_CELL,
-                 hash_count: int = HASH_COUNT) -> None:
-        super().__init__(threaded)
-        self._hash_cell, self._hash_count = hash_cell, hash_count
-        self.use_spatial_hash(hash_cell, hash_count)
-
-    def __setstate__(self, state: dict) -> None:
-        super().__setstate__(state)
-        # A contact that began in the last step is marked "first collision" until the next
-        # step starts, which marks every contact of the last step "normal"; the restored
-        # contacts are not in that list, so they are marked here (else the next step would
-        # count them as beginning again and skip their cached impulses).
-        stamp = _lib.cpSpaceGetTimestamp(self._space)
-        for arbiter in self._get_arbiters():
-            if arbiter.stamp == stamp and arbiter.state == _ARBITER_FIRST_COLLISION:
-                arbiter.state = _ARBITER_NORMAL
-
-
-def build_space(segments: np.ndarray, robots: list[Robot]) -> HashSpace:
-    """A fresh space (a :class:`HashSpace`): zero gravity, no damping, 10 solver iterations,
-    2 mm collision slop, walls, robots, and a contact counter (each contact that begins adds one
-    to every robot it involves). It pickles and copies, and a copy steps exactly as the
-    original."""
-    space = HashSpace()
+def build_space(segments: np.ndarray, robots: list[Robot]) -> pymunk.Space:
+    """A fresh space: zero gravity, no damping, 10 solver iterations, 2 mm collision slop, walls,
+    robots, and a contact counter (each contact that begins adds one to every robot it involves)."""
+    space = pymunk.Space()
     space.gravity = (0.0, 0.0)
     space.damping = 1.0
     space.iterations = 10
@@ -225,20 +163,16 @@ def build_space(segments: np.ndarray, robots: list[Robot]) -> HashSpace:
     _add_walls(space, segments)
     for robot in robots:
         space.add(robot.body, robot.shape, robot.motor, *robot.joints)
-    # a module-level callback and plain data, so that the space pickles and deep-copies
-    space.on_collision(None, None, begin=count_contact,
-                       data={r.shape.collision_type: r for r in robots})
+    by_type = {r.shape.collision_type: r for r in robots}
+
+    def count_contact(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+        for shape in arbiter.shapes:
+            robot = by_type.get(shape.collision_type)
+            if robot is not None:
+                robot.collisions += 1
+
+    space.on_collision(None, None, begin=count_contact)
     return space
-
-
-def count_contact(arbiter: pymunk.Arbiter, _space: pymunk.Space,
-                  robots: dict[int, Robot]) -> None:
-    """The space's ``begin`` callback: one more contact for each robot (by ``collision_type``,
-    from the handler's data ``robots``) the beginning contact involves."""
-    for shape in arbiter.shapes:
-        robot = robots.get(shape.collision_type)
-        if robot is not None:
-            robot.collisions += 1
 
 
 def _add_walls(space: pymunk.Space, segments: np.ndarray) -> None:

@@ -102,13 +102,8 @@ def _readings(alpha, nx, ny, dirs, length, mount, u, noise, k_rays, steep, p_dro
         truth[k] = lo if true < lo else hi if true > hi else true
 
 
-_CFFI_SLOTS = frozenset({"_info", "_end_structs", "_filter", "_filter_of"})
-""":class:`Sonar` slots holding cffi objects, and the filter one was made from (remade after
-unpickling, never pickled)."""
-
-
 class Sonar:
-    """The sonar ring of one robot (pickles and deep-copies: :meth:`__getstate__`).
+    """The sonar ring of one robot.
 
     Args:
         cfg: the sonar settings.
@@ -149,40 +144,24 @@ class Sonar:
         self.last_pose = np.zeros(3)
         self.fresh = False
         self._since = math.inf
+        # the one query result struct every cast of this sonar writes into
+        self._info = _ffi.new("cpSegmentQueryInfo *")
         # each scan's ray directions and end points (written by _ray_ends; both arrays live as
         # long as the sonar, never reallocated), the ends also seen by cffi as the cpVect
-        # structs passed to chipmunk (_bind), so no Python arithmetic or tuple conversion
-        # happens per ray
+        # structs passed to chipmunk (from_buffer checks the size: a row is a cpVect's two
+        # doubles), so no Python arithmetic or tuple conversion happens per ray
         self._ends = np.zeros((self._n_rays, 2))
         self._dirs = np.zeros((self._n_rays, 2))
-        self._filter_words = np.zeros(2, dtype=np.uint64)  # _filter, for the compiled casts
-        self._bind()
+        ends = _ffi.from_buffer("cpVect[]", self._ends)
+        self._end_structs = [ends[i] for i in range(self._n_rays)]
+        self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
+        self._filter = None
+        self._filter_words = np.zeros(2, dtype=np.uint64)  # the same, for the compiled casts
         # the compiled casts' query result (a cpSegmentQueryInfo's 6 words) and per-ray hits
         self._hit = np.zeros(6)
         self._alpha = np.zeros(self._n_rays)
         self._nx = np.zeros(self._n_rays)
         self._ny = np.zeros(self._n_rays)
-
-    def _bind(self) -> None:
-        """Make the cffi objects the casts use (not pickled: :meth:`__getstate__`)."""
-        # the one query result struct every cast of this sonar writes into
-        self._info = _ffi.new("cpSegmentQueryInfo *")
-        # cffi's view of _ends as cpVect structs (from_buffer checks the size: a row is a
-        # cpVect's two doubles)
-        ends = _ffi.from_buffer("cpVect[]", self._ends)
-        self._end_structs = [ends[i] for i in range(self._n_rays)]
-        self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
-        self._filter = None
-
-    def __getstate__(self) -> dict:
-        """The state for ``pickle`` and ``copy``: every slot but the cffi objects (pointers
-        into this process's memory), which :meth:`__setstate__` makes anew."""
-        return {k: getattr(self, k) for k in self.__slots__ if k not in _CFFI_SLOTS}
-
-    def __setstate__(self, state: dict) -> None:
-        for key, value in state.items():
-            setattr(self, key, value)
-        self._bind()
 
     def reset(self) -> None:
         """Forget the last scan (the next :meth:`measure` always scans)."""

@@ -3,8 +3,10 @@ pickle and deepcopy (a restored env continues exactly), the global state."""
 
 import copy
 import dataclasses
+import json
 import math
 import pickle
+import warnings
 
 import numpy as np
 import pytest
@@ -123,20 +125,28 @@ def test_a_restored_env_continues_exactly_as_the_original_across_a_merge(monkeyp
     ref = [env]
     _scripted_merges(monkeypatch, ref)
     rng = np.random.default_rng(7)
-    actions = [_drive(env, rng) for _ in range(120)]
+    actions = [_drive(env, rng) for _ in range(140)]
     env.reset(seed=7)
     for act in actions[:6]:
         env.step(act)
     assert env.merge_state().transform is None
-    restored = pickle.loads(pickle.dumps(env)) if how == "pickle" else copy.deepcopy(env)
+
+    def restore(e):
+        return pickle.loads(pickle.dumps(e)) if how == "pickle" else copy.deepcopy(e)
+
+    restored = restore(env)
     assert restored is not env and restored.maps[0].grid is not env.maps[0].grid
-    original = _trace(env, actions[6:])
-    again = _trace(restored, actions[6:])
+    original = _trace(env, actions[6:120])
+    again = _trace(restored, actions[6:120])
     assert len(original) == len(again) == 114
     for k, (x, y) in enumerate(zip(original, again, strict=True)):
         assert x == y, f"the restored env diverges {k} steps after the copy"
     assert env.merge_state().transform is not None, "no merge happened after the copy"
     assert restored.merges == env.merges and restored.robots[0].collisions == env.robots[0].collisions
+    # a copy taken with the merge in use replays it
+    late = restore(env)
+    assert late.merge_state().transform.allclose(env.merge_state().transform)
+    assert _trace(late, actions[120:]) == _trace(env, actions[120:])
 
 
 def test_pickle_before_reset_and_with_a_render_window():
@@ -152,6 +162,95 @@ def test_pickle_before_reset_and_with_a_render_window():
     assert copied._renderer is None and copied.render().shape == fresh.render().shape
     fresh.close()
     copied.close()
+
+
+def test_a_copy_after_the_episode_end_is_ended_and_resets_as_the_original():
+    env = two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": 30})
+    env.reset(seed=5)
+    rng = np.random.default_rng(5)
+    while env.agents:
+        env.step(_drive(env, rng))
+    data = pickle.dumps(env)
+    assert len(data) < 20_000  # config, commands, generator states: no maps, no physics
+    restored = pickle.loads(data)
+    assert restored.agents == [] and restored.steps == 30
+    with pytest.raises(RuntimeError, match="after the episode ended"):
+        restored.step(_drive(env, rng))
+    # the generator continues where the original's is: the next unseeded episode is the same
+    a, _ = env.reset()
+    b, _ = restored.reset()
+    for agent in a:
+        for key in a[agent]:
+            np.testing.assert_array_equal(a[agent][key], b[agent][key])
+
+
+def test_a_copy_replays_start_poses_and_max_cycles_changes_without_warnings():
+    env = two_robot_explore_v0.parallel_env(**SMALL)
+    env.reset(seed=6)
+    starts = np.array([r.true_pose() for r in env.robots]) + [[0.0, 0.0, 0.5], [0.0, 0.0, -0.5]]
+    with pytest.warns(UserWarning, match=r"reset options \['speed'\] are not used"):
+        env.reset(seed=6, options={"start_poses": starts, "speed": 1})
+    rng = np.random.default_rng(6)
+    for _ in range(5):
+        env.step(_drive(env, rng))
+    env.max_cycles = 3  # the next step truncates
+    twin = copy.deepcopy(env)
+    _, _, _, truncs, _ = env.step(_drive(env, rng))
+    assert all(truncs.values()) and env.agents == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the restored env shows no warning again
+        restored = pickle.loads(pickle.dumps(env))
+    assert restored.steps == 6 and restored.agents == [] and restored.max_cycles == 3
+    for r1, r2 in zip(env.robots, restored.robots, strict=True):
+        assert r1.true_pose().tobytes() == r2.true_pose().tobytes()
+    np.testing.assert_array_equal(restored.robots[0].start, starts[0])
+    assert twin.max_cycles == 3 and twin.agents == list(env.possible_agents)
+    _, _, _, truncs, _ = twin.step({a: np.array([0.1, 0.0]) for a in twin.agents})
+    assert all(truncs.values())
+
+
+def test_a_copy_keeps_the_loaded_world_file(tmp_path):
+    path = tmp_path / "house.json"
+    verts = [[0, 0], [8, 0], [8, 3], [3, 3], [3, 6], [0, 6]]
+    path.write_text(json.dumps({"id": "x", "verts": verts, "bbox": {}}))
+    env = two_robot_explore_v0.parallel_env(world={"source": str(path)}, max_cycles=50,
+                                            mapping={"merge_every": 0})
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        env.step(_drive(env, rng))
+    data = pickle.dumps(env)
+    path.unlink()  # a copy does not read the file again
+    restored = pickle.loads(data)
+    assert restored.world.name == env.world.name
+    act = _drive(env, rng)
+    assert _trace(restored, [act]) == _trace(env, [act])
+
+
+def test_a_copy_of_an_env_changed_from_outside_is_refused():
+    env = two_robot_explore_v0.parallel_env(**SMALL)
+    env.reset(seed=8)
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        env.step(_drive(env, rng))
+    env.robots[0].body.position += (0.01, 0.0)  # not something step() or reset() did
+    with pytest.raises(RuntimeError, match="does not reproduce the original"):
+        copy.deepcopy(env)
+
+
+def test_the_aec_env_copies():
+    aec = two_robot_explore_v0.env(**SMALL)
+    aec.reset(seed=9)
+    for _ in range(8):
+        aec.step(np.array([0.7, 0.2], dtype=np.float32))
+    twin = copy.deepcopy(aec)
+    for _ in range(8):
+        agent = aec.agent_selection
+        assert twin.agent_selection == agent
+        np.testing.assert_array_equal(twin.observe(agent)["sonar"], aec.observe(agent)["sonar"])
+        aec.step(np.array([0.5, -0.3], dtype=np.float32))
+        twin.step(np.array([0.5, -0.3], dtype=np.float32))
+    assert np.array_equal(twin.state(), aec.state())
 
 
 def test_state_is_a_global_view_in_its_space(monkeypatch):
@@ -218,19 +317,3 @@ def test_copies_taken_in_contact_continue_exactly():
             if k - start >= 30:
                 copies.remove((start, twin))
     assert in_contact >= 3, "too few copies were taken in contact to test them"
-
-
-def test_solver_state_offsets_are_checked():
-    from envs.two_robot_explore import _solver_state
-
-    assert _solver_state.usable()
-    check = _solver_state.usable.__wrapped__
-    # shifted onto fields that the next step recomputes (writing elsewhere could corrupt)
-    for name, shift in (("BODY_V_BIAS", -32), ("PIVOT_J_ACC", -8), ("GEAR_J_ACC", -8)):
-        good = getattr(_solver_state, name)
-        try:
-            setattr(_solver_state, name, good + shift)
-            assert not check(), f"a wrong {name} went unnoticed"
-        finally:
-            setattr(_solver_state, name, good)
-    assert check()
