@@ -205,7 +205,7 @@ an unpickled space drifts from the original after a contact; the env is determin
 the generator, the start poses and the commands, so a replay rebuilds that state exactly.
 
 Cost: restoring takes about as long as the steps since ``reset`` took, less their outputs —
-about 0.3 s of CPU per 1000 steps at the defaults, 0.1 s with ``topo_every = merge_every =
+about 0.35 s of CPU per 1000 steps at the defaults, 0.13 s with ``topo_every = merge_every =
 0`` (``benchmarks/copy_speed.py``) — and grows with the step count: copy early in an episode
 where copies are frequent (tree search, say), or keep the actions and replay them yourself.
 
@@ -384,7 +384,7 @@ class TwoRobotExploreEnv(ParallelEnv):
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
     the original would. A copy replays the episode since ``reset`` (manual, Copies), so
-    restoring one costs about 0.3 s of CPU per 1000 steps since ``reset`` at the defaults.
+    restoring one costs about 0.35 s of CPU per 1000 steps since ``reset`` at the defaults.
     """
 
     metadata = {
@@ -473,7 +473,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         """Rebuild the env from :meth:`__getstate__`'s state: construct it, restore the
         generator as it was at ``reset``, reset and replay the recorded commands (no
         rendering, no warnings), so that it ends in exactly the original's state. The time
-        grows with the steps since ``reset``: about 0.3 s of CPU per 1000 steps at the defaults
+        grows with the steps since ``reset``: about 0.35 s of CPU per 1000 steps at the defaults
         (manual, Copies).
 
         Raises:
