@@ -274,7 +274,7 @@ class InfoLogger(BaseCallback):
             if "merge_accepted" in info:
                 self.logger.record_mean("merge/accepted", float(info["merge_accepted"]))
                 for key in ("merge_rotation_error_deg", "merge_translation_error_m"):
-                    if np.isfinite(info.get(key, math.nan)):
+                    if info.get("merge_errors_valid", False):
                         self.logger.record_mean(f"merge/{key}", float(info[key]))
         elapsed = time.perf_counter() - self.t0
         if elapsed > 0:

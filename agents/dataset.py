@@ -200,10 +200,11 @@ def env_kwargs(settings: dict[str, Any]) -> dict[str, Any]:
 def _snapshot(env: Any, infos: dict, pair_id: int, episode: int, k: int, seed: int,
               step: int, settings: dict[str, Any]) -> MapPair:
     raw = env.unwrapped
-    a, b = infos["robot_0"], infos["robot_1"]
+    a = infos["robot_0"]
+    snap_a, snap_b = raw.robot_map("robot_0"), raw.robot_map("robot_1")
 
-    def grid(info: dict) -> GridSnapshot:
-        g = info["grid"]
+    def grid(snap: Any) -> GridSnapshot:
+        g = snap.grid
         return GridSnapshot(np.asarray(g.states(), dtype=np.int8).copy(), float(g.resolution),
                             tuple(float(v) for v in g.origin))
 
@@ -211,8 +212,8 @@ def _snapshot(env: Any, infos: dict, pair_id: int, episode: int, k: int, seed: i
     world_id = f"procedural:{seed}" if world == "procedural" else Path(world).name
     truth: Rigid2D = raw.true_merge
     return MapPair(
-        pair_id=pair_id, map_a=a["topomap"], map_b=b["topomap"], grid_a=grid(a),
-        grid_b=grid(b), transform=truth, overlap=float(a["overlap"]), world_id=world_id,
+        pair_id=pair_id, map_a=snap_a.topomap, map_b=snap_b.topomap, grid_a=grid(snap_a),
+        grid_b=grid(snap_b), transform=truth, overlap=float(a["overlap"]), world_id=world_id,
         seed=seed, explorer=settings["explorer"], step=step, episode=episode, snapshot=k,
         extra={"true_coverage": float(a["true_coverage"])},
     )

@@ -145,6 +145,10 @@ class SectorRule(Explorer):
         self.controller = GoalFrontier(action_type=action_type)
         self._since = self.hold
 
+    def bind(self, env: Any, agent: str) -> None:
+        super().bind(env, agent)
+        self.controller.bind(env, agent)
+
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self.controller.reset(int(self.rng.integers(2**31)))
@@ -187,6 +191,8 @@ class FrontierGoalEnv(ParallelEnv):
         action_type = env.config.action_type
         self.controllers = {a: GoalFrontier(config, action_type=action_type)
                             for a in self.possible_agents}
+        for agent, controller in self.controllers.items():
+            controller.bind(env, agent)
         inner = env.observation_space(self.possible_agents[0])
         self._obs_space = spaces.Dict({
             **inner.spaces,
@@ -195,6 +201,11 @@ class FrontierGoalEnv(ParallelEnv):
         self._act_space = spaces.Discrete(SECTORS)
         self._rng: np.random.Generator | None = None
         self._last: tuple[dict, dict] | None = None
+
+    @property
+    def unwrapped(self) -> Any:
+        """The wrapped ``two_robot_explore`` env, unwrapped (as PettingZoo's wrappers do)."""
+        return self.env.unwrapped
 
     def observation_space(self, agent: str) -> spaces.Space:
         return self._obs_space

@@ -8,7 +8,8 @@
   (``info["overlap"]``); duplicated effort.
 * ``path_length_m`` per robot (true poses), ``collisions`` (sum of both robots' contacts).
 * ``merge_first_accept_step``, ``merge_accept_fraction`` (steps with a transform in use),
-  final ``merge_rotation_error_deg``/``merge_translation_error_m``.
+  final ``merge_rotation_error_deg``/``merge_translation_error_m`` (NaN without a transform
+  in use at the end: the infos' ``merge_errors_valid``).
 * ``coverage``: the whole true-coverage curve, for plots.
 """
 
@@ -72,7 +73,7 @@ class EpisodeRecorder:
         first = np.flatnonzero(acc)
         out["merge_first_accept_step"] = int(first[0] + 1) if len(first) else None
         out["merge_accept_fraction"] = float(acc.mean()) if n else 0.0
-        out["merge_rotation_error_deg"] = float(info.get("merge_rotation_error_deg", math.nan))
-        out["merge_translation_error_m"] = float(info.get("merge_translation_error_m", math.nan))
+        for key in ("merge_rotation_error_deg", "merge_translation_error_m"):
+            out[key] = float(info[key]) if info.get("merge_errors_valid") else math.nan
         out["coverage"] = cov
         return out

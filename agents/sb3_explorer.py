@@ -56,6 +56,11 @@ class SB3Explorer(Explorer):
             self.hold = int(getattr(policy, "goal_hold", DEFAULT_HOLD))
             self._since = self.hold
 
+    def bind(self, env: Any, agent: str) -> None:
+        super().bind(env, agent)
+        if self.controller is not None:
+            self.controller.bind(env, agent)
+
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         if self.controller is not None:

@@ -2,8 +2,10 @@
 two-robot version.
 
 All drive from the robot's own sensing: the ``sonar`` observation (ranges normalised by the
-sonar's ``max_range``), ``info["odometry"]`` (pose in the robot's own start frame) and
-``info["grid"]`` (the robot's own :class:`topo.OccupancyGrid`). None of them reads the true pose.
+sonar's ``max_range``), ``info["odometry"]`` (pose in the robot's own start frame) and, for the
+frontier explorers, the robot's own :class:`topo.OccupancyGrid`, read when they plan from the
+env they are bound to (``env.robot_map(agent).grid``, see :meth:`agents.base.Explorer.bind`).
+None of them reads the true pose.
 
 * :class:`RandomWalk` — bump and turn: drive ahead, turn away for a random time when the front
   sonars see something close.
@@ -371,7 +373,7 @@ def pure_pursuit(pose: np.ndarray, path: np.ndarray, lookahead: float) -> np.nda
 class Frontier(CommandExplorer):
     """Frontier-based exploration (Yamauchi 1997) on the robot's own grid.
 
-    Every plan: frontier cells of ``info["grid"]`` are clustered (8-connected), path costs from
+    Every plan: frontier cells of the robot's grid are clustered (8-connected), path costs from
     the robot through the configuration space come from one ``MCP_Geometric`` run, and the goal
     is the cheapest cell of the best cluster (:meth:`_choose`: the nearest here, the current
     goal's cluster favoured by ``hysteresis``). Between plans the path is followed by pure
@@ -457,9 +459,22 @@ class Frontier(CommandExplorer):
             return True
         return False
 
+    def _maps(self) -> Any:
+        """The bound env, which the robots' maps are read from."""
+        if self.env is None:
+            raise RuntimeError(f"{type(self).__name__} plans on its robot's occupancy grid, read "
+                               f"from the env: bind it first (explorer.bind(env, agent), "
+                               f"make_team(name, env=env), or run_episode)")
+        return self.env
+
+    def _grid(self, agent: str | None = None) -> Any:
+        """The occupancy grid of robot ``agent`` (default: this explorer's) now, a snapshot
+        read from the bound env."""
+        return self._maps().robot_map(agent or self.agent).grid
+
     def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
         exclude = np.array(self.given_up) if self.given_up else None
-        return frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude)
+        return frontier_map(self._grid(), pose[:2], self.cfg, exclude=exclude)
 
     def _make_plan(self, info: Mapping[str, Any], pose: np.ndarray) -> Plan | None:
         self._count("plans")
@@ -504,24 +519,22 @@ class Frontier(CommandExplorer):
 @dataclass
 class Blackboard:
     """What two :class:`CoordinatedFrontier` robots share: each robot's current goal in its
-    own frame, each robot's live grid, and the last accepted merge transform (robot 1's frame
-    → robot 0's)."""
+    own frame, and the merge transform in use (robot 1's frame → robot 0's; ``None`` when
+    none is). Each robot reads its teammate's grid from the env when it plans."""
 
     goals: dict[int, np.ndarray] = field(default_factory=dict)
-    grids: dict[int, Any] = field(default_factory=dict)
     transform: Rigid2D | None = None
 
     def clear(self) -> None:
         self.goals.clear()
-        self.grids.clear()
         self.transform = None
 
 
 class CoordinatedFrontier(Frontier):
     """Frontier exploration for a team (Burgard et al. 2005 style).
 
-    Before any merge it is :class:`Frontier`. Once a merge has been accepted
-    (``info["merge"]``), with the merge transform each robot:
+    While no merge transform is in use it is :class:`Frontier`. With one in use (the env's
+    ``merge_state().transform``), each robot:
 
     * plans on the shared map: its teammate's grid evidence is added to its own, so frontiers
       the teammate has already explored are not goals;
@@ -586,11 +599,14 @@ class CoordinatedFrontier(Frontier):
             return None
         return to_mate.inverse().apply(goal)
 
+    def bind(self, env: Any, agent: str) -> None:
+        if agent != f"robot_{self.index}":
+            raise ValueError(f"agent of CoordinatedFrontier(index={self.index}) must be "
+                             f"'robot_{self.index}', got {agent!r}")
+        super().bind(env, agent)
+
     def command(self, observation, info) -> np.ndarray:
-        merge = info.get("merge")
-        if merge is not None and getattr(merge, "accepted", False):
-            self.board.transform = merge.transform
-        self.board.grids[self.index] = info["grid"]
+        self.board.transform = self._maps().merge_state().transform
         mate = np.asarray(observation["teammate"], dtype=np.float64)
         if mate[4] > 0.5:  # valid: robot-frame offset of the teammate -> own frame
             pose = _pose(info)
@@ -601,12 +617,11 @@ class CoordinatedFrontier(Frontier):
 
     def _frontier_map(self, info, pose):
         to_mate = self._to_mate()
-        mate_grid = self.board.grids.get(1 - self.index)
-        if to_mate is None or mate_grid is None:
+        if to_mate is None:
             return super()._frontier_map(info, pose)
         exclude = np.array(self.given_up) if self.given_up else None
-        self._fmap = frontier_map(info["grid"], pose[:2], self.cfg, exclude=exclude,
-                                  teammate=(mate_grid, to_mate))
+        self._fmap = frontier_map(self._grid(), pose[:2], self.cfg, exclude=exclude,
+                                  teammate=(self._grid(f"robot_{1 - self.index}"), to_mate))
         return self._fmap
 
     def _mate_costs(self, clusters, pose) -> np.ndarray | None:
@@ -664,19 +679,26 @@ EXPLORERS = {
 """Scripted explorers by name (``make_team`` also accepts ``"sb3:PATH"``)."""
 
 
-def make_team(name: str, action_type: str = "continuous") -> dict[str, Explorer]:
+def make_team(name: str, action_type: str = "continuous", env: Any = None
+              ) -> dict[str, Explorer]:
     """One explorer per robot, ``{"robot_0": ..., "robot_1": ...}``; the coordinated team
-    shares one :class:`Blackboard`."""
+    shares one :class:`Blackboard`. With ``env``, each is bound to its robot of it
+    (:meth:`agents.base.Explorer.bind`: the frontier explorers read their maps there)."""
     if name.startswith("sb3:"):
         from agents.sb3_explorer import SB3Explorer
 
         policy = SB3Explorer.load_policy(name[4:])
-        return {f"robot_{i}": SB3Explorer(policy, action_type=action_type) for i in range(2)}
-    if name == "coordinated_frontier":
+        team = {f"robot_{i}": SB3Explorer(policy, action_type=action_type) for i in range(2)}
+    elif name == "coordinated_frontier":
         board = Blackboard()
-        return {f"robot_{i}": CoordinatedFrontier(i, board, action_type=action_type)
+        team = {f"robot_{i}": CoordinatedFrontier(i, board, action_type=action_type)
                 for i in range(2)}
-    if name not in EXPLORERS:
+    elif name not in EXPLORERS:
         raise ValueError(f"explorer must be one of {sorted(EXPLORERS)} or 'sb3:PATH', "
                          f"got {name!r}")
-    return {f"robot_{i}": EXPLORERS[name](action_type=action_type) for i in range(2)}
+    else:
+        team = {f"robot_{i}": EXPLORERS[name](action_type=action_type) for i in range(2)}
+    if env is not None:
+        for agent, explorer in team.items():
+            explorer.bind(env, agent)
+    return team

@@ -35,7 +35,7 @@ def main() -> None:
 
     env = two_robot_explore_v0.parallel_env(max_cycles=args.steps, render_mode="rgb_array")
     obs, infos = env.reset(seed=args.seed)
-    team = make_team(args.explorer)
+    team = make_team(args.explorer, env=env)
     for explorer, s in zip(team.values(), np.random.SeedSequence(args.seed).spawn(2), strict=True):
         explorer.reset(int(s.generate_state(1)[0]))
     frames = []

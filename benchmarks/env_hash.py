@@ -2,11 +2,12 @@
 change leaves the env bit-identical.
 
 Runs seeds 0, 1, 2 and 4 for ``--steps`` steps each under a fixed action sequence (a new random
-command every 10 steps) and prints a running SHA-256 of everything the env returns —
-observations, rewards, terminations, truncations, the scalar infos (but ``merge_time_s``, a
-wall time) and both robots' topological maps (positions, kinds, paths, lengths, polylines) —
-every 100 steps. Seeds 0–2 accept no merge within 1000 steps; seed 4 merges from step 399, so
-the code that runs once the maps are fused (the warped shared map, the teammate observation,
+command every 10 steps) and prints two running SHA-256 digests every 100 steps: ``obs``, of
+observations, rewards, terminations, truncations and both robots' topological maps (positions,
+kinds, paths, lengths, polylines), and ``infos``, of the infos (their scalars, and the array
+ones' bytes) — so a change of the infos alone (a new key, say) shows in the second column
+only. Seeds 0–2 accept no merge within 1000 steps; seed 4 merges from step 399, so the code
+that runs once the maps are fused (the warped shared map, the teammate observation,
 ``local_map`` from both grids) is covered too. Run it on two checkouts and diff::
 
     python benchmarks/env_hash.py > /tmp/before.txt      # on main
@@ -49,22 +50,27 @@ def episode(seed: int, steps: int):
 
 
 def fingerprint(seed: int, steps: int, every: int = 100):
-    """Yield ``(step, hex digest)`` of the running hash every ``every`` steps of one episode."""
+    """Yield ``(step, obs digest, infos digest)`` of the running hashes (module docstring)
+    every ``every`` steps of one episode."""
     h = hashlib.sha256()
+    hi = hashlib.sha256()
     for par, k, (obs, rew, term, trunc, info) in episode(seed, steps):
         for a in sorted(obs):
             for key in sorted(obs[a]):
                 h.update(np.ascontiguousarray(obs[a][key]).tobytes())
             h.update(repr((rew[a], term[a], trunc[a])).encode())
             inf = info[a]
-            h.update(repr([(key, inf[key]) for key in sorted(inf)
-                           if key != "merge_time_s" and isinstance(inf[key], SCALARS)]).encode())
+            hi.update(repr([(key, inf[key]) for key in sorted(inf)
+                            if isinstance(inf[key], SCALARS)]).encode())
+            for key in sorted(inf):
+                if isinstance(inf[key], np.ndarray):
+                    hi.update(np.ascontiguousarray(inf[key]).tobytes())
         for m in par.maps:
             tm = m.topomap
             for arr in (tm.xy, tm.kinds, tm.edges, tm.lengths, *(tm.paths or ())):
                 h.update(np.ascontiguousarray(arr).tobytes())
         if (k + 1) % every == 0:
-            yield k + 1, h.hexdigest()[:16]
+            yield k + 1, h.hexdigest()[:16], hi.hexdigest()[:16]
 
 
 def main() -> None:
@@ -73,8 +79,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 4])
     args = parser.parse_args()
     for seed in args.seeds:
-        for step, digest in fingerprint(seed, args.steps):
-            print(seed, step, digest, flush=True)
+        for step, obs_digest, infos_digest in fingerprint(seed, args.steps):
+            print(seed, step, "obs", obs_digest, "infos", infos_digest, flush=True)
 
 
 if __name__ == "__main__":

@@ -165,7 +165,8 @@ def decision_time() -> None:
     env = parallel_env(max_cycles=400, world={"size": (20.0, 20.0)})
     team = {a: Frontier() for a in ("robot_0", "robot_1")}
     obs, infos = env.reset(seed=1)
-    for i, a in enumerate(team.values()):
+    for i, (agent, a) in enumerate(team.items()):
+        a.bind(env, agent)
         a.reset(i)
     acts, plans = [], []
     while env.agents:
@@ -173,10 +174,7 @@ def decision_time() -> None:
         actions = {a: team[a].act(obs[a], infos[a]) for a in env.agents}
         acts.append((time.perf_counter() - t0) / 2)
         obs, _, _, _, infos = env.step(actions)
-    grid = infos and next(iter(infos.values()))["grid"]
-    if not grid:
-        _, infos = env.reset(seed=1)
-        grid = infos["robot_0"]["grid"]
+    grid = env.robot_map("robot_0").grid
     # re-plans on a 200 x 200 crop of a grid explored for 400 steps
     from topo.grid import OccupancyGrid
 

@@ -1,8 +1,8 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
 disk): a whole scan's grid update (the grid's sonar model, folding the cells it made known into
-the "ever known" masks), the ``local_map`` crop, and the ``graph_nodes`` observation. Each
-replaces a dozen small numpy calls whose overhead, not arithmetic, was the cost (four grids are
-updated every env step)."""
+the "ever known" masks), the ``local_map`` crop, the ``graph_nodes`` observation and the
+state's block maps. Each replaces a dozen small numpy calls whose overhead, not arithmetic, was
+the cost (four grids are updated every env step)."""
 
 from __future__ import annotations
 
@@ -199,3 +199,19 @@ def adjacency(order, edges, n_nodes, adj):
         if a >= 0 and b >= 0:
             adj[a, b] = 1.0
             adj[b, a] = 1.0
+
+
+@njit(cache=True, nogil=True)
+def block_fractions(mask, cells, out):
+    """Per block ``b`` of ``out``, the fraction of its samples ``cells[b·k : (b+1)·k]`` (flat
+    indices into the C-contiguous ``mask``; ``-1``: outside, counted False) that are True,
+    ``k = len(cells) / len(out)``."""
+    flat = mask.ravel()
+    k = cells.shape[0] // out.shape[0]
+    for b in range(out.shape[0]):
+        hits = 0
+        for j in range(b * k, (b + 1) * k):
+            c = cells[j]
+            if c >= 0 and flat[c]:
+                hits += 1
+        out[b] = hits / k

@@ -51,8 +51,8 @@ m/pixel; 0 occupied, 128 unknown, 255 free.
 (c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
 is accepted; all 0 before).
 
-Before a merge is accepted a robot's ``local_map`` shows only its own map. Raw maps are in
-``infos`` (below).
+Before a merge is accepted a robot's ``local_map`` shows only its own map. The raw maps are
+read through the env (Infos, below).
 
 ## Sensors
 
@@ -130,7 +130,8 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 Two random drivable cells at least ``world.start_clearance`` (0.45 m) from any wall and
 ``world.min_start_separation`` (2 m) apart, in the same connected region, random headings;
 each robot's odometry starts at ``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first
-scan is taken at reset.
+scan is taken at reset. A ``reset`` that raises (bad ``start_poses``) leaves no episode:
+``agents`` is empty and ``step()`` raises until a ``reset`` succeeds.
 
 ## Episode End
 
@@ -142,20 +143,94 @@ After that ``agents`` is empty and ``step()`` raises until ``reset()``.
 
 ## Infos
 
-Per robot: ``true_coverage`` — the fraction of the reachable free area the sonars have truly
-swept: the world cells the robots' inverse sensor model updates for each scan taken from the
+Small, numeric and comparable (no NaN, no wall clock, no live objects: under 1 kB pickled per
+step; equal episodes give equal infos, as PettingZoo's ``parallel_seed_test`` checks, and
+TorchRL turns every entry into a tensor). Per robot:
+
+| key | type | meaning |
+|---|---|---|
+| ``true_coverage`` | float | fraction of the reachable free area the sonars have truly swept (d) |
+| ``true_area_m2`` | float | area truly swept (walls included), m² |
+| ``shared_area_m2`` | float | known area of the shared map, m² |
+| ``shared_coverage`` | float | shared area / reachable area (the robots' estimate, e) |
+| ``own_area_m2`` | float | known area of the robot's own map, m² |
+| ``overlap`` | float | fraction of the smaller robot's true sweep the other also swept |
+| ``collisions`` | int | contacts of this robot so far |
+| ``merge_accepted`` | bool | a merge transform is in use |
+| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) |
+| ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
+| ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
+| ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
+| ``merges`` | int | merge calls so far |
+| ``merge_drops`` | int | transforms dropped because the grids refuted them (see Maps) |
+| ``pose`` | (3,) f64 | true world pose ``x, y, θ`` (for metrics; explorers must not use it) |
+| ``odometry`` | (3,) f64 | odometry pose in the robot's own start frame |
+
+(d) the world cells the robots' inverse sensor model updates for each scan taken from the
 robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
-dropped echo that "sees through" a wall, or odometry drift, does not count; ``true_area_m2``
-(swept area, walls included), ``shared_area_m2``, ``shared_coverage`` (shared area / reachable
-area; the robots' estimate, it includes walls, phantom free space behind dropped echoes and
-mis-merged area), ``own_area_m2``, ``overlap`` (fraction of the smaller robot's true sweep also
-swept by the other), ``collisions``, ``merge_accepted`` (a transform is in use),
-``merge_rotation_error_deg`` / ``merge_translation_error_m`` (of the transform in use against
-ground truth, translation error measured at the centroid of robot 1's map; NaN before a
-merge), ``merge_time_s`` (the last ``merge_maps`` call), ``merges``, ``merge_drops`` (merges
-dropped because the grids refuted them, see Maps), ``pose`` (true world pose),
-``odometry``, ``topomap`` (own ``topo.TopoMap``), ``grid`` (own ``topo.OccupancyGrid``, live:
-do not modify), ``merge`` (the last ``fusion.MergeResult`` or ``None``).
+dropped echo that "sees through" a wall, or odometry drift, does not count. (e) it includes
+walls, phantom free space behind dropped echoes and mis-merged area. (f) against ground
+truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare).
+
+The maps are read through the env, not handed out every step (a grid is megabytes; explorers
+need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
+:class:`~envs.two_robot_explore.mapping.RobotMapSnapshot` of the robot's own maps (a copy of
+its ``topo.OccupancyGrid``, its ``topo.TopoMap``, odometry; later steps never change it; taken
+once per step, about 0.1 ms at the defaults), and ``env.unwrapped.merge_state()`` a
+:class:`MergeState` (the transform in use, the method that supplied it, the last
+``fusion.MergeResult``, counts and the last merge call's wall time, ``time_s``). Explorers
+that plan on maps are given read access this way (``agents.base.Explorer.bind``).
+
+## State
+
+``state()`` is a global view for centralised critics (MAPPO-style): a float32 vector in
+``state_space`` (a ``Box`` of ``STATE_SCALARS + 3 · STATE_MAP_SIZE²`` = 3084 values), in the
+world frame, the same layout for every world (positions as fractions of the world's extent):
+
+| index | meaning | min | max |
+|---|---|---|---|
+| 0–3 | robot 0's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
+| 4–7 | robot 1: the same | 0, -1 | 1 |
+| 8 | ``true_coverage`` | 0 | 1 |
+| 9 | ``overlap`` | 0 | 1 |
+| 10 | a merge transform is in use (0/1) | 0 | 1 |
+| 11 | steps / ``max_cycles`` | 0 | 1 |
+| 12 + k | swept: share of world block ``k`` truly swept | 0 | 1 |
+| 12 + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
+| 12 + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
+
+The world's extent is cut into ``STATE_MAP_SIZE × STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
+· 32 + column``, row 0 at the bottom; each share is measured at 4 × 4 points evenly spread in
+the block. (g) the shared map placed in the world by robot 0's true start pose: a wrong merge
+shows as known cells where nothing was swept. The reachable channel is fixed per world.
+``state()`` costs about 80 µs; the AEC ``env()`` forwards ``state()`` and ``state_space``.
+
+## Copies
+
+The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as
+the original would (same observations, rewards and infos for the same actions), also after
+the episode's end (``agents`` empty) and into the next unseeded ``reset`` (its generator is
+where the original's is).
+
+A copy is made by **replay**, not by copying the physics: what is pickled is the config, the
+render mode, the loaded world file, the generator's state at the last ``reset``, the start
+poses given to it, each step's ``(v, ω)`` commands since (32 bytes a step: about 33 kB after
+1000 steps) and any later ``max_cycles`` change. Restoring builds a fresh env, resets it from
+that generator state and steps it through the commands, building no observations, no
+rendering and no warnings. Why: pymunk pickles bodies and contacts but not what a step leaves
+to the next (the solver's bias velocities and joint impulses, the broadphase's pair order), so
+an unpickled space drifts from the original after a contact; the env is deterministic given
+the generator, the start poses and the commands, so a replay rebuilds that state exactly.
+
+Cost: restoring takes about as long as the steps since ``reset`` took, less their outputs —
+about 0.35 s of CPU per 1000 steps at the defaults, 0.13 s with ``topo_every = merge_every =
+0`` (``benchmarks/copy_speed.py``) — and grows with the step count: copy early in an episode
+where copies are frequent (tree search, say), or keep the actions and replay them yourself.
+
+Not copied: the render window; the wall time in ``merge_state().time_s`` (the replay's own);
+changes made to the env's internals from outside ``step``/``reset``. The replay checks the
+step count, agents, poses, contact counts and generator state it ends in against the
+original's, and a copy that does not reproduce them raises ``RuntimeError``.
 
 ## Arguments
 
@@ -206,13 +281,16 @@ robots; other keys are ignored with a warning.
 
 ## Version History
 
-* v0: initial release.
+* v0: initial release. (Unreleased changes within v0, observations and dynamics unchanged:
+  small numeric infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact
+  copies by replay.)
 """
 
 from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium
@@ -221,13 +299,16 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore._map_kernels import adjacency, nearest_nodes
+from envs.two_robot_explore._map_kernels import adjacency, block_fractions, nearest_nodes
+from envs.two_robot_explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
+    RobotMapSnapshot,
     SharedMap,
+    cell_indices,
     compose_pose,
     run_merge,
 )
@@ -251,17 +332,81 @@ MAX_CLEARANCE = 10.0
 N_NODE_FEATURES = 2 + len(NodeKind) + 3
 """Per node: ``x, y``, the kind one-hot, degree, clearance, frontier flag (the manual)."""
 
+MERGE_METHODS = ("none", *(m for m in CONFIG_MERGE_METHODS if m != "none"))
+"""The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
+the merge result that supplied the transform in use (``"none"``: no transform in use); the
+``mapping.merge_method`` values, "none" first."""
+
+STATE_MAP_SIZE = 32
+"""Side of the world-frame maps in :meth:`TwoRobotExploreEnv.state` (blocks per side)."""
+
+STATE_SAMPLES = 4
+"""Each state map block is the mean of ``STATE_SAMPLES²`` points sampled evenly inside it."""
+
+STATE_SCALARS = 12
+"""Entries of the state vector before its maps (manual, State)."""
+
+
+@dataclass(frozen=True, slots=True)
+class MergeState:
+    """The merge state at one env step (:meth:`TwoRobotExploreEnv.merge_state`).
+
+    Attributes:
+        transform: the robot-1 → robot-0 transform in use (``fusion.Rigid2D``, ``p_0 = R p_1 +
+            T``), ``None`` when none is (never merged, or dropped).
+        method: ``method`` of the merge result that supplied it (``"none"`` without one).
+        last: the last merge call's ``fusion.MergeResult`` (``None`` before the first).
+        merges: merge calls this episode; ``drops``: transforms dropped (the grids refuted them).
+        time_s: wall time of the last merge call, seconds (NaN before the first).
+    """
+
+    transform: Rigid2D | None
+    method: str
+    last: Any
+    merges: int
+    drops: int
+    time_s: float
+
+
+@dataclass(slots=True)
+class _History:
+    """How the current episode came about, all a copy needs to replay it (manual, Copies):
+    the generator's state at ``reset``, the start poses given (``None``: drawn), ``max_cycles``
+    at ``reset``, each step's parsed ``(v, ω)`` commands, and ``(step, value)`` of every later
+    ``max_cycles`` change."""
+
+    rng_state: dict[str, Any]
+    starts: np.ndarray | None
+    max_cycles: int
+    commands: list[list[tuple[float, float]]] = field(default_factory=list)
+    max_cycles_changes: list[tuple[int, int]] = field(default_factory=list)
+
+
+def _generator(state: dict[str, Any]) -> np.random.Generator:
+    """A ``numpy.random.Generator`` in ``state`` (a ``bit_generator.state``)."""
+    rng = np.random.Generator(getattr(np.random, state["bit_generator"])())
+    rng.bit_generator.state = state
+    return rng
+
 
 class TwoRobotExploreEnv(ParallelEnv):
     """The two-robot sonar exploration env; the module docstring is its manual.
 
-    Read-only state for metrics, datasets and rendering (valid after ``reset``):
-    ``world`` (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``,
-    ``maps`` (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
+    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`merge_state`; the global
+    state for centralised critics: :meth:`state`, :attr:`state_space`.
+
+    Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
+    every step; read, never modify): ``world``
+    (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``, ``maps``
+    (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
     (:class:`~envs.two_robot_explore.mapping.SharedMap`), ``oracle``
     (:class:`~envs.two_robot_explore.mapping.OracleCoverage`), ``frames`` (each robot's map
     frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
-    transform), ``merge`` (the last ``MergeResult``), ``steps``.
+    transform), ``merge`` (the last ``MergeResult``), ``merge_time_s``, ``steps``.
+
+    The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
+    the original would. A copy replays the episode since ``reset`` (manual, Copies), so
+    restoring one costs about 0.35 s of CPU per 1000 steps since ``reset`` at the defaults.
     """
 
     metadata = {
@@ -284,6 +429,12 @@ class TwoRobotExploreEnv(ParallelEnv):
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
                 f"got {render_mode!r}"
             )
+        self._setup(config, render_mode, None)
+
+    def _setup(self, config: EnvConfig, render_mode: str | None,
+               file_world: World | None) -> None:
+        """Everything ``__init__`` builds from a checked config (a copy passes the world file
+        it already loaded: ``file_world``)."""
         self.config = config
         self.render_mode = render_mode
         self.possible_agents = list(AGENTS)
@@ -291,21 +442,111 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._max_cycles = config.max_cycles
         cfg = config
         # A world file is loaded (and validated) once, here; procedural worlds every reset.
-        self._file_world: World | None = None
+        self._file_world = file_world
         if cfg.world.source != "procedural":
-            self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
+            if self._file_world is None:
+                self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
             x0, y0, x1, y1 = self._file_world.extent
             diag = math.hypot(x1 - x0, y1 - y0)
         else:
             diag = math.hypot(*cfg.world.size)
         self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
         self._build_spaces()
+        self.state_space = self._state_space()
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
         self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
+        self._snapshots: list[RobotMapSnapshot | None] = [None, None]  # this step's, if taken
+        self._history: _History | None = None  # how this episode came about (Copies)
+
+    # ------------------------------------------------------------------ copies
+    def __getstate__(self) -> dict[str, Any]:
+        """The state for ``pickle`` and ``copy`` (manual, Copies): the config, the render mode,
+        the loaded world file, the generator's state, and how the episode came about — the
+        generator's state at ``reset``, the start poses given, the commands of every step
+        since (a ``(steps, 2, 2)`` float64 array) and ``max_cycles`` changes — plus the
+        original's step count, agents, poses and contact counts, which the restored env must
+        reproduce. No physics, grids or cffi objects: :meth:`__setstate__` replays."""
+        h = self._history
+        episode = None
+        if h is not None:
+            episode = {
+                "rng": h.rng_state,
+                "starts": h.starts,
+                "max_cycles": h.max_cycles,
+                "commands": np.array(h.commands, dtype=np.float64).reshape(-1, 2, 2),
+                "max_cycles_changes": list(h.max_cycles_changes),
+                "check": self._replay_check(),
+            }
+        return {
+            "config": self.config,
+            "render_mode": self.render_mode,
+            "file_world": self._file_world,
+            "rng": None if self._rng is None else self._rng.bit_generator.state,
+            "episode": episode,
+        }
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Rebuild the env from :meth:`__getstate__`'s state: construct it, restore the
+        generator as it was at ``reset``, reset and replay the recorded commands (no
+        rendering, no warnings), so that it ends in exactly the original's state. The time
+        grows with the steps since ``reset``: about 0.35 s of CPU per 1000 steps at the defaults
+        (manual, Copies).
+
+        Raises:
+            RuntimeError: the replay did not reproduce the original (step count, agents,
+                poses, contacts or generator state differ: its internals were changed from
+                outside, or the code it runs differs from the original's).
+        """
+        config, episode = state["config"], state["episode"]
+        self._setup(config, state["render_mode"], state["file_world"])
+        if episode is not None:
+            self._rng = _generator(episode["rng"])
+            self._max_cycles = episode["max_cycles"]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the original has shown them already
+                self._begin(episode["starts"])
+                self._replay(episode["commands"], episode["max_cycles_changes"])
+            got = self._replay_check()
+            if got != episode["check"]:
+                raise RuntimeError(
+                    f"the restored env does not reproduce the original: (steps, agents, "
+                    f"poses, contacts) {got} after the replay, the original had "
+                    f"{episode['check']}; was the original's state changed from outside "
+                    f"step()/reset(), or does this process run other code?")
+            self.config, self._max_cycles = config, config.max_cycles
+        if state["rng"] is not None:
+            if self._rng is None:
+                self._rng = _generator(state["rng"])
+            elif self._rng.bit_generator.state != state["rng"]:
+                raise RuntimeError(
+                    "the restored env does not reproduce the original: its generator drew a "
+                    "different number of values during the replay")
+
+    def _replay(self, commands: np.ndarray,
+                max_cycles_changes: list[tuple[int, int]]) -> None:
+        """Advance a freshly reset episode by the recorded ``commands`` (the outputs, which
+        change no state, are not built), setting ``max_cycles`` where it was set."""
+        changes = sorted(max_cycles_changes)  # stable: same-step changes keep their order
+        c = 0
+        for k, step_commands in enumerate(commands.tolist()):
+            while c < len(changes) and changes[c][0] <= k:
+                self.max_cycles = changes[c][1]
+                c += 1
+            self._advance(step_commands)
+            if self._terminated() or self._truncated():
+                self.agents = []
+        for _, value in changes[c:]:
+            self.max_cycles = value
+
+    def _replay_check(self) -> tuple:
+        """What a replay must reproduce: steps, agents, both robots' exact poses and
+        contact counts."""
+        return (self.steps, tuple(self.agents), tuple(r._pose() for r in self.robots),
+                tuple(r.collisions for r in self.robots))
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
@@ -345,6 +586,13 @@ class TwoRobotExploreEnv(ParallelEnv):
             return spaces.Box(-1.0, 1.0, (2,), np.float32)
         return spaces.Discrete(len(DISCRETE_ACTIONS))
 
+    def _state_space(self) -> spaces.Box:
+        """The :meth:`state` vector's space (manual, State)."""
+        n = STATE_SCALARS + 3 * STATE_MAP_SIZE ** 2
+        low = np.zeros(n, dtype=np.float32)
+        low[[2, 3, 6, 7]] = -1.0  # cos, sin of the headings
+        return spaces.Box(low, np.ones(n, dtype=np.float32), dtype=np.float32)
+
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object every call)."""
         try:
@@ -368,6 +616,8 @@ class TwoRobotExploreEnv(ParallelEnv):
     def max_cycles(self, value: int) -> None:
         self.config = self.config.replace(max_cycles=value)
         self._max_cycles = self.config.max_cycles
+        if self._history is not None:  # replayed by copies at this step
+            self._history.max_cycles_changes.append((self.steps, self._max_cycles))
 
     @property
     def world(self) -> World:
@@ -381,7 +631,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
-        starts = self._parse_options(options)
+        self._begin(self._parse_options(options))
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), self._infos()
+
+    def _begin(self, starts: np.ndarray | None) -> None:
+        """Build a new episode from the generator as it is now, at the given start poses
+        (``None``: drawn), and start recording its history (Copies)."""
+        history = _History(self._rng.bit_generator.state,
+                           None if starts is None else starts.copy(), self._max_cycles)
+        self._ready = False  # until the episode is built (a reset that raises leaves none)
+        self.agents = []
+        self._history = None
         cfg = self.config
         rng = self._rng
         if self._file_world is not None:
@@ -414,9 +676,12 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.merge = None
         self.merges = 0
         self.merge_drops = 0
+        self._merge_method = "none"  # method of the result that supplied the transform in use
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self.merge_time_s = math.nan
         self.steps = 0
+        self._snapshots = [None, None]
+        self._prepare_state()
         self._prev_collisions = [0, 0]
         self._shared_delta = 0
         self._own_delta = [0, 0]
@@ -426,9 +691,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.agents = list(AGENTS)
         self._ready = True
         self._sense_and_map(travelled=[0.0, 0.0])
-        if self.render_mode == "human":
-            self.render()
-        return self._observe(), self._infos()
+        self._history = history
 
     def _parse_options(self, options: dict[str, Any] | None) -> np.ndarray | None:
         if options is None:
@@ -472,17 +735,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             raise RuntimeError(
                 "step() called after the episode ended (all agents terminated or truncated); "
                 "call reset() to start a new episode")
-        commands = self._parse_actions(actions)
-        self._apply_actions(commands)
-        self._simulate()
-        self.steps += 1
-        travelled = [0.0, 0.0]
-        for i, robot in enumerate(self.robots):
-            before = robot.travelled
-            robot.update_odometry(self.config.robot.odometry_noise, self._rng)
-            travelled[i] = robot.travelled - before
-        self._sense_and_map(travelled)
-        self._fuse()
+        self._advance(self._parse_actions(actions))
         rewards = self._rewards()
         terminations = self._terminations()
         truncations = self._truncations()
@@ -493,6 +746,22 @@ class TwoRobotExploreEnv(ParallelEnv):
         if self.render_mode == "human":
             self.render()
         return observations, rewards, terminations, truncations, infos
+
+    def _advance(self, commands: list[tuple[float, float]]) -> None:
+        """One step's state change from both robots' parsed ``(v, ω)`` commands (recorded
+        for copies): physics, odometry, sensing, mapping, merging; no outputs."""
+        self._apply_actions(commands)
+        self._simulate()
+        self.steps += 1
+        self._snapshots = [None, None]
+        travelled = [0.0, 0.0]
+        for i, robot in enumerate(self.robots):
+            before = robot.travelled
+            robot.update_odometry(self.config.robot.odometry_noise, self._rng)
+            travelled[i] = robot.travelled - before
+        self._sense_and_map(travelled)
+        self._fuse()
+        self._history.commands.append(commands)
 
     def _require_reset(self) -> None:
         if not self._ready:
@@ -617,10 +886,15 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.merge_time_s = float(result.time_s)
         if result.accepted and (self.shared.transform is None
                                 or not result.transform.allclose(self.shared.transform)):
+            if result.method not in MERGE_METHODS:
+                raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
+                                   f"code; known: {list(MERGE_METHODS)}")
+            self._merge_method = result.method
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
                                                       result.transform)
         elif refuted is not None and self.shared.transform is not None:
             self.merge_drops += 1
+            self._merge_method = "none"
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1], None)
 
     # ------------------------------------------------------------------ rewards, ends
@@ -640,12 +914,17 @@ class TwoRobotExploreEnv(ParallelEnv):
                   - cfg.time_penalty)
         return dict.fromkeys(self.agents, r)
 
+    def _terminated(self) -> bool:
+        return bool(self.oracle.fraction >= self.config.target_coverage)
+
+    def _truncated(self) -> bool:
+        return self.steps >= self._max_cycles
+
     def _terminations(self) -> dict[str, bool]:
-        done = self.oracle.fraction >= self.config.target_coverage
-        return dict.fromkeys(self.agents, bool(done))
+        return dict.fromkeys(self.agents, self._terminated())
 
     def _truncations(self) -> dict[str, bool]:
-        return dict.fromkeys(self.agents, self.steps >= self._max_cycles)
+        return dict.fromkeys(self.agents, self._truncated())
 
     # ------------------------------------------------------------------ observations
     def _poses_across(self) -> list[np.ndarray] | None:
@@ -749,21 +1028,23 @@ class TwoRobotExploreEnv(ParallelEnv):
         return errors
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        world_area = self._world_area
-        rot_err, trans_err = self.merge_errors()
+        """Small, numeric, comparable infos (manual, Infos): no NaN, no wall clock, no live
+        objects, so that equal episodes give equal infos and infos are cheap to send."""
+        in_use = self.shared.transform is not None
+        rot_err, trans_err = self.merge_errors() if in_use else (0.0, 0.0)
         common = {
             "true_coverage": self.oracle.fraction,
             "true_area_m2": self.oracle.area,
             "shared_area_m2": self.shared.area,
-            "shared_coverage": self.shared.area / world_area,
+            "shared_coverage": self.shared.area / self._world_area,
             "overlap": self.oracle.overlap,
-            "merge_accepted": self.shared.transform is not None,
+            "merge_accepted": in_use,
+            "merge_method": MERGE_METHODS.index(self._merge_method),
+            "merge_errors_valid": in_use,
             "merge_rotation_error_deg": rot_err,
             "merge_translation_error_m": trans_err,
-            "merge_time_s": self.merge_time_s,
             "merges": self.merges,
             "merge_drops": self.merge_drops,
-            "merge": self.merge,
         }
         out = {}
         for i, a in enumerate(AGENTS):
@@ -777,10 +1058,82 @@ class TwoRobotExploreEnv(ParallelEnv):
                 "collisions": robot.collisions,
                 "pose": robot.true_pose(),
                 "odometry": robot.odometry.copy(),
-                "topomap": rmap.topomap,
-                "grid": rmap.grid,
             }
         return out
+
+    # ------------------------------------------------------------------ snapshots, state
+    def robot_map(self, agent: str) -> RobotMapSnapshot:
+        """``agent``'s own maps now: a read-only
+        :class:`~envs.two_robot_explore.mapping.RobotMapSnapshot` (a copy of its occupancy
+        grid, its topological map, odometry) that later steps never change.
+
+        What map-planning explorers read (manual, Infos); the copy is taken on the first call
+        of a step and shared by that step's later calls.
+        """
+        self._require_reset()
+        try:
+            i = AGENTS.index(agent)
+        except ValueError:
+            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+        snap = self._snapshots[i]
+        if snap is None:
+            snap = RobotMapSnapshot.of(self.maps[i], self.robots[i].odometry, self.steps)
+            self._snapshots[i] = snap
+        return snap
+
+    def merge_state(self) -> MergeState:
+        """The merge state now (:class:`MergeState`: the transform in use, the method that
+        supplied it, the last merge result, counts, the last merge call's wall time)."""
+        self._require_reset()
+        return MergeState(self.shared.transform, self._merge_method, self.merge, self.merges,
+                          self.merge_drops, self.merge_time_s)
+
+    def _prepare_state(self) -> None:
+        """Per episode: the world points :meth:`state` samples, as cell indices of the world
+        grid and of the shared map (robot 0's frame), and the static reachable channel."""
+        s, k = STATE_MAP_SIZE, STATE_SAMPLES
+        x0, y0, x1, y1 = self._world.extent
+        # sample (a, b) of block (r, c) at row r·k + a, column c·k + b of an (s·k)² lattice
+        # (row 0 at the bottom, like the grids), listed block by block so that a block's
+        # samples are contiguous
+        r, c, a, b = np.meshgrid(*(np.arange(n) for n in (s, s, k, k)), indexing="ij")
+        points = np.stack([x0 + ((c * k + b).ravel() + 0.5) * ((x1 - x0) / (s * k)),
+                           y0 + ((r * k + a).ravel() + 0.5) * ((y1 - y0) / (s * k))], axis=1)
+        self._state_world_cells = cell_indices(points, self.oracle.geometry)
+        self._state_shared_cells = cell_indices(self.frames[0].inverse().apply(points),
+                                                self.shared.geometry)
+        self._state_reachable = self._state_blocks(self.oracle.reachable,
+                                                   self._state_world_cells)
+
+    @staticmethod
+    def _state_blocks(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Mean of ``mask`` at the sampled ``cells`` (listed block by block; ``-1``: outside,
+        False) per state block, ``(STATE_MAP_SIZE**2,)`` float32, row-major, row 0 at the
+        bottom."""
+        out = np.empty(STATE_MAP_SIZE ** 2, dtype=np.float32)
+        block_fractions(mask, cells, out)
+        return out
+
+    def state(self) -> np.ndarray:
+        """The global state for centralised critics: a ``(STATE_SCALARS + 3 ·
+        STATE_MAP_SIZE²,)`` float32 vector in :attr:`state_space` (manual, State)."""
+        self._require_reset()
+        x0, y0, x1, y1 = self._world.extent
+        head = np.zeros(STATE_SCALARS, dtype=np.float64)
+        for i, robot in enumerate(self.robots):
+            x, y, th = robot._pose()
+            head[4 * i: 4 * i + 4] = ((x - x0) / (x1 - x0), (y - y0) / (y1 - y0),
+                                      math.cos(th), math.sin(th))
+        head[[0, 1, 4, 5]] = np.clip(head[[0, 1, 4, 5]], 0.0, 1.0)
+        head[8:] = (self.oracle.fraction, self.oracle.overlap,
+                    float(self.shared.transform is not None),
+                    min(self.steps / self._max_cycles, 1.0))
+        return np.concatenate([
+            head.astype(np.float32),
+            self._state_blocks(self.oracle.union, self._state_world_cells),
+            self._state_blocks(self.shared.ever, self._state_shared_cells),
+            self._state_reachable,
+        ])
 
     # ------------------------------------------------------------------ render, close
     def render(self) -> np.ndarray | None:

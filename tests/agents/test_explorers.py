@@ -31,7 +31,7 @@ def test_frontier_covers_a_small_world():
 
 def actions_of(name: str, seed: int, steps: int = 200) -> list[np.ndarray]:
     env = parallel_env(max_cycles=steps, **SMALL)
-    team = make_team(name)
+    team = make_team(name, env=env)
     seen: list[np.ndarray] = []
     obs, infos = env.reset(seed=seed)
     for a, s in zip(team.values(), np.random.SeedSequence(seed).spawn(2), strict=True):

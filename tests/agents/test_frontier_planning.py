@@ -3,8 +3,10 @@ evidence moved by the merge transform), goals given up, and the teammate's goal 
 choice."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from agents.scripted import (
     Blackboard,
@@ -82,13 +84,36 @@ CORRIDOR = grid_with([(-3.0, -1.0, 5.0, 1.0)], [(-3.0, 1.0, 5.0, 1.3), (-3.0, -1
 NO_ECHO = {"sonar": np.ones(8, np.float32), "teammate": np.zeros(5, np.float32)}
 
 
+class Maps:
+    """Stands in for the env an explorer is bound to: fixed grids per robot and a merge
+    transform in use (``None``: not merged)."""
+
+    possible_agents = ("robot_0", "robot_1")
+
+    def __init__(self, grids, transform=None):
+        self.grids, self.transform = grids, transform
+
+    def robot_map(self, agent):
+        return SimpleNamespace(grid=self.grids[agent])
+
+    def merge_state(self):
+        return SimpleNamespace(transform=self.transform)
+
+
+def bound(explorer, agent="robot_0", mate_grid=None, transform=None):
+    explorer.bind(Maps({agent: CORRIDOR, "robot_1" if agent == "robot_0" else "robot_0":
+                        mate_grid if mate_grid is not None else grid_with([])}, transform),
+                  agent)
+    explorer.reset(0)
+    return explorer
+
+
 def info_at(x: float, y: float = 0.0) -> dict:
-    return {"grid": CORRIDOR, "odometry": np.array([x, y, 0.0]), "merge": None}
+    return {"odometry": np.array([x, y, 0.0])}
 
 
 def test_frontier_goes_to_the_nearer_end_then_gives_it_up_when_reached():
-    robot = Frontier()
-    robot.reset(0)
+    robot = bound(Frontier())
     robot.act(NO_ECHO, info_at(0.0))
     goal = robot.plan.goal
     assert goal[0] < -2.5
@@ -100,17 +125,26 @@ def test_frontier_goes_to_the_nearer_end_then_gives_it_up_when_reached():
     assert robot.events["given_up_reached"] == 1
 
 
+def test_an_unbound_frontier_explorer_says_to_bind_it():
+    robot = Frontier()
+    robot.reset(0)
+    with pytest.raises(RuntimeError, match=r"bind it first \(explorer.bind\(env, agent\)"):
+        robot.act(NO_ECHO, info_at(0.0))
+    with pytest.raises(TypeError, match="env must be a two_robot_explore env"):
+        robot.bind(object(), "robot_0")
+    with pytest.raises(ValueError, match=r"agent must be one of \['robot_0', 'robot_1'\], got 'r2'"):
+        robot.bind(Maps({}), "r2")
+    with pytest.raises(ValueError, match="must be 'robot_1', got 'robot_0'"):
+        CoordinatedFrontier(1, Blackboard()).bind(Maps({}), "robot_0")
+
+
 def test_coordinated_robot_leaves_the_teammates_goal_to_the_teammate():
-    alone = Frontier()
-    alone.reset(0)
+    alone = bound(Frontier())
     alone.act(NO_ECHO, info_at(0.0))
     assert alone.plan.goal[0] < -2.5
     board = Blackboard()
-    robot = CoordinatedFrontier(0, board)
-    robot.reset(0)
     # merged (identity transform); the teammate knows nothing extra and goes left
-    board.transform = Rigid2D()
-    board.grids[1] = grid_with([])
+    robot = bound(CoordinatedFrontier(0, board), transform=Rigid2D())
     board.goals[1] = np.array([-2.9, 0.0])
     robot.act(NO_ECHO, info_at(0.0))
     assert robot.plan.goal[0] > 4.0
@@ -119,11 +153,7 @@ def test_coordinated_robot_leaves_the_teammates_goal_to_the_teammate():
 
 
 def test_coordinated_robot_leaves_the_end_nearer_its_teammate_to_the_teammate():
-    board = Blackboard()
-    robot = CoordinatedFrontier(0, board)
-    robot.reset(0)
-    board.transform = Rigid2D()
-    board.grids[1] = grid_with([])
+    robot = bound(CoordinatedFrontier(0, Blackboard()), transform=Rigid2D())
     # no goal announced; the teammate is seen (merge transform) 2 m left of the robot
     seen = {**NO_ECHO, "teammate": np.array([-2.0, 0.0, 1.0, 0.0, 1.0], np.float32)}
     robot.act(seen, info_at(0.0))
@@ -131,9 +161,7 @@ def test_coordinated_robot_leaves_the_end_nearer_its_teammate_to_the_teammate():
     assert robot.plan.goal[0] > 4.0
     assert np.linalg.norm(robot.plan.path[0]) < 0.2  # its own path, not the teammate's
     # without the assignment it takes the nearer end whatever the teammate does
-    lone = CoordinatedFrontier(1, Blackboard(), assign=False, mate_penalty=0.0)
-    lone.reset(0)
-    lone.board.transform = Rigid2D()
-    lone.board.grids[0] = grid_with([])
+    lone = bound(CoordinatedFrontier(1, Blackboard(), assign=False, mate_penalty=0.0),
+                 agent="robot_1", transform=Rigid2D())
     lone.act(seen, info_at(0.0))
     assert lone.plan.goal[0] < -2.5 and "assigned" not in lone.events

@@ -105,6 +105,7 @@ def test_the_chosen_sector_decides_the_goal():
         obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
     info = infos["robot_0"]
     robot = GoalFrontier()
+    robot.bind(env, "robot_0")
     robot.reset(0)
     features = robot.frontier_features(info)
     available = np.flatnonzero(features[:, 0])

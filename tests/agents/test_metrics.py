@@ -9,8 +9,9 @@ from agents.metrics import EpisodeRecorder
 
 def infos(cov, x, accepted=False, collisions=0):
     common = {"true_coverage": cov, "merge_accepted": accepted, "overlap": 0.25,
-              "merge_rotation_error_deg": 1.5 if accepted else math.nan,
-              "merge_translation_error_m": 0.1 if accepted else math.nan}
+              "merge_errors_valid": accepted,
+              "merge_rotation_error_deg": 1.5 if accepted else 0.0,
+              "merge_translation_error_m": 0.1 if accepted else 0.0}
     return {"robot_0": {**common, "pose": np.array([x, 0.0, 0.0]), "collisions": collisions},
             "robot_1": {**common, "pose": np.array([0.0, 2 * x, 0.0]), "collisions": 0}}
 
@@ -30,3 +31,11 @@ def test_thresholds_path_and_merges():
     assert s["merge_first_accept_step"] == 4 and s["merge_accept_fraction"] == 0.5
     assert s["merge_rotation_error_deg"] == 1.5 and s["overlap"] == 0.25
     np.testing.assert_array_equal(s["coverage"], covs)
+
+
+def test_merge_errors_are_nan_without_a_transform_in_use_at_the_end():
+    rec = EpisodeRecorder()
+    rec(1, {}, {}, infos(0.1, 1.0, accepted=True))
+    rec(2, {}, {}, infos(0.2, 2.0, accepted=False))  # dropped: the infos' errors are 0.0
+    s = rec.summary()
+    assert math.isnan(s["merge_rotation_error_deg"]) and math.isnan(s["merge_translation_error_m"])

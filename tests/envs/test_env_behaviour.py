@@ -1,6 +1,7 @@
 """Behaviour over many steps: determinism, rewards, maps and frames, episode end."""
 
 import dataclasses
+import hashlib
 import math
 
 import numpy as np
@@ -8,10 +9,12 @@ import pytest
 from conftest import SMALL
 
 from envs import two_robot_explore_v0
+from envs.two_robot_explore.env import MERGE_METHODS
 from envs.two_robot_explore.mapping import compose_pose
 
 
-def _flatten(obs, rewards, terms, truncs, infos):
+def _flatten(par, obs, rewards, terms, truncs, infos):
+    """Everything a step returns, as comparable bytes and reprs, and both robots' maps."""
     out = []
     for agent in sorted(obs):
         out += [obs[agent][k].tobytes() for k in sorted(obs[agent])]
@@ -19,11 +22,11 @@ def _flatten(obs, rewards, terms, truncs, infos):
         out.append(repr(sorted(d.items())))
     for agent in sorted(infos):
         info = infos[agent]
-        out.append(repr([(k, info[k]) for k in sorted(info)
-                         if isinstance(info[k], (int, float, bool, str))
-                         and not k.endswith("time_s")]))  # wall-clock
-        out.append(info["pose"].tobytes() + info["odometry"].tobytes())
-        out.append(info["topomap"].xy.tobytes())
+        out.append(repr([(k, info[k]) for k in sorted(info) if not isinstance(info[k], np.ndarray)]))
+        out += [info[k].tobytes() for k in sorted(info) if isinstance(info[k], np.ndarray)]
+    for agent in par.possible_agents:
+        snap = par.robot_map(agent)
+        out += [snap.topomap.xy.tobytes(), hashlib.sha1(snap.grid.log_odds.tobytes()).digest()]
     return out
 
 
@@ -31,13 +34,13 @@ def _episode(seed, steps, **kw):
     par = two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": steps, **kw})
     rng = np.random.default_rng(seed + 100)
     obs, infos = par.reset(seed=seed)
-    trace = [_flatten(obs, {}, {}, {}, infos)]
+    trace = [_flatten(par, obs, {}, {}, {}, infos)]
     while par.agents:
         act = {a: rng.uniform(-1, 1, 2) for a in par.agents}
         # change course only every 5 steps so the robots get somewhere
         if len(trace) % 5:
             act = {a: np.array([0.8, 0.1]) for a in par.agents}
-        trace.append(_flatten(*par.step(act)))
+        trace.append(_flatten(par, *par.step(act)))
     return trace, par
 
 
@@ -238,17 +241,23 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     seen = []
     while par.agents and len(calls) < 4:
         _, rewards, _, _, infos = par.step({a: np.array([0.8, 0.3]) for a in par.agents})
-        seen.append((len(calls), par.shared.transform, infos["robot_0"], rewards["robot_0"]))
+        seen.append((len(calls), par.shared.transform, infos["robot_0"], rewards["robot_0"],
+                     par.merge_state()))
     assert len(calls) == 4, "the grid alignment did not keep running after the merge"
-    in_use = {n: t for n, t, _, _ in seen}
+    in_use = {n: t for n, t, *_ in seen}
     assert in_use[1].allclose(par.true_merge)
     assert math.degrees(in_use[2].rotation_error(par.true_merge)) == pytest.approx(2.0)
     # the third alignment is rejected and 90° / 5 m away: the merge is dropped
     assert in_use[3] is None and par.shared.transform is None
-    info, reward = next((i, r) for n, _, i, r in seen if n == 3)
+    info, reward, state = next((i, r, m) for n, _, i, r, m in seen if n == 3)
     assert info["merge_drops"] == 1 and not info["merge_accepted"]
+    assert not info["merge_errors_valid"] and info["merge_method"] == 0
     assert reward < 0  # robot 1's cells left the shared map at that step
-    assert "the grids refute the transform in use" in info["merge"].reason
+    assert "the grids refute the transform in use" in state.last.reason
+    assert state.transform is None and state.drops == 1 and state.method == "none"
+    merged = next(i for n, _, i, _, _ in seen if n == 2)
+    assert merged["merge_errors_valid"] and merged["merge_rotation_error_deg"] == pytest.approx(2.0)
+    assert MERGE_METHODS[merged["merge_method"]] == "hybrid"
     assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
     assert par._observe_one(0, par._poses_across())["teammate"][4] == 0.0
 
