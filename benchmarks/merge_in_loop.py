@@ -76,7 +76,8 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
         if env.merge is not seen[0]:  # a new merge result: who supplied an accepted one
             seen[0] = env.merge
             if env.merge is not None and env.merge.accepted:
-                row["structural" if env.merge.evidence is not None else "grid"] += 1
+                row["grid" if getattr(env.merge, "supplied_by", None) == "grid"
+                    else "structural"] += 1
         t = env.shared.transform
         cov = next(iter(infos.values()))["true_coverage"] if infos else 0.0
         if row["t95"] is None and cov >= 0.95:

@@ -83,7 +83,7 @@ def env_windows(steps: int = 1500, every: int = 25) -> list[tuple[np.ndarray, fl
 
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, mapping={"merge_every": 0,
                                                                         "topo_every": 0})
-    team = make_team("frontier")
+    team = make_team("frontier", env=env)
     observations, infos = env.reset(seed=0)
     for explorer in team.values():
         explorer.reset(seed=0)

@@ -158,6 +158,7 @@ TorchRL turns every entry into a tensor). Per robot:
 | ``collisions`` | int | contacts of this robot so far |
 | ``merge_accepted`` | bool | a merge transform is in use |
 | ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) |
+| ``merge_source`` | int | ``MERGE_SOURCES[code]``: what supplied it (1 structural, 2 grid) |
 | ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
 | ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
 | ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
@@ -332,6 +333,10 @@ MAX_CLEARANCE = 10.0
 N_NODE_FEATURES = 2 + len(NodeKind) + 3
 """Per node: ``x, y``, the kind one-hot, degree, clearance, frontier flag (the manual)."""
 
+MERGE_SOURCES = ("none", "structural", "grid")
+"""The ``merge_source`` info's codes: what supplied the transform in use — the structural merge
+of the topological maps (checked by the grids in ``"hybrid"``) or the grid alignment."""
+
 MERGE_METHODS = ("none", *(m for m in CONFIG_MERGE_METHODS if m != "none"))
 """The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
 the merge result that supplied the transform in use (``"none"``: no transform in use); the
@@ -355,6 +360,8 @@ class MergeState:
         transform: the robot-1 → robot-0 transform in use (``fusion.Rigid2D``, ``p_0 = R p_1 +
             T``), ``None`` when none is (never merged, or dropped).
         method: ``method`` of the merge result that supplied it (``"none"`` without one).
+        source: what supplied it: ``"structural"`` (the topological maps' merge) or ``"grid"``
+            (the grid alignment); ``"none"`` without one.
         last: the last merge call's ``fusion.MergeResult`` (``None`` before the first).
         merges: merge calls this episode; ``drops``: transforms dropped (the grids refuted them).
         time_s: wall time of the last merge call, seconds (NaN before the first).
@@ -362,6 +369,7 @@ class MergeState:
 
     transform: Rigid2D | None
     method: str
+    source: str
     last: Any
     merges: int
     drops: int
@@ -677,6 +685,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.merges = 0
         self.merge_drops = 0
         self._merge_method = "none"  # method of the result that supplied the transform in use
+        self._merge_source = "none"  # and what supplied it (MERGE_SOURCES)
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self.merge_time_s = math.nan
         self.steps = 0
@@ -869,11 +878,15 @@ class TwoRobotExploreEnv(ParallelEnv):
         mcfg = self.config.mapping
         if not mcfg.merge_every or mcfg.merge_method == "none" or self.steps % mcfg.merge_every:
             return None
-        if self.maps[0].topomap.n_edges == 0 or self.maps[1].topomap.n_edges == 0:
+        # the structural merge needs 3 nodes a map; the grid alignment (hybrid) only grids
+        small = min(m.topomap.n_nodes for m in self.maps) < 3
+        if small and mcfg.merge_method != "hybrid":
             return None
         known = self.maps[0].n_ever + self.maps[1].n_ever
         try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
                          and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
+        if small and not try_grids:
+            return None
         if try_grids:
             self._grid_tried_at = known
         return try_grids
@@ -890,11 +903,14 @@ class TwoRobotExploreEnv(ParallelEnv):
                 raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
                                    f"code; known: {list(MERGE_METHODS)}")
             self._merge_method = result.method
+            # a hybrid result says what supplied it; any other method is the structural merge
+            self._merge_source = getattr(result, "supplied_by", None) or "structural"
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
                                                       result.transform)
         elif refuted is not None and self.shared.transform is not None:
             self.merge_drops += 1
             self._merge_method = "none"
+            self._merge_source = "none"
             self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1], None)
 
     # ------------------------------------------------------------------ rewards, ends
@@ -1040,6 +1056,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             "overlap": self.oracle.overlap,
             "merge_accepted": in_use,
             "merge_method": MERGE_METHODS.index(self._merge_method),
+            "merge_source": MERGE_SOURCES.index(self._merge_source),
             "merge_errors_valid": in_use,
             "merge_rotation_error_deg": rot_err,
             "merge_translation_error_m": trans_err,
@@ -1085,7 +1102,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         """The merge state now (:class:`MergeState`: the transform in use, the method that
         supplied it, the last merge result, counts, the last merge call's wall time)."""
         self._require_reset()
-        return MergeState(self.shared.transform, self._merge_method, self.merge, self.merges,
+        return MergeState(self.shared.transform, self._merge_method, self._merge_source,
+                          self.merge, self.merges,
                           self.merge_drops, self.merge_time_s)
 
     def _prepare_state(self) -> None:

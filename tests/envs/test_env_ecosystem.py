@@ -15,7 +15,12 @@ from gymnasium import spaces
 from pettingzoo.test import parallel_seed_test, seed_test
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.env import MERGE_METHODS, STATE_MAP_SIZE, STATE_SCALARS
+from envs.two_robot_explore.env import (
+    MERGE_METHODS,
+    MERGE_SOURCES,
+    STATE_MAP_SIZE,
+    STATE_SCALARS,
+)
 
 
 def test_pettingzoo_seed_tests():
@@ -38,7 +43,7 @@ def _scripted_merges(monkeypatch, env_ref):
     monkeypatch.setattr(gm, "merge_grids", truth)
 
 
-MERGING = {"mapping": {"merge_every": 5, "grid_merge_every": 10}}
+MERGING = {"mapping": {"merge_every": 5, "grid_merge_every": 10, "topo_every": 5}}
 
 
 def _drive(env, rng):
@@ -66,10 +71,13 @@ def test_infos_are_small_numeric_comparable_and_nan_free(monkeypatch):
         assert info["merge_errors_valid"] == info["merge_accepted"]
         if not info["merge_accepted"]:
             assert info["merge_rotation_error_deg"] == 0.0 == info["merge_translation_error_m"]
-            assert info["merge_method"] == 0
+            assert info["merge_method"] == 0 == info["merge_source"]
         else:
             seen_merged = True
             assert MERGE_METHODS[info["merge_method"]] == "hybrid"
+            # the scripted grid alignment supplies it, unless the structural merge came first
+            assert MERGE_SOURCES[info["merge_source"]] in ("structural", "grid")
+            assert MERGE_SOURCES[info["merge_source"]] == env.merge_state().source
             assert info["merge_rotation_error_deg"] == pytest.approx(0.0, abs=1e-6)
         _, _, _, _, infos = env.step(_drive(env, rng))
     assert seen_merged, "the scripted merge was never accepted"

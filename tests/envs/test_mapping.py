@@ -206,7 +206,7 @@ def test_structural_merge_on_a_small_env_pair():
 
     env = two_robot_explore_v0.parallel_env(max_cycles=600, world={"size": (12, 12)},
                                             mapping={"merge_every": 0})
-    team = make_team("frontier")
+    team = make_team("frontier", env=env)
     observations, infos = env.reset(seed=5)
     for explorer in team.values():
         explorer.reset(seed=5)
