@@ -14,6 +14,7 @@ KIND_COLOURS = {
     NodeKind.JUNCTION: "tab:red",
     NodeKind.DEAD_END: "tab:blue",
     NodeKind.CORNER: "tab:green",
+    NodeKind.GATEWAY: "tab:purple",
 }
 """One colour per node kind, shared by every figure."""
 
@@ -22,7 +23,8 @@ def plot_topomap(ax: Any, topomap: TopoMap, *, edge_colour: str = "0.35", marker
                  size: float = 36.0, label: str | None = None, kinds: bool = True,
                  zorder: int = 2) -> None:
     """Draw ``topomap`` on a matplotlib ``ax``: paths (polylines when known, else straight
-    segments) and nodes coloured by kind (:data:`KIND_COLOURS`) or all in ``edge_colour``."""
+    segments) and nodes coloured by kind (:data:`KIND_COLOURS`) or all in ``edge_colour``;
+    nodes on the frontier (:attr:`TopoMap.frontier`) are drawn hollow."""
     for e, (u, v) in enumerate(topomap.edges):
         path = topomap.paths[e] if topomap.paths is not None else topomap.xy[[u, v]]
         ax.plot(path[:, 0], path[:, 1], color=edge_colour, lw=1.5, zorder=zorder,
@@ -33,8 +35,10 @@ def plot_topomap(ax: Any, topomap: TopoMap, *, edge_colour: str = "0.35", marker
         colours = [KIND_COLOURS[NodeKind(k)] for k in topomap.kinds]
     else:
         colours = [edge_colour] * topomap.n_nodes
-    ax.scatter(topomap.xy[:, 0], topomap.xy[:, 1], c=colours, s=size, marker=marker,
-               edgecolors="k", linewidths=0.5, zorder=zorder + 1,
+    inner = ["none" if f else c for c, f in zip(colours, topomap.frontier.tolist(), strict=True)]
+    outer = [c if f else "k" for c, f in zip(colours, topomap.frontier.tolist(), strict=True)]
+    ax.scatter(topomap.xy[:, 0], topomap.xy[:, 1], facecolors=inner, edgecolors=outer, s=size,
+               marker=marker, linewidths=np.where(topomap.frontier, 1.5, 0.5), zorder=zorder + 1,
                label=label if topomap.n_edges == 0 else None)
 
 
