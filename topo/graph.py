@@ -9,6 +9,7 @@ encoding table, :class:`NodeKind` (MiniGrid-style ``OBJECT_TO_IDX``), with names
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -192,6 +193,28 @@ class TopoMap:
     def degree(self) -> np.ndarray:
         """``(N,)`` number of paths at each node (a parallel path counts again)."""
         return np.bincount(self.edges.ravel(), minlength=self.n_nodes)
+
+    def path_directions(self, reach: float = 1.0) -> list[np.ndarray]:
+        """Per node, the directions (radians, CCW from +x) of the paths leaving it, measured
+        to the point ``reach`` metres along each path (its polyline when known, else the
+        straight segment; the far end if the path is shorter): with :attr:`clearance` and
+        :meth:`degree`, a node's descriptor — the same place seen by two robots has its paths
+        leaving the same ways, turned by the robots' relative heading.
+
+        Raises:
+            ValueError: ``reach`` not a positive number.
+        """
+        if not (isinstance(reach, (int, float)) and math.isfinite(reach) and reach > 0):
+            raise ValueError(f"reach must be a positive number of metres, got {reach!r}")
+        out: list[list[float]] = [[] for _ in range(self.n_nodes)]
+        for e, (u, v) in enumerate(self.edges.tolist()):
+            line = self.paths[e] if self.paths is not None else self.xy[[u, v]]
+            for node, pts in ((u, line), (v, line[::-1])):
+                steps = np.hypot(*np.diff(pts, axis=0).T)
+                k = min(int(np.searchsorted(np.cumsum(steps), reach)) + 1, len(pts) - 1)
+                d = pts[k] - pts[0]
+                out[node].append(math.atan2(d[1], d[0]))
+        return [np.array(a, dtype=np.float64) for a in out]
 
     def endpoints(self) -> np.ndarray:
         """The paper's point set: coordinates of the path endpoints (``E_A``/``E_B`` of eq. 2).

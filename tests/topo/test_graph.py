@@ -185,3 +185,27 @@ def test_version_1_dicts_still_read_and_descriptors_are_checked():
         TopoMap.from_arrays([[0, 0], [1, 0]], clearance=[0.5, 1.0, 2.0])
     with pytest.raises(TypeError, match="frontier must hold booleans, got dtype float64"):
         TopoMap.from_arrays([[0, 0], [1, 0]], frontier=[0.5, 1.0])
+
+
+def test_path_directions_leave_each_node_along_its_paths():
+    """An L path with its polyline: at the corner node the path heads east (0); at the far end
+    of a 1 m reach it heads back along the polyline; straight edges use the segment."""
+    xy = [[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]]
+    m = TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=[np.array([[0, 0], [2, 0], [4, 0.0]]),
+                                                         np.array([[4, 0], [4, 3.0]])])
+    d = m.path_directions()
+    np.testing.assert_allclose(d[0], [0.0])
+    np.testing.assert_allclose(sorted(d[1]), sorted([np.pi, np.pi / 2]))
+    np.testing.assert_allclose(d[2], [-np.pi / 2])
+    turned = m.transformed(_Turn(np.pi / 2))
+    np.testing.assert_allclose(turned.path_directions()[0], [np.pi / 2])
+    with pytest.raises(ValueError, match="reach must be a positive number of metres, got 0"):
+        m.path_directions(0)
+
+
+class _Turn:
+    def __init__(self, a):
+        self.r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+
+    def apply(self, points):
+        return np.asarray(points) @ self.r.T
