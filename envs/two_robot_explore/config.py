@@ -284,6 +284,9 @@ class MappingConfig:
             runs on merge steps that are multiples of this: to find a merge, and once one is in
             use to re-examine it (replace or drop it, see the env's manual); ``0`` never. A
             multiple of ``merge_every`` (unused when ``merge_every`` is 0).
+        topo_growth: an extraction due waits until the robot's map knows this fraction more
+            cells than at its last extraction (the same map gives the same graph; a structural
+            merge of two unchanged graphs is skipped likewise). ``0`` extracts on schedule.
         grid_merge_growth: after a grid alignment, the next one waits (beyond
             ``grid_merge_every``) until the two robots' maps together know this fraction more
             cells: the same maps would only give the same answer. ``0`` runs on schedule.
@@ -297,6 +300,7 @@ class MappingConfig:
 
     grid_resolution: float = 0.1
     topo_every: int = 25
+    topo_growth: float = 0.02
     topo: Any = None
     merge_every: int = 25
     merge_method: str = "hybrid"
@@ -322,6 +326,8 @@ class MappingConfig:
             raise ValueError(f"mapping.grid_merge_every must be 0 or a multiple of "
                              f"mapping.merge_every ({self.merge_every}), got "
                              f"{self.grid_merge_every}")
+        _set(self, "topo_growth", check_real(self.topo_growth, "mapping.topo_growth", low=0.0,
+                                             low_inclusive=True, high=10.0))
         _set(self, "grid_merge_growth", check_real(self.grid_merge_growth,
                                                    "mapping.grid_merge_growth", low=0.0,
                                                    low_inclusive=True, high=10.0))

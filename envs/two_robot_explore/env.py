@@ -74,7 +74,9 @@ HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, sim
 of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
 ``mapping.grid_resolution``) covers a square of half-side ``R`` around its start; its
 topological map (``topo.extract_topomap``, settings ``mapping.topo``) is re-extracted from the
-grid every ``mapping.topo_every`` steps: **places** at the maxima of the clearance from the
+grid every ``mapping.topo_every`` steps once the map has grown by ``mapping.topo_growth`` (2 %)
+since the last extraction (and the structural merge of two unchanged maps is skipped):
+**places** at the maxima of the clearance from the
 walls the sonars have seen (room centres, corridor crossings and bends), **gateways** at the
 narrow passes between them (doorways), **dead ends** at corridor ends, and the paths between
 them; a node that touches the unknown is flagged (its ``frontier`` feature) and the structural
@@ -260,6 +262,7 @@ are a ``ValueError``.
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
 | ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
+| ``mapping.topo_growth`` | float | 0.02 | map growth before a re-extraction (see Maps) |
 | ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
@@ -687,6 +690,8 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._merge_method = "none"  # method of the result that supplied the transform in use
         self._merge_source = "none"  # and what supplied it (MERGE_SOURCES)
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
+        self._extracted_at = [0, 0]  # known cells of each map at its last extraction
+        self._merged_maps: tuple = (None, None)  # the topological maps of the last merge
         self.merge_time_s = math.nan
         self.steps = 0
         self._snapshots = [None, None]
@@ -859,8 +864,11 @@ class TwoRobotExploreEnv(ParallelEnv):
         every = cfg.mapping.topo_every
         if every and self.steps % every == 0:
             for i, rmap in enumerate(self.maps):
-                rmap.extract(cfg.mapping.topo)
-                self._cache_graph(i)
+                if rmap.n_ever and rmap.n_ever >= self._extracted_at[i] * (
+                        1.0 + cfg.mapping.topo_growth):
+                    self._extracted_at[i] = rmap.n_ever
+                    rmap.extract(cfg.mapping.topo)
+                    self._cache_graph(i)
 
     def _fuse(self) -> None:
         try_grids = self._merge_due()
@@ -885,8 +893,11 @@ class TwoRobotExploreEnv(ParallelEnv):
         known = self.maps[0].n_ever + self.maps[1].n_ever
         try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
                          and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
-        if small and not try_grids:
-            return None
+        maps = (self.maps[0].topomap, self.maps[1].topomap)
+        unchanged = maps[0] is self._merged_maps[0] and maps[1] is self._merged_maps[1]
+        if (small or unchanged) and not try_grids:
+            return None  # no structural merge to try, or the same maps: the same answer
+        self._merged_maps = maps
         if try_grids:
             self._grid_tried_at = known
         return try_grids

@@ -184,7 +184,8 @@ def test_env_extracts_each_robots_whole_known_map():
     from envs import two_robot_explore_v0
     from topo.extract import extract_topomap
 
-    par = two_robot_explore_v0.parallel_env(max_cycles=200, mapping={"topo_every": 20})
+    par = two_robot_explore_v0.parallel_env(max_cycles=200, mapping={"topo_every": 20,
+                                                                      "topo_growth": 0.0})
     par.reset(seed=3)
     rng = np.random.default_rng(3)
     checked = 0
@@ -335,3 +336,28 @@ def test_true_coverage_sweep_is_the_ever_known_of_a_grid(seed):
         assert oracle.n_swept[i] == ever[i].sum()
     np.testing.assert_array_equal(oracle.union, union)
     assert (oracle.both, oracle.covered, oracle.count) == (both, covered, union.sum())
+
+
+def test_unchanged_maps_are_neither_extracted_nor_merged_again():
+    """With ``topo_growth`` out of reach a map is extracted once (its first known cells) and,
+    without grid alignments, the two unchanged graphs are merged once: the same maps would give
+    the same answer. With 0 every due step extracts anew."""
+    from envs import two_robot_explore_v0
+
+    def run(growth):
+        par = two_robot_explore_v0.parallel_env(
+            max_cycles=120, world={"size": (12, 12)},
+            mapping={"topo_every": 10, "merge_every": 10, "grid_merge_every": 0,
+                     "topo_growth": growth})
+        par.reset(seed=2)
+        rng = np.random.default_rng(2)
+        graphs, merges = set(), 0
+        while par.agents:
+            par.step({a: np.array([0.8, rng.uniform(-1, 1)]) for a in par.agents})
+            graphs.add(id(par.maps[0].topomap))
+            merges = par.merge_state().merges
+        return len(graphs), merges
+
+    frozen, fresh = run(10.0), run(0.0)
+    assert frozen[0] == 1 and frozen[1] <= 1  # extracted once, at reset
+    assert fresh[0] >= 10 and fresh[1] >= 5
