@@ -53,7 +53,8 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
                  ) -> HybridResult:
     """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``, at
     ``config.accept_threshold``): kept if it is accepted and the grids agree with it
-    (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate). Otherwise, when
+    (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate), then refined on the grids'
+    wall cells (:func:`fusion.grid_merge.refine_with_grids`). Otherwise, when
     ``try_grids``, the grid alignment (:func:`fusion.grid_merge.merge_grids`): accepted when its
     calibrated confidence reaches ``accept_threshold``; an accepted grid alignment fuses the
     topological maps at nodes within :data:`HYBRID_EPS`. A rejection keeps the grids' best
@@ -109,9 +110,11 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
     if topo.accepted:
         # the structural merge is accepted only if the grids agree with it (a hard gate)
         why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
-        if why is None:
-            return HybridResult(**{**fields, "method": "hybrid",
-                                   "time_s": time.perf_counter() - t0},
+        if why is None:  # and the walls place it to the cells' precision
+            refined = gm.refine_with_grids(grid_a, grid_b, topo.transform, cfg)
+            merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
+            return HybridResult(**{**fields, "transform": refined, "merged": merged,
+                                   "method": "hybrid", "time_s": time.perf_counter() - t0},
                                 supplied_by="structural")
         fields.update(accepted=False, merged=map_a,
                       reason=f"structural merge refuted by the grids: {why}")
