@@ -51,8 +51,7 @@ from agents.goals import make_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
-from fusion.pairs import atomic_write_json
-from topo._io import atomic_write
+from topo.fileio import atomic_write, atomic_write_json
 
 ENV_ID = "two_robot_explore_v0"
 

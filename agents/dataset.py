@@ -59,7 +59,6 @@ from fusion.pairs import (
     DatasetError,
     GridSnapshot,
     MapPair,
-    atomic_write_json,
     load_pairs,
     pair_files,
     read_manifest,
@@ -67,8 +66,8 @@ from fusion.pairs import (
     write_pair,
 )
 from fusion.rigid import Rigid2D
-from topo._checks import check_int
-from topo._io import TEMP_PREFIX, LockHeld, exclusive_lock
+from topo.fileio import TEMP_PREFIX, LockHeld, atomic_write_json, exclusive_lock
+from topo.validation import check_int
 
 BACKENDS = ("process", "ray")
 _WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}

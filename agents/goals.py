@@ -37,7 +37,7 @@ from pettingzoo import ParallelEnv
 
 from agents.base import Explorer
 from agents.scripted import Frontier, FrontierConfig, FrontierMap, _pose
-from topo._checks import check_int
+from topo.validation import check_int
 
 SECTORS = 8
 """Directions a goal can be chosen in: 45° sectors around the robot, 0 ahead, CCW."""

@@ -33,8 +33,8 @@ from skimage.graph import MCP_Geometric
 from agents.base import CommandExplorer, Explorer
 from envs.two_robot_explore.config import SonarConfig
 from fusion.rigid import Rigid2D
-from topo._checks import check_int, check_real
 from topo.grid import CellState
+from topo.validation import check_int, check_real
 
 _SONAR = SonarConfig()
 SONAR_ANGLES = np.radians(np.asarray(_SONAR.angles, dtype=np.float64))

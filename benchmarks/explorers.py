@@ -152,7 +152,7 @@ def metrics_table(n_worlds: int, sizes: list[float], workers: int, json_out: Pat
         with ProcessPoolExecutor(workers) as pool:
             rows = list(pool.map(episode, jobs))
     if json_out is not None:
-        from topo._io import atomic_write_bytes
+        from topo.fileio import atomic_write_bytes
 
         atomic_write_bytes(json_out, json.dumps(rows, indent=1, default=float).encode())
     print_table(rows)

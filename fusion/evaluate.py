@@ -47,14 +47,14 @@ from typing import Any
 
 import numpy as np
 
-from fusion._config import config_from
 from fusion.icp import rigid_fit
 from fusion.merge import METHODS, MergeConfig, merge_maps
-from fusion.pairs import atomic_write_json
 from fusion.rigid import Rigid2D
 from fusion.search import DEFAULT_MAX_EVALUATIONS, too_many_evaluations
 from fusion.synthetic import SyntheticConfig, generate_pairs
+from topo.fileio import atomic_write_json
 from topo.graph import TopoMap
+from topo.validation import config_from
 
 ROTATION_OK_DEG = 2.0
 """Success threshold on the rotation error (degrees)."""

@@ -58,7 +58,7 @@ from scipy.spatial import cKDTree
 from fusion import _grid_kernels as GK
 from fusion.icp import icp_svd
 from fusion.rigid import Rigid2D
-from topo._checks import check_int, check_real
+from topo.validation import check_int, check_real
 
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2  # topo.grid.CellState codes
 

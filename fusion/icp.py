@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
 from fusion.rigid import Rigid2D
-from topo._checks import as_points, check_int, check_real
+from topo.validation import as_points, check_int, check_real
 
 BRUTE_FORCE_MAX_PAIRS = 20_000
 """Below ``len(M) * len(D)`` of this many pairs, nearest neighbours are found by an all-pairs

@@ -55,12 +55,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fusion import _merge_kernels as K
-from fusion._config import config_from
 from fusion.icp import degeneracy, icp_checked, icp_svd, moments_degeneracy, rigid_fit
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.search import exhaustive_search
-from topo._checks import check_int, check_real
 from topo.graph import NodeKind, TopoMap
+from topo.validation import check_int, check_real, config_from
 
 DEFAULT_ACCEPT_THRESHOLD = 0.8
 """Default :attr:`MergeConfig.accept_threshold`: the smallest (on a 0.05 grid) at which the

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from topo._checks import check_real
+from topo.validation import check_real
 
 
 def wrap_angle(theta: float | np.ndarray) -> float | np.ndarray:

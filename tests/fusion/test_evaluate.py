@@ -24,6 +24,7 @@ from fusion.evaluate import (
 )
 from fusion.synthetic import make_pair
 from topo import TopoMap
+from topo.fileio import atomic_write_json
 
 
 def test_success_needs_both_errors_strictly_below_the_thresholds():
@@ -144,7 +145,7 @@ def test_reads_a_map_pair_dataset(tmp_path):
     import fusion.pairs as pairs_mod
 
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
-    pairs_mod.atomic_write_json(tmp_path / "dataset.json",
+    atomic_write_json(tmp_path / "dataset.json",
                                 {"format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
     for i, kind in enumerate(["overlap", "disjoint"]):
         p = make_pair(np.random.default_rng(i), overlap=0.8, kind=kind, nodes=(25, 25))
@@ -203,7 +204,7 @@ def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
     for folder in ("one", "two"):
         root = tmp_path / folder
-        pairs_mod.atomic_write_json(root / "dataset.json", {
+        atomic_write_json(root / "dataset.json", {
             "format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
         p = make_pair(np.random.default_rng(len(folder)), overlap=0.8, nodes=(20, 20))
         pairs_mod.write_pair(root, pairs_mod.MapPair(
