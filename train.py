@@ -197,7 +197,7 @@ class Args:
             raise ValueError(f"run_name must be a plain folder name, got {self.run_name!r}")
         if self.resume is not None and not Path(self.resume).exists():
             raise ValueError(f"resume: no run folder or checkpoint at {str(self.resume)!r}")
-        from agents.scripted import EXPLORERS
+        from agents.team import EXPLORERS
 
         for name in self.eval_baselines:
             if name not in EXPLORERS:

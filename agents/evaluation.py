@@ -91,7 +91,7 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
              baselines: Sequence[str] = ("frontier", "random_walk"),
              name: str = "ppo") -> dict[str, Any]:
     """Evaluate ``team`` (the policy, one explorer per robot) and the scripted ``baselines``
-    (names of :data:`agents.scripted.EXPLORERS`) on the fixed worlds of
+    (names of :data:`agents.team.EXPLORERS`) on the fixed worlds of
     :func:`eval_worlds`; write the files of the module docstring into ``run_dir``.
 
     Args:
@@ -105,7 +105,7 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
     Returns:
         ``{"step", "seeds", "rows", "max_cycles"}`` (what ``eval.json`` holds).
     """
-    from agents.scripted import make_team
+    from agents.team import make_team
     from topo.fileio import atomic_write_bytes, atomic_write_json
 
     run_dir = Path(run_dir)
