@@ -46,24 +46,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from _actions import fixed_actions
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs import two_robot_explore_v0  # noqa: E402
 from envs.two_robot_explore import env as env_module  # noqa: E402
 from envs.two_robot_explore import mapping, raycast, robot, sonar  # noqa: E402
-
-
-def _actions(n: int, seed: int) -> list[dict[str, np.ndarray]]:
-    """A fixed action sequence: a new random command every 10 steps, mostly forward."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for k in range(n):
-        if k % 10 == 0:
-            cmd = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)], dtype=np.float32)
-                   for a in ("robot_0", "robot_1")}
-        out.append(cmd)
-    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,7 +79,7 @@ def run_env(steps: int, seed: int = 0, **kwargs) -> tuple[Speed, object]:
     """Steps/s of the env over ``steps`` steps (resetting when an episode ends)."""
     par = two_robot_explore_v0.parallel_env(max_cycles=steps, **kwargs)
     par.reset(seed=seed)
-    acts = _actions(steps, seed)
+    acts = fixed_actions(steps, seed)
     clock = _Clock()
     for k in range(steps):
         if not par.agents:
@@ -109,7 +98,7 @@ def run_floor(par, steps: int, seed: int = 0, public: bool = False) -> Speed:
     space = robot.build_space(world.segments, robots)
     caster = raycast.RayCaster(world.segments, cfg.robot.radius)
     son = sonar.Sonar(cfg.sonar, cfg.robot.radius)
-    acts = _actions(steps, seed)
+    acts = fixed_actions(steps, seed)
     w_max = math.radians(cfg.robot.max_turn_rate)
     dt, substeps = cfg.robot.dt, cfg.robot.substeps
     query = space.segment_query_first
