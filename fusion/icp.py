@@ -238,7 +238,8 @@ def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
                 trim: float | None) -> IcpResult:
     """:func:`icp_svd` without its argument checks, for callers whose inputs are valid by
     construction (``M``, ``D``: finite float64 ``(N, 2)`` arrays of at least 2 points; options
-    within :func:`icp_svd`'s ranges): the checks cost 7 µs, a quarter of a small refinement."""
+    within :func:`icp_svd`'s ranges): the merge refines many small alignments, where the
+    checks would cost a good part of each."""
     m_moments, d_moments = spread(M), spread(D)
     degenerate = moments_degeneracy(m_moments, "M") or moments_degeneracy(d_moments, "D")
 

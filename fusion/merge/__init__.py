@@ -14,8 +14,8 @@ merge built from the maps' structure:
    count ``Σ (1 − d²/eps²)`` of the B nodes landing within ``eps`` of their cell's node, −1 per
    B junction/corner landing on an A path far from any A node. Refitting before counting is
    what finds pairs sharing few nodes: the right hypothesis lands its 3–5 shared nodes tightly,
-   while a hard count within the loose coarse tolerance preferred chance alignments of the
-   corridor lattice landing 6–8 nodes loosely (thousands of hypotheses cost 1–2 ms).
+   where a hard count within the loose coarse tolerance prefers chance alignments of a
+   corridor lattice landing more nodes loosely.
 4. **Candidates**: the ``path_pool`` best *distinct* hypotheses (non-maximum suppression on angle
    and on where B's centroid lands), and the ``sparse_pool`` best of those landing only 3 B nodes
    tightly (pairs sharing 3 nodes, kept apart so that the many chance 3-node landings do not
@@ -32,8 +32,7 @@ merge built from the maps' structure:
    at ``eps`` and trimmed (TrICP) to the estimated overlap, then least-squares SVD fits on mutually
    nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences — and on
    B's path points lying on A's paths (long corridors fix the rotation better than the few nodes
-   of a small overlap: on 5 of the 900 evaluation pairs of seed 0 it succeeds where the oracle
-   fails).
+   of a small overlap).
 6. **Accept/reject** (:func:`decide`): enough matches, not collinear, log-odds at least
    ``min_score``, and a margin of ``min_margin`` over the best *distinct* runner-up (a symmetric
    map has several equally good alignments: rejected as ambiguous).

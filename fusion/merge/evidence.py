@@ -30,12 +30,10 @@ CONFIDENCE_WEIGHTS: dict[str, float] = {
     "path_off": -0.0509,
 }
 """Weights of :attr:`MergeEvidence.score`, which ranks the search's candidates: a logistic
-regression (L2 on standardised features) of right (< 2°, < 0.3 m) against wrong candidates
-of the search on synthetic pairs (seed 100 overlap, 9100 no-overlap; near misses within 5° and
-1 m left out). Most candidates are wrong, so the score is low. The accept rule reads the
-calibrated :attr:`MergeEvidence.confidence`, not the score. ``benchmarks/calibrate_merge.py
---model ranking`` refits the weights on env and synthetic pairs and compares them (a refit on
-2026-12-02 was not kept: ``benchmarks/fusion.md``)."""
+regression of right (< 2°, < 0.3 m) against wrong candidates of the search, so the score is the
+log-odds of a candidate being right, and low (most candidates are wrong). The accept rule reads
+the calibrated :attr:`MergeEvidence.confidence`, not the score. ``benchmarks/calibrate_merge.py
+--model ranking`` refits them; how these were fitted: ``benchmarks/merge_tuning.md``."""
 
 
 _SCORE_WEIGHTS = tuple(CONFIDENCE_WEIGHTS.values())
@@ -52,8 +50,7 @@ CALIBRATION_FEATURES = ("score", "margin", "inliers", "rmse", "path_agree", "des
 """What the structural merge's calibrated :attr:`MergeEvidence.confidence` weighs: the search's
 score, its margin over a distinct alternative, the matches, their rmse (capped at 1 m), the
 agreeing paths, and — for maps from ``topo.extract_topomap`` (``described``) — the score,
-margin and matches again: their evidence weighs differently from hand-made maps' (in
-cross-validation the products brought the largest calibration gap from 0.20 to 0.09)."""
+margin and matches again: their evidence weighs differently from hand-made maps'."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,8 +129,7 @@ class MergeEvidence:
     @property
     def score(self) -> float:
         """Log-odds that the alignment is right: ``Σ CONFIDENCE_WEIGHTS[f] × features()[f]``,
-        summed in that order (a plain loop: a dict and a generator cost ~6 µs a score, and
-        scores are read ~7 times a merge)."""
+        summed in that order (a plain loop: scores are read several times a merge)."""
         total = 0.0
         for w, v in zip(_SCORE_WEIGHTS, self._feature_values(), strict=True):
             total += w * v

@@ -72,10 +72,9 @@ def hit_grid(pa: Prepared, tol: float, path_tol: float
     :data:`~fusion.merge._search_kernels.NEAR_ANY_NODE` (within ~``tol`` of an A node) and
     :data:`~fusion.merge._search_kernels.ON_PATH` (within ~``path_tol`` of an A path).
     Returns ``(table, x0, y0, 1 / cell)``."""
-    # a small dtype keeps the table in cache (int16: scoring twice faster at 60 nodes than
-    # int32; int8 another ~10%)
+    # the smallest dtype that holds a node index keeps the table in cache
     n = len(pa.xy)
-    like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32  # iinfo costs 10 µs
+    like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32
     return SK.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, pa.compat, like)
 
 
@@ -85,18 +84,15 @@ dtype, not a dtype)."""
 
 
 _COARSE_MIN_PAIRS = 4
-"""The coarse ranking holds the hypotheses landing at least this many B nodes on A nodes (3 in
-the one ranking, like ``min_inliers``, measured +1.3 points at σ = 0.05 m, 20–40% overlap, −1.4
-at σ = 0.15 m, 40–60%, seed 100, and 7% more time: not kept); those landing ``min_inliers`` to
-this − 1 are refitted and scored too, and pooled apart (``MergeConfig.sparse_pool``)."""
+"""The coarse ranking holds the hypotheses landing at least this many B nodes on A nodes; those
+landing ``min_inliers`` to this − 1 are refitted and scored too, and pooled apart
+(``MergeConfig.sparse_pool``), so that chance 3-node landings do not crowd the ranking."""
 
 
 _SPARSE_MIN = 0.7
 """A hypothesis of the ``sparse_pool`` must land its few nodes tightly: a coarse score of at
-least this per landed node (mean distance ≲ 0.27 m at ``eps`` 0.5; the right ones of seed 100
-score 0.89–1.0 per node at σ ≤ 0.15 m). Without it a chance 3-node alignment (σ = 0.3 m,
-15–60 nodes) was one more false accept of the 4500 of seed 9007; with it as many as before on
-the tuning and held-out no-overlap seeds, at the same success."""
+least this per landed node (a mean distance of about 0.27 m at ``eps`` 0.5), which right
+alignments of maps with node noise up to 0.15 m pass and loose chance landings do not."""
 
 
 def search_candidates(pa: Prepared, pb: Prepared, cfg: MergeConfig) -> tuple | str:

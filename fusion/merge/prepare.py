@@ -16,7 +16,7 @@ KIND_COMPATIBLE = np.zeros((len(NodeKind), len(NodeKind)), dtype=np.bool_)
 """``[kind_a, kind_b]``: may a node of A of ``kind_a`` be the same place as one of B of ``kind_b``?
 Same kinds; junction ↔ corner (a side branch one robot did not see); dead end ↔ corner (a corner
 at the edge of one robot's explored space, its second corridor unseen). Not dead end ↔ junction
-(a frontier dead end sits part-way along a corridor; allowing it adds chance matches: measured)."""
+(a frontier dead end sits part-way along a corridor; allowing it adds chance matches)."""
 
 
 for _a, _b in [(NodeKind.JUNCTION, NodeKind.JUNCTION), (NodeKind.CORNER, NodeKind.CORNER),
