@@ -48,7 +48,8 @@ def grid_times(pairs_dir: Path, rev: str | None = None) -> None:
     """Print the time of the grid merges on every pair of ``pairs_dir`` (with ``rev``, also
     those of the ``fusion`` package at that git revision, interleaved pair by pair)."""
     from fusion.evaluate import load_pair_dir
-    from fusion.grid_merge import hybrid_merge, merge_grids
+    from fusion.grid_merge import merge_grids
+    from fusion.hybrid import hybrid_merge
 
     pairs = load_pair_dir(pairs_dir)
     runs = {
@@ -187,7 +188,8 @@ def env_times(rev: str, steps: int, repeats: int = 3) -> None:
     """Print the environment's merge cost now and at revision ``rev`` on the merges of an env
     run (:func:`_env_merge_calls`), both in this one process, interleaved call by call (the
     fastest of ``repeats`` runs of each), and whether every result is identical."""
-    from fusion.grid_merge import hybrid_merge, merge_grids
+    from fusion.grid_merge import merge_grids
+    from fusion.hybrid import hybrid_merge
 
     calls = _env_merge_calls(steps)
     with tempfile.TemporaryDirectory() as tmp:

@@ -305,7 +305,8 @@ env's default merge) and ``"grid"`` (grid alignment alone). Synthetic pairs have
 
 
 def _grid_method(pair: EvalPair, method: str) -> Any:
-    from fusion.grid_merge import GridMergeResult, hybrid_merge, merge_grids
+    from fusion.grid_merge import GridMergeResult, merge_grids
+    from fusion.hybrid import hybrid_merge
 
     if pair.grids is None:
         return GridMergeResult(Rigid2D.identity(), False, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0,

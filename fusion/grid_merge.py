@@ -34,8 +34,7 @@ more evidence — every wall cell — so this method aligns them directly:
 
 :func:`fusion.hybrid.hybrid_merge` puts the structural merge first and this alignment second
 (what the environment runs); :func:`fusion.hybrid.recheck` re-runs both for maps already
-merged, to replace or refute the transform in use as the maps grow (both importable from here
-too).
+merged, to replace or refute the transform in use as the maps grow.
 
 All inputs are duck-typed grids: :class:`topo.OccupancyGrid` or :class:`fusion.pairs.GridSnapshot`
 (anything with cell-state codes — ``states()`` or ``states`` — ``resolution`` and ``origin``).
@@ -624,9 +623,5 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
     return estimate, near, deep
 
 
-# the environment's merge lives in fusion.hybrid (imported here for callers of this module)
-from fusion.hybrid import HYBRID_EPS, HybridResult, hybrid_merge, recheck  # noqa: E402
-
-__all__ = ["FEATURES", "HYBRID_EPS", "GridMergeConfig", "GridMergeResult", "HybridResult",
-           "check_with_grids", "distinct", "grid_features", "hybrid_merge", "merge_grids",
-           "recheck"]
+__all__ = ["FEATURES", "GridMergeConfig", "GridMergeResult", "check_with_grids", "distinct",
+           "grid_features", "merge_grids"]

@@ -10,13 +10,8 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from fusion import Rigid2D
-from fusion.grid_merge import (
-    GridMergeConfig,
-    check_with_grids,
-    hybrid_merge,
-    merge_grids,
-    recheck,
-)
+from fusion.grid_merge import GridMergeConfig, check_with_grids, merge_grids
+from fusion.hybrid import hybrid_merge, recheck
 from fusion.pairs import GridSnapshot
 from topo import TopoMap
 
