@@ -29,13 +29,8 @@ import json
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 
-from fusion.evaluate import (
-    EvalPair,
-    is_success,
-    oracle_transform,
-    synthetic_pairs,
-    transform_errors,
-)
+from fusion.eval_results import EvalPair, is_success, oracle_transform, transform_errors
+from fusion.evaluate import synthetic_pairs
 from fusion.merge import MergeConfig, merge_maps
 from fusion.merge.evidence import evaluate
 from fusion.merge.prepare import prepare_pair

@@ -8,18 +8,20 @@ import numpy as np
 import pytest
 
 from fusion import evaluate as evaluate_module
-from fusion.evaluate import (
+from fusion.eval_results import (
     ROTATION_OK_DEG,
     TRANSLATION_OK_M,
     EvalPair,
+    is_success,
+    oracle_transform,
+    summarise,
+)
+from fusion.evaluate import (
     check_exhaustive,
     evaluate,
-    is_success,
     load_pair_dir,
     main,
-    oracle_transform,
     parse_methods,
-    summarise,
     synthetic_pairs,
 )
 from fusion.synthetic import make_pair
@@ -169,7 +171,7 @@ def test_grid_methods_need_grids():
 
 
 def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
-    from fusion.evaluate import Record
+    from fusion.eval_results import Record
 
     err = (0.5, 0.1) if right else (30.0, 3.0)
     return Record(name, "m", kind, overlap, None, 10.0, conf >= 0.5, *err,
@@ -177,7 +179,7 @@ def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
 
 
 def test_threshold_sweep_counts_what_each_threshold_accepts():
-    from fusion.evaluate import calibration_summary, is_right, threshold_sweep
+    from fusion.eval_results import calibration_summary, is_right, threshold_sweep
 
     records = [_rec("p0", 0.95, True), _rec("p1", 0.7, True), _rec("p2", 0.6, False),
                _rec("p3", 0.8, False, kind="no_overlap", overlap=0.0),
