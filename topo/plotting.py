@@ -14,6 +14,7 @@ KIND_COLOURS = {
     NodeKind.JUNCTION: "tab:red",
     NodeKind.DEAD_END: "tab:blue",
     NodeKind.CORNER: "tab:green",
+    NodeKind.GATEWAY: "tab:purple",
 }
 """One colour per node kind, shared by every figure."""
 
