@@ -51,8 +51,7 @@ from agents.goals import make_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import SB3Explorer
-from fusion.pairs import atomic_write_json
-from topo._io import atomic_write
+from topo.fileio import atomic_write, atomic_write_json
 
 ENV_ID = "two_robot_explore_v0"
 
@@ -198,7 +197,7 @@ class Args:
             raise ValueError(f"run_name must be a plain folder name, got {self.run_name!r}")
         if self.resume is not None and not Path(self.resume).exists():
             raise ValueError(f"resume: no run folder or checkpoint at {str(self.resume)!r}")
-        from agents.scripted import EXPLORERS
+        from agents.team import EXPLORERS
 
         for name in self.eval_baselines:
             if name not in EXPLORERS:

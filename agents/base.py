@@ -23,7 +23,9 @@ are large (a grid is megabytes) and explorers need them only when they plan.
 from __future__ import annotations
 
 import abc
+import math
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,6 +33,57 @@ import numpy as np
 from envs.two_robot_explore.env import DISCRETE_ACTIONS
 
 ACTION_TYPES = ("continuous", "discrete")
+
+FRONT_HALF_WIDTH_DEG = 35.0
+"""A sonar pointing within this of the heading looks ahead (:attr:`SonarRing.front`)."""
+SIDE_LIMIT_DEG = 135.0
+"""... and one pointing between :data:`FRONT_HALF_WIDTH_DEG` and this to either side looks to
+that side (:attr:`SonarRing.left`, :attr:`SonarRing.right`); farther round it looks back."""
+
+
+def odometry_pose(info: Mapping[str, Any]) -> np.ndarray:
+    """The robot's ``(x, y, heading)`` odometry pose (its own start frame) from its ``info``."""
+    return np.asarray(info["odometry"], dtype=np.float64)[:3]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SonarRing:
+    """How to read a robot's ``sonar`` observation: the env's sonar layout, which an explorer
+    takes from the env it is bound to (:meth:`Explorer.bind`), so that any ``sonar`` config
+    (angles, order, range) is read right.
+
+    Attributes:
+        angles: ``(S,)`` sonar directions in the robot frame, radians in ``(-pi, pi]``.
+        max_range: metres that an observation of 1 stands for (the env's ``sonar.max_range``).
+        front: ``(S,)`` bool, the sonars within :data:`FRONT_HALF_WIDTH_DEG` of ahead.
+        left, right: ``(S,)`` bool, the sonars to the left (CCW) / right, up to
+            :data:`SIDE_LIMIT_DEG` from ahead.
+    """
+
+    angles: np.ndarray
+    max_range: float
+    front: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+
+    @classmethod
+    def from_degrees(cls, angles_deg: Any, max_range: float) -> SonarRing:
+        """The ring of sonars at ``angles_deg`` (degrees CCW from the heading) reading up to
+        ``max_range`` metres."""
+        a = np.radians(np.asarray(angles_deg, dtype=np.float64))
+        a = np.arctan2(np.sin(a), np.cos(a))
+        front = np.abs(a) < math.radians(FRONT_HALF_WIDTH_DEG)
+        side = ~front & (np.abs(a) <= math.radians(SIDE_LIMIT_DEG))
+        return cls(a, float(max_range), front, side & (a > 0), side & (a < 0))
+
+    def metres(self, observation: Mapping[str, Any]) -> np.ndarray:
+        """The ``sonar`` observation in metres."""
+        return np.asarray(observation["sonar"], dtype=np.float64) * self.max_range
+
+    @staticmethod
+    def nearest(ranges: np.ndarray, mask: np.ndarray) -> float:
+        """The nearest of ``ranges[mask]`` (``inf`` when the mask selects no sonar)."""
+        return float(ranges[mask].min()) if mask.any() else math.inf
 
 
 class Explorer(abc.ABC):
@@ -53,20 +106,44 @@ class Explorer(abc.ABC):
         """The unwrapped env this explorer reads maps from (:meth:`bind`), ``None`` before."""
         self.agent: str | None = None
         """The robot this explorer drives (:meth:`bind`)."""
+        self.sonar: SonarRing | None = None
+        """The bound env's sonar layout (:meth:`bind`), ``None`` before."""
 
     def bind(self, env: Any, agent: str) -> None:
         """Drive robot ``agent`` of ``env`` (a ``two_robot_explore`` env, wrapped or not):
         read access to that robot's maps, ``env.unwrapped.robot_map(agent)``, and to
-        ``merge_state()``, for explorers that plan on maps (the others ignore it).
-        :func:`run_episode` and ``make_team(name, env=env)`` call it."""
+        ``merge_state()``, for explorers that plan on maps, and the env's sonar layout
+        (:attr:`sonar`). :func:`run_episode` and ``make_team(name, env=env)`` call it."""
         raw = getattr(env, "unwrapped", env)
-        if not (hasattr(raw, "robot_map") and hasattr(raw, "merge_state")):
-            raise TypeError(f"env must be a two_robot_explore env (with robot_map and "
-                            f"merge_state), got {type(env).__name__}")
+        if not all(hasattr(raw, a) for a in ("robot_map", "merge_state", "config")):
+            raise TypeError(f"env must be a two_robot_explore env (with robot_map, merge_state "
+                            f"and config), got {type(env).__name__}")
         if agent not in raw.possible_agents:
             raise ValueError(f"agent must be one of {list(raw.possible_agents)}, got {agent!r}")
         self.env = raw
         self.agent = agent
+        self.sonar = SonarRing.from_degrees(raw.config.sonar.angles, raw.config.sonar.max_range)
+
+    def sonar_ring(self) -> SonarRing:
+        """:attr:`sonar`, the bound env's sonar layout.
+
+        Raises:
+            RuntimeError: the explorer is not bound yet (:meth:`bound_env`).
+        """
+        self.bound_env()
+        return self.sonar
+
+    def bound_env(self) -> Any:
+        """The env bound by :meth:`bind`, which maps and the sonar layout are read from.
+
+        Raises:
+            RuntimeError: the explorer is not bound yet.
+        """
+        if self.env is None:
+            raise RuntimeError(f"{type(self).__name__} reads its robot's sonar layout and maps "
+                               f"from the env: bind it first (explorer.bind(env, agent), "
+                               f"make_team(name, env=env), or run_episode)")
+        return self.env
 
     def reset(self, seed: int | None = None) -> None:
         """Start a new episode; ``seed`` re-creates the explorer's one random generator."""

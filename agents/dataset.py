@@ -59,7 +59,6 @@ from fusion.pairs import (
     DatasetError,
     GridSnapshot,
     MapPair,
-    atomic_write_json,
     load_pairs,
     pair_files,
     read_manifest,
@@ -67,8 +66,8 @@ from fusion.pairs import (
     write_pair,
 )
 from fusion.rigid import Rigid2D
-from topo._checks import check_int
-from topo._io import TEMP_PREFIX, LockHeld, exclusive_lock
+from topo.fileio import TEMP_PREFIX, LockHeld, atomic_write_json, exclusive_lock
+from topo.validation import check_int
 
 BACKENDS = ("process", "ray")
 _WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
@@ -159,7 +158,7 @@ class GenerateArgs:
             with _setting("world_size"):
                 WorldConfig(size=self.world_size)
         if not self.explorer.startswith("sb3:"):
-            from agents.scripted import EXPLORERS
+            from agents.team import EXPLORERS
 
             if self.explorer not in EXPLORERS:
                 raise SettingsError("explorer", f"explorer must be one of {sorted(EXPLORERS)} "
@@ -223,7 +222,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     """Run episode ``episode`` and write its pairs (ids ``episode · snapshots + k`` below
     ``n_pairs``) into dataset ``root``. Returns how many pairs it wrote. Top-level and
     argument-only so that process pools and Ray can ship it."""
-    from agents.scripted import make_team
+    from agents.team import make_team
     from envs.two_robot_explore_v0 import parallel_env
 
     snapshots = settings["snapshots"]
@@ -335,7 +334,7 @@ def _preflight(args: GenerateArgs) -> None:
     with _setting("world"):
         parallel_env(**env_kwargs(args.settings())).close()
     if args.explorer.startswith("sb3:"):
-        from agents.scripted import make_team
+        from agents.team import make_team
 
         try:
             make_team(args.explorer)

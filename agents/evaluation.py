@@ -27,7 +27,7 @@ import numpy as np
 
 from agents.base import Explorer, run_episode
 from agents.metrics import EpisodeRecorder
-from topo._checks import check_int
+from topo.validation import check_int
 
 SUMMARY_KEYS = ("T50", "T85", "T95", "final_coverage", "overlap", "collisions")
 """Episode metrics averaged into a summary row (plus ``reached_T85``)."""
@@ -91,7 +91,7 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
              baselines: Sequence[str] = ("frontier", "random_walk"),
              name: str = "ppo") -> dict[str, Any]:
     """Evaluate ``team`` (the policy, one explorer per robot) and the scripted ``baselines``
-    (names of :data:`agents.scripted.EXPLORERS`) on the fixed worlds of
+    (names of :data:`agents.team.EXPLORERS`) on the fixed worlds of
     :func:`eval_worlds`; write the files of the module docstring into ``run_dir``.
 
     Args:
@@ -105,9 +105,8 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
     Returns:
         ``{"step", "seeds", "rows", "max_cycles"}`` (what ``eval.json`` holds).
     """
-    from agents.scripted import make_team
-    from fusion.pairs import atomic_write_json
-    from topo._io import atomic_write_bytes
+    from agents.team import make_team
+    from topo.fileio import atomic_write_bytes, atomic_write_json
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

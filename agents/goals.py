@@ -35,9 +35,10 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from agents.base import Explorer
-from agents.scripted import Frontier, FrontierConfig, FrontierMap, _pose
-from topo._checks import check_int
+from agents.base import Explorer, odometry_pose
+from agents.frontier_planning import FrontierConfig, FrontierMap
+from agents.scripted import Frontier
+from topo.validation import check_int
 
 SECTORS = 8
 """Directions a goal can be chosen in: 45° sectors around the robot, 0 ahead, CCW."""
@@ -87,7 +88,7 @@ class GoalFrontier(Frontier):
         """``(SECTORS, 3)`` float32 in ``[0, 1]``, per sector: a reachable frontier cluster is
         there (0/1), the path cost to the cheapest one (``/ COST_SCALE``; 1 if none), their
         total area (``/ AREA_SCALE``)."""
-        pose = _pose(info)
+        pose = odometry_pose(info)
         fmap = self._frontier_map(info, pose)
         # the plan of the very next step reuses it (unless a goal was given up meanwhile)
         self._cached = ((len(self.given_up), self._steps + 1), fmap)

@@ -36,7 +36,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper
 
-from topo._checks import check_int
+from topo.validation import check_int
 
 EnvFactory = Callable[[], Any]
 

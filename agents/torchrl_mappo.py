@@ -40,7 +40,7 @@ from torchrl.modules import MLP, MultiAgentMLP, ProbabilisticActor, TanhNormal
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
 from envs import two_robot_explore_v0
-from topo._checks import check_int, check_real
+from topo.validation import check_int, check_real
 
 GROUP = "robot"
 """TorchRL's group of the two robots (``PettingZooWrapper`` groups agents by name prefix)."""

@@ -56,9 +56,11 @@ from fusion.calibration import (  # noqa: E402
     reliability_table,
     write_model,
 )
-from fusion.evaluate import ROTATION_OK_DEG, TRANSLATION_OK_M, synthetic_pairs  # noqa: E402
-from fusion.pairs import atomic_write_json, load_pairs  # noqa: E402
+from fusion.eval_results import ROTATION_OK_DEG, TRANSLATION_OK_M  # noqa: E402
+from fusion.evaluate import synthetic_pairs  # noqa: E402
+from fusion.pairs import load_pairs  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402
+from topo.fileio import atomic_write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data" / "env_pairs"

@@ -3,7 +3,7 @@
 A copy replays the episode since ``reset`` (the env's manual, Copies), so restoring costs about
 what the steps since ``reset`` cost, less the observations and infos a replay does not build.
 For each setting and each episode length ``N`` (steps since ``reset``; seed 0, the default 20 m
-world, a new random command every 10 steps as in ``env_hash.py``) this prints, in CPU
+world, a new random command every 10 steps as in ``benchmarks/_actions.py``) this prints, in CPU
 milliseconds (the machine is shared; wall time in brackets): the original's ``N`` steps (the
 reference, the same process), ``pickle.dumps``, ``pickle.loads`` (the replay) and
 ``copy.deepcopy``, each restore per 1000 restored steps, its ratio to stepping, and the
@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
+from _actions import fixed_actions
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -55,16 +55,12 @@ def _episode(kwargs: dict, steps: int):
     """An env after ``reset(seed=0)`` and ``steps`` steps, and the CPU and wall time of those
     steps (``reset`` included)."""
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, **kwargs)
-    rng = np.random.default_rng(0)
+    acts = fixed_actions(steps, 0)
 
     def run():
         env.reset(seed=0)
-        acts = {}
         for k in range(steps):
-            if k % 10 == 0:
-                acts = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)],
-                                    dtype=np.float32) for a in env.agents}
-            env.step(acts)
+            env.step(acts[k])
 
     cpu, wall, _ = _timed(run)
     return env, cpu, wall

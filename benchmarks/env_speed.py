@@ -7,10 +7,9 @@ It is measured two ways:
 
 - casting through pymunk's public ``Space.segment_query_first`` — the issue's definition ("about
   3,000 steps/s here" when it was written), the floor the 40 % target is read against;
-- casting as the env does (its own ``Sonar._cast``: chipmunk's ``cpSpaceSegmentQueryFirst``
-  called directly, a whole scan in one compiled call where the platform allows; see
-  ``envs/two_robot_explore/sonar.py``), about 4× faster: what physics and casts cost the env
-  itself.
+- casting as the env does (its own ``Sonar._cast``: the world's compiled ray caster,
+  ``envs/two_robot_explore/raycast.py``, a whole scan in one call), several times faster: what
+  physics and casts cost the env itself.
 
 The env is reported as steps/s and as its ratio to each.
 
@@ -47,24 +46,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from _actions import fixed_actions
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs import two_robot_explore_v0  # noqa: E402
 from envs.two_robot_explore import env as env_module  # noqa: E402
-from envs.two_robot_explore import mapping, robot, sonar  # noqa: E402
-
-
-def _actions(n: int, seed: int) -> list[dict[str, np.ndarray]]:
-    """A fixed action sequence: a new random command every 10 steps, mostly forward."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for k in range(n):
-        if k % 10 == 0:
-            cmd = {a: np.array([rng.uniform(0.2, 1.0), rng.uniform(-1, 1)], dtype=np.float32)
-                   for a in ("robot_0", "robot_1")}
-        out.append(cmd)
-    return out
+from envs.two_robot_explore import mapping, raycast, robot, sonar  # noqa: E402
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,7 +79,7 @@ def run_env(steps: int, seed: int = 0, **kwargs) -> tuple[Speed, object]:
     """Steps/s of the env over ``steps`` steps (resetting when an episode ends)."""
     par = two_robot_explore_v0.parallel_env(max_cycles=steps, **kwargs)
     par.reset(seed=seed)
-    acts = _actions(steps, seed)
+    acts = fixed_actions(steps, seed)
     clock = _Clock()
     for k in range(steps):
         if not par.agents:
@@ -108,8 +96,9 @@ def run_floor(par, steps: int, seed: int = 0, public: bool = False) -> Speed:
     starts = np.array([r.start for r in par.robots])
     robots = [robot.Robot(i, starts[i], cfg.robot) for i in range(2)]
     space = robot.build_space(world.segments, robots)
+    caster = raycast.RayCaster(world.segments, cfg.robot.radius)
     son = sonar.Sonar(cfg.sonar, cfg.robot.radius)
-    acts = _actions(steps, seed)
+    acts = fixed_actions(steps, seed)
     w_max = math.radians(cfg.robot.max_turn_rate)
     dt, substeps = cfg.robot.dt, cfg.robot.substeps
     query = space.segment_query_first
@@ -119,12 +108,16 @@ def run_floor(par, steps: int, seed: int = 0, public: bool = False) -> Speed:
             v, w = acts[k][name]
             r.command(float(v) * cfg.robot.max_speed, float(w) * w_max)
         robot.simulate(space, robots, dt, substeps)
+        if not public:  # the env's own casts
+            poses = [r.true_pose() for r in robots]
+            for i, pose in enumerate(poses):
+                caster.discs[i] = pose[:2]
+            for i, pose in enumerate(poses):
+                son._cast(caster, pose, i)
+            continue
         for r in robots:
             p = r.body.position
             pose = np.array([p.x, p.y, r.body.angle])
-            if not public:
-                son._cast(space, pose, r.sensor_filter)  # the env's own casts
-                continue
             starts_, ends = son.ray_segments(pose)
             f = r.sensor_filter
             for a, b in zip(starts_.tolist(), ends.tolist(), strict=True):

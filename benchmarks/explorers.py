@@ -64,7 +64,7 @@ def episode(job: tuple[str, str, str, dict, int]) -> dict:
     torch.set_num_threads(1)
     from agents.base import run_episode
     from agents.metrics import EpisodeRecorder
-    from agents.scripted import make_team
+    from agents.team import make_team
     from envs.two_robot_explore_v0 import parallel_env
 
     explorer, group, world_id, spec, max_cycles = job
@@ -152,14 +152,15 @@ def metrics_table(n_worlds: int, sizes: list[float], workers: int, json_out: Pat
         with ProcessPoolExecutor(workers) as pool:
             rows = list(pool.map(episode, jobs))
     if json_out is not None:
-        from topo._io import atomic_write_bytes
+        from topo.fileio import atomic_write_bytes
 
         atomic_write_bytes(json_out, json.dumps(rows, indent=1, default=float).encode())
     print_table(rows)
 
 
 def decision_time() -> None:
-    from agents.scripted import Frontier, frontier_map
+    from agents.frontier_planning import frontier_map
+    from agents.scripted import Frontier
     from envs.two_robot_explore_v0 import parallel_env
 
     env = parallel_env(max_cycles=400, world={"size": (20.0, 20.0)})

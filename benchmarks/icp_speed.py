@@ -12,6 +12,7 @@ ratio is fair even on a busy machine. Also prints the brute-force/KD-tree crosso
 
 from __future__ import annotations
 
+import argparse
 import math
 
 import numpy as np
@@ -71,6 +72,7 @@ def errors(t: Rigid2D, at: np.ndarray) -> tuple[float, float]:
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     rng = np.random.default_rng(0)
     o3d = load_open3d()
     print("ICP-SVD vs Open3D registration_icp (point-to-point), same data and stopping rules")

@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion.grid_merge as grid_merge  # noqa: E402
 from agents.base import run_episode  # noqa: E402
-from agents.scripted import EXPLORERS, make_team  # noqa: E402
+from agents.team import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
 
 WRONG_DEG, WRONG_M = 5.0, 1.0

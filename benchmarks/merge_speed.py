@@ -140,9 +140,9 @@ def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
 
 def _env_merge_calls(steps: int) -> list[dict]:
     """The arguments of every merge the environment makes (``mapping.run_merge``, default
-    config) in ``steps`` steps of seeds 0, 1, 2 under the actions of ``benchmarks/env_hash.py``
-    (its :func:`env_hash.episode`), the grids copied as they were then."""
-    from env_hash import episode
+    config) in ``steps`` steps of seeds 0, 1, 2 under the fixed actions of
+    ``benchmarks/_actions.py`` (its :func:`episode`), the grids copied as they were then."""
+    from _actions import episode
 
     from envs.two_robot_explore import env as env_module
     from fusion.pairs import GridSnapshot

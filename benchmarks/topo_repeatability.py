@@ -31,7 +31,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fusion.evaluate import EvalPair, evaluate  # noqa: E402
+from fusion.eval_results import EvalPair  # noqa: E402
+from fusion.evaluate import evaluate  # noqa: E402
 from fusion.pairs import load_pairs  # noqa: E402
 from fusion.repeatability import node_repeatability  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402

@@ -11,6 +11,7 @@ the same window's occupied cells: the one library pass every extraction needs, a
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from pathlib import Path
@@ -29,6 +30,7 @@ SONAR = np.radians([-90, -50, -30, -10, 10, 30, 50, 90])
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     rng = np.random.default_rng(0)
     print("OccupancyGrid.update, one 8-sonar scan (15° cones, 5 m range), median µs")
     print(f"{'grid':>10} {'µs/scan':>9} {'goal':>6}")
@@ -78,7 +80,7 @@ def main() -> None:
 def env_windows(steps: int = 1500, every: int = 25) -> list[tuple[np.ndarray, float, tuple]]:
     """``(states, resolution, origin)`` of both robots' known windows every ``every`` steps of a
     Frontier episode (seed 0, 20 m building), copied."""
-    from agents.scripted import make_team
+    from agents.team import make_team
     from envs import two_robot_explore_v0
 
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, mapping={"merge_every": 0,

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import train  # noqa: E402
 from agents.evaluation import eval_worlds, run_explorer, summarise  # noqa: E402
 from agents.goals import SECTOR_RULES, SectorRule  # noqa: E402
-from topo._io import atomic_write_bytes  # noqa: E402
+from topo.fileio import atomic_write_bytes  # noqa: E402
 
 
 def run_args(run_dir: Path, episodes: int | None) -> train.Args:

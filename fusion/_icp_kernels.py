@@ -1,7 +1,7 @@
 """Compiled inner loops of :func:`fusion.icp_svd` (numba, cached on disk after the first call).
 
-At the paper's sizes (tens of points) numpy's per-call overhead (~1 µs a call, ~30 calls an
-iteration) costs more than the arithmetic, so the nearest-neighbour pass and the closed-form
+At the paper's sizes (tens of points) numpy's per-call overhead (some 30 calls an iteration)
+costs more than the arithmetic, so the nearest-neighbour pass and the closed-form
 Step 2 fit each run as one compiled call.
 """
 

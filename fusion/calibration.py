@@ -274,7 +274,7 @@ def read_table(path: str | Path | None = None) -> dict[str, Calibrator]:
 def write_model(name: str, model: Calibrator, path: str | Path | None = None) -> Path:
     """Store ``model`` as ``name`` in the table at ``path`` (default :data:`TABLE_PATH`),
     keeping the other models; written atomically."""
-    from fusion.pairs import atomic_write_json
+    from topo.fileio import atomic_write_json
 
     path = Path(path or TABLE_PATH)
     models = {n: m.to_dict() for n, m in read_table(path).items()} if path.exists() else {}

@@ -2,8 +2,8 @@
 
 For every synthetic overlapping pair (overlap ≥ 20%) that the oracle gets right (the SVD fit on
 the true node correspondences: rotation < 2°, translation < 0.3 m at B's centroid), the true
-alignment is refined as ``auto`` refines its own (:func:`fusion.merge._polish`) and scored, and
-a miss of ``auto`` is put in one class:
+alignment is refined as ``auto`` refines its own (:func:`fusion.merge.refine.polish`) and
+scored, and a miss of ``auto`` is put in one class:
 
 - ``truth_too_few_matches``: the refined true alignment matches fewer than ``min_inliers``
   nodes (compatible kinds, within ``eps``) or only collinear ones — the pair shares too little
@@ -29,14 +29,12 @@ import json
 from collections import Counter, defaultdict
 from collections.abc import Sequence
 
-from fusion.evaluate import (
-    EvalPair,
-    is_success,
-    oracle_transform,
-    synthetic_pairs,
-    transform_errors,
-)
-from fusion.merge import MergeConfig, _evaluate, _polish, _prepare_pair, merge_maps
+from fusion.eval_results import EvalPair, is_success, oracle_transform, transform_errors
+from fusion.evaluate import synthetic_pairs
+from fusion.merge import MergeConfig, merge_maps
+from fusion.merge.evidence import evaluate
+from fusion.merge.prepare import prepare_pair
+from fusion.merge.refine import polish
 
 CLASSES = ("truth_too_few_matches", "truth_below_threshold", "right_rejected", "refine_off",
            "search_miss", "score_prefers_wrong")
@@ -54,8 +52,8 @@ def classify(pair: EvalPair, config: MergeConfig) -> str | None:
     errors = transform_errors(result.transform, pair)
     if result.accepted and is_success(errors):
         return None
-    pa, pb = _prepare_pair(pair.map_a, pair.map_b, config)
-    truth = _polish(pa, pb, _evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
+    pa, pb = prepare_pair(pair.map_a, pair.map_b, config)
+    truth = polish(pa, pb, evaluate(pa, pb, oracle.theta, oracle.T, config), config).evidence
     if truth.collinear or truth.inliers < config.min_inliers:
         return "truth_too_few_matches"
     if truth.confidence < config.accept_threshold:

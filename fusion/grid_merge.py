@@ -19,9 +19,8 @@ more evidence — every wall cell — so this method aligns them directly:
    ``resolution`` — the best on a ``step_deg / 3`` angle grid around it, the others (its
    rivals) on a ``2·step_deg / 3`` one — and the best is refined by gated ICP-SVD on wall
    cells, then (``native_refine``) on the grids' own cells: two gated ICP passes on their
-   occupied cells, after a local correlation at 0.1 m for grids finer than that (real maps of
-   0.03–0.05 m cells come out within a few centimetres of the best rigid fit instead of
-   0.3 m: ``benchmarks/fine_maps.py``);
+   occupied cells, after a local correlation at 0.1 m for grids finer than that (so that maps
+   of fine cells are aligned as precisely as their cells allow: ``benchmarks/fusion.md``);
 4. its evidence — the margin of its score over the best alignment that is clearly different
    (more than ``distinct_deg`` or ``distinct_m`` away: the refined rivals, and far-away peaks
    at the best rotation), the overlapping area, how many of B's walls land on A's known cells
@@ -35,8 +34,7 @@ more evidence — every wall cell — so this method aligns them directly:
 
 :func:`fusion.hybrid.hybrid_merge` puts the structural merge first and this alignment second
 (what the environment runs); :func:`fusion.hybrid.recheck` re-runs both for maps already
-merged, to replace or refute the transform in use as the maps grow (both importable from here
-too).
+merged, to replace or refute the transform in use as the maps grow.
 
 All inputs are duck-typed grids: :class:`topo.OccupancyGrid` or :class:`fusion.pairs.GridSnapshot`
 (anything with cell-state codes — ``states()`` or ``states`` — ``resolution`` and ``origin``).
@@ -58,7 +56,7 @@ from scipy.spatial import cKDTree
 from fusion import _grid_kernels as GK
 from fusion.icp import icp_svd
 from fusion.rigid import Rigid2D
-from topo._checks import check_int, check_real
+from topo.validation import check_int, check_real
 
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2  # topo.grid.CellState codes
 
@@ -547,10 +545,9 @@ def _local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarra
                   radius: float, cfg: GridMergeConfig) -> Rigid2D:
     """The best alignment within :data:`LOCAL_REACH` and ``step_deg / 3`` of ``estimate`` by
     the correlation score on layers pooled to :data:`LOCAL_CELL` (finer than ``resolution``):
-    on maps of fine cells (0.03–0.05 m) it fixes the rotation to a fraction of a degree where
-    the ICP refinement alone stayed 2–5° off on 3 of 19 real-map pairs (``benchmarks/
-    fine_maps.py``). ``estimate`` itself if the grids' cells are not finer than
-    :data:`LOCAL_CELL` (on the env's 0.1 m grids it did not help)."""
+    on maps of fine cells it fixes a rotation the ICP refinement alone can leave degrees off
+    (``benchmarks/fusion.md``, fine maps). ``estimate`` itself if the grids' cells are not
+    finer than :data:`LOCAL_CELL`."""
     fine = max(float(grid_a.resolution), float(grid_b.resolution))
     cell = LOCAL_CELL
     if fine > 0.75 * cell or cell > 0.75 * cfg.resolution:

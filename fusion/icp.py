@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
 from fusion.rigid import Rigid2D
-from topo._checks import as_points, check_int, check_real
+from topo.validation import as_points, check_int, check_real
 
 BRUTE_FORCE_MAX_PAIRS = 20_000
 """Below ``len(M) * len(D)`` of this many pairs, nearest neighbours are found by an all-pairs
@@ -238,7 +238,8 @@ def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
                 trim: float | None) -> IcpResult:
     """:func:`icp_svd` without its argument checks, for callers whose inputs are valid by
     construction (``M``, ``D``: finite float64 ``(N, 2)`` arrays of at least 2 points; options
-    within :func:`icp_svd`'s ranges): the checks cost 7 µs, a quarter of a small refinement."""
+    within :func:`icp_svd`'s ranges): the merge refines many small alignments, where the
+    checks would cost a good part of each."""
     m_moments, d_moments = spread(M), spread(D)
     degenerate = moments_degeneracy(m_moments, "M") or moments_degeneracy(d_moments, "D")
 

@@ -53,14 +53,14 @@ from typing import Any
 import numpy as np
 
 from fusion.rigid import Rigid2D
-from topo._io import TEMP_PREFIX, atomic_write_bytes
+from topo.fileio import TEMP_PREFIX, atomic_write_bytes, atomic_write_json
 from topo.graph import TopoMap
 
 FORMAT = "topomerge.map_pairs"
 FORMAT_VERSION = 1
 PAIR_FILE = re.compile(r"^pair_(\d{6,})\.npz$")
 LOCK_FILE = ".lock"
-"""Name of the lock file a writer holds in the dataset folder (``topo._io.exclusive_lock``)."""
+"""Name of the lock file a writer holds in the dataset folder (``topo.fileio.exclusive_lock``)."""
 
 
 class DatasetError(ValueError):
@@ -125,14 +125,6 @@ class MapPair:
 def pair_path(root: str | Path, pair_id: int) -> Path:
     """Where pair ``pair_id`` lives in dataset ``root``."""
     return Path(root) / "pairs" / f"pair_{pair_id:06d}.npz"
-
-
-# --------------------------------------------------------------------------- atomic writes
-def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> Path:
-    """JSON-encode ``obj`` (indented, sorted keys) and write it atomically; returns the path.
-    ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
-    text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
-    return atomic_write_bytes(path, text.encode())
 
 
 def _map_arrays(prefix: str, m: TopoMap) -> dict[str, np.ndarray]:

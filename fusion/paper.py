@@ -12,7 +12,7 @@ pixels, so call them "map units"):
 The loop is a rectangle, which looks the same after a half turn — so, like the paper's exhaustive
 search (two best fusions, at 136° and 316°), the baseline finds two equally scored optima 180°
 apart. And because B has three vertices that A lacks, the paper's initialisation
-(``T = mean(M) − mean(D)``) starts from a biased centroid: see ``benchmarks/paper_example.py``.
+(``T = mean(M) − mean(D)``) starts from a biased centroid: see ``examples/paper_example.py``.
 """
 
 from __future__ import annotations

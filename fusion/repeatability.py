@@ -32,9 +32,9 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from fusion.rigid import Rigid2D
-from topo._checks import check_real
 from topo.graph import TopoMap
 from topo.grid import CellState
+from topo.validation import check_real
 
 RADII = (0.5, 1.0)
 """Default radii (metres) of :func:`node_repeatability`."""

@@ -30,8 +30,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fusion.rigid import Rigid2D
-from topo._checks import as_points, check_int, check_real
 from topo.graph import TopoMap
+from topo.validation import as_points, check_int, check_real
 
 DEFAULT_EPS = 0.3
 """Default coincidence tolerance in metres (the evaluation's translation-success threshold)."""

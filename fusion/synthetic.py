@@ -39,10 +39,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from fusion._config import config_from
 from fusion.rigid import Rigid2D
-from topo._checks import check_int, check_real
 from topo.graph import TopoMap, kinds_from_degree
+from topo.validation import check_int, check_real, config_from
 
 PAIR_KINDS = ("overlap", "disjoint", "other_world")
 """The kinds of :class:`SyntheticPair`: partly overlapping, or one of the two no-overlap cases."""

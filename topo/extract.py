@@ -71,10 +71,10 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import remove_small_holes, skeletonize
 
-from topo._checks import check_real
 from topo._extract_kernels import basin_paths, merge_tree, route
 from topo.graph import NodeKind, TopoMap, kinds_from_degree
 from topo.grid import CellState
+from topo.validation import check_real, config_from
 
 _UNKNOWN, _FREE, _OCCUPIED = int(CellState.UNKNOWN), int(CellState.FREE), int(CellState.OCCUPIED)
 
@@ -142,11 +142,7 @@ class ExtractConfig:
         """A config from a plain dict; unknown keys are an error naming the allowed ones."""
         if not isinstance(data, dict):
             raise TypeError(f"data must be a dict, got {type(data).__name__}")
-        allowed = [f.name for f in dataclasses.fields(cls)]
-        unknown = sorted(set(data) - set(allowed))
-        if unknown:
-            raise ValueError(f"ExtractConfig has unknown keys {unknown}; allowed: {allowed}")
-        return cls(**data)
+        return config_from(cls, data, "ExtractConfig")
 
 
 _DEFAULT = ExtractConfig()

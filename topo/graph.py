@@ -17,7 +17,7 @@ from typing import Any, Protocol
 import networkx as nx
 import numpy as np
 
-from topo._checks import as_points
+from topo.validation import as_points
 
 FORMAT_VERSION = 2
 """Version of the :meth:`TopoMap.to_dict` layout (2 added ``clearance`` and ``frontier``);

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from topo._checks import as_points, check_real
 from topo._grid_kernels import NO_COUNTS, NO_MASK, sonar_update
+from topo.validation import as_points, check_real
 
 
 def _float_array(value: Any, name: str, shape: str) -> np.ndarray:
@@ -161,12 +161,33 @@ class OccupancyGrid:
         a float64 ``(3,)`` array, ``ranges`` and ``sensor_angles`` float64 ``(K,)`` arrays,
         all finite, ranges ``>= 0``, ``max_range > 0``, ``cone_half_width`` in ``(0, pi/2]``.
         The same update; bad input here is not diagnosed."""
+        self._apply(pose, ranges, sensor_angles, max_range, cone_half_width, NO_MASK, NO_COUNTS)
+
+    def update_tracked(self, pose: np.ndarray, ranges: np.ndarray, sensor_angles: np.ndarray,
+                       max_range: float, cone_half_width: float, ever: np.ndarray
+                       ) -> np.ndarray:
+        """:meth:`update_valid` (same input contract) that also keeps ``ever``, a bool mask of
+        the grid's shape of the cells known at least once: the cells this scan makes known
+        join it. Returns int64 ``[n_fresh, r0, r1, c0, c1, 0, 0, 0]``: how many cells joined
+        ``ever`` and their bounding box (all zero if none). Why: coverage that never shrinks,
+        kept in the same pass as the update (the env calls this four times a step)."""
+        fresh = np.zeros(8, dtype=np.int64)
+        self._apply(pose, ranges, sensor_angles, max_range, cone_half_width, ever, fresh)
+        return fresh
+
+    def _apply(self, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
+               max_range: float, beta: float, ever: np.ndarray, fresh: np.ndarray) -> None:
         m = self.model
         sonar_update(self.log_odds, self._states, self.origin[0], self.origin[1],
-                     self.resolution, pose[0], pose[1], pose[2], ranges, sensor_angles,
-                     max_range, cone_half_width, (m.hit_width or self.resolution) / 2.0,
-                     m.l_free, m.l_occupied, m.clamp, m.threshold, NO_MASK, NO_MASK, NO_MASK,
-                     NO_COUNTS)
+                     self.resolution, pose[0], pose[1], pose[2], ranges, angles, max_range,
+                     beta, (m.hit_width or self.resolution) / 2.0, m.l_free, m.l_occupied,
+                     m.clamp, m.threshold, ever, NO_MASK, NO_MASK, fresh)
+
+    def freeze(self) -> None:
+        """Make :attr:`log_odds` and the states read-only (a snapshot that must not change);
+        a later update raises numpy's ``ValueError`` for writing a read-only array."""
+        self.log_odds.setflags(write=False)
+        self._states.setflags(write=False)
 
     def _check_scan(self, pose: Any, ranges: Any, angles: Any):
         # sums instead of np.isfinite(...).all(): NaN and inf survive a sum, and on arrays this
@@ -282,3 +303,34 @@ class OccupancyGrid:
     def __repr__(self) -> str:
         return (f"OccupancyGrid(shape={self.shape}, resolution={self.resolution}, "
                 f"origin={self.origin}, known={self.coverage_m2():.1f} m²)")
+
+
+def sweep_scan(ever: np.ndarray, origin: tuple[float, float], resolution: float,
+               model: SensorModel, pose: np.ndarray, ranges: np.ndarray,
+               sensor_angles: np.ndarray, max_range: float, cone_half_width: float,
+               union: np.ndarray, reachable: np.ndarray) -> np.ndarray:
+    """Coverage of one scan without a grid: every cell an :class:`OccupancyGrid` of this
+    geometry and ``model`` would update (the same cone test) joins ``ever`` (bool ``(H, W)``),
+    cells already in it skipped untested; each cell joining ``ever`` is also folded into
+    ``union`` (bool, same shape), noting whether it was ``reachable``. Input as
+    :meth:`OccupancyGrid.update_valid` (valid by construction, not checked).
+
+    Returns int64 ``[n_fresh, r0, r1, c0, c1, both, new, covered]``: the cells that joined
+    ``ever``, their bounding box (all zero if none), how many were in ``union`` already, were
+    added to it, and were added and ``reachable``. Why: ground-truth coverage of a sensor
+    sweep, without keeping a grid per robot of the whole world.
+
+    The sweep counts a cell as known after one update, so it matches a grid only for models
+    whose single update makes a cell known (``|l_free|`` and ``l_occupied`` above
+    ``threshold``)."""
+    fresh = np.zeros(8, dtype=np.int64)
+    sonar_update(_NO_LOG_ODDS, _NO_STATES, origin[0], origin[1], resolution, pose[0], pose[1],
+                 pose[2], ranges, sensor_angles, max_range, cone_half_width,
+                 (model.hit_width or resolution) / 2.0, model.l_free, model.l_occupied,
+                 model.clamp, model.threshold, ever, union, reachable, fresh)
+    return fresh
+
+
+_NO_LOG_ODDS = np.zeros((0, 0), dtype=np.float32)
+_NO_STATES = np.zeros((0, 0), dtype=np.int8)
+"""The kernel's "no grid" arguments (:func:`sweep_scan`)."""

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from topo._checks import check_real
+from topo.validation import check_real
 
 DUNGEON_FREE_ABOVE = 150
 """DungeonMaps grey levels above this are free space."""

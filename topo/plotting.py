@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from topo._io import atomic_write
+from topo.fileio import atomic_write
 from topo.graph import NodeKind, TopoMap
 
 KIND_COLOURS = {
@@ -60,7 +60,7 @@ def equal_axes(ax: Any, points: np.ndarray, margin: float = 0.08) -> None:
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
-    """Write ``fig`` to ``path`` atomically (:func:`topo._io.atomic_write`), creating the
+    """Write ``fig`` to ``path`` atomically (:func:`topo.fileio.atomic_write`), creating the
     folder; the format follows the suffix. Returns the path."""
     fmt = Path(path).suffix.lstrip(".") or "png"
     return atomic_write(path, lambda fh: fig.savefig(fh, format=fmt, dpi=dpi,

@@ -1,8 +1,7 @@
 """Compiled per-step bookkeeping of :mod:`envs.two_robot_explore.mapping` (numba, cached on
-disk): a whole scan's grid update (the grid's sonar model, folding the cells it made known into
-the "ever known" masks), the ``local_map`` crop, the ``graph_nodes`` observation and the
+disk): the shared map's patches, the ``local_map`` crop, the ``graph_nodes`` observation and the
 state's block maps. Each replaces a dozen small numpy calls whose overhead, not arithmetic, was
-the cost (four grids are updated every env step)."""
+the cost (they run every env step)."""
 
 from __future__ import annotations
 
@@ -10,26 +9,6 @@ import math
 
 import numpy as np
 from numba import njit, uint64
-
-from topo._grid_kernels import sonar_update
-
-
-@njit(cache=True, nogil=True)
-def integrate_scan(log_odds, states, ever, ox, oy, res, x, y, theta, ranges, angles, mount,
-                   max_range, half_cone, hit_half, l_free, l_occ, clamp, threshold, union,
-                   reachable):
-    """One scan into a grid and its "ever known" mask, in one call: the grid's sonar model
-    with its coverage bookkeeping (``topo._grid_kernels.sonar_update``: ``union`` and
-    ``reachable`` there; empty ``log_odds`` and ``states`` only sweep ``ever``) with
-    ``ranges + mount`` and ``max_range + mount`` (ranges are from the transducers, the
-    model's sensors sit at the centre). Returns its counts ``[n_fresh, r0, r1, c0, c1, both,
-    new, covered]``: the cells known for the first time, their bounding box (all zero if
-    none), and how they fell in ``union``."""
-    fresh = np.zeros(8, dtype=np.int64)
-    sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges + mount, angles,
-                 max_range + mount, half_cone, hit_half, l_free, l_occ, clamp, threshold, ever,
-                 union, reachable, fresh)
-    return fresh
 
 
 @njit(cache=True, nogil=True)
@@ -80,13 +59,8 @@ def warp_patch(out, src, r0, c0, h, w, ox, oy, res, d_r0, d_c0, x0, y0, src_res,
                 out[a, b] = src[r0 + iv, c0 + iu]
 
 
-NO_LOG_ODDS = np.zeros((0, 0))
-"""The ``log_odds`` argument of :func:`integrate_scan` for a sweep without a grid (with
-:data:`NO_STATES`)."""
-
 NO_STATES = np.zeros((0, 0), dtype=np.int8)
-"""The ``states2`` argument of :func:`sample_image` when there is no second grid, and the
-``states`` of a sweep (:data:`NO_LOG_ODDS`)."""
+"""The ``states2`` argument of :func:`sample_image` when there is no second grid."""
 
 
 @njit(cache=True, nogil=True)

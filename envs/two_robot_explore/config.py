@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from topo._checks import check_int, check_real
+from topo.validation import check_int, check_real, config_from
 
 REWARD_MODES = ("shared", "oracle", "individual")
 """``EnvConfig.reward_mode`` values (see the env manual, section Rewards)."""
@@ -58,34 +57,13 @@ def _extract_config(value: object) -> Any:
     dict of its fields (errors name ``mapping.topo``)."""
     from topo.extract import ExtractConfig
 
-    if value is None:
-        return ExtractConfig()
-    if isinstance(value, ExtractConfig):
-        return value
-    if isinstance(value, Mapping):
-        try:
-            return ExtractConfig.from_dict(dict(value))
-        except (TypeError, ValueError) as exc:
-            raise type(exc)(f"mapping.topo: {exc}") from exc
-    raise TypeError(f"mapping.topo must be a topo.ExtractConfig, a dict of its fields or None, "
-                    f"got {type(value).__name__}")
-
-
-def _build(cls: type, data: object, name: str) -> Any:
-    """``cls`` from an instance of itself, a mapping of its fields, or ``None`` (defaults)."""
-    if data is None:
-        return cls()
-    if isinstance(data, cls):
-        return data
-    if not isinstance(data, Mapping):
-        raise TypeError(
-            f"{name} must be a {cls.__name__} or a dict of its fields, got {type(data).__name__}"
-        )
-    allowed = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(str(k) for k in data if k not in allowed)
-    if unknown:
-        raise ValueError(f"{name} has unknown keys {unknown}; allowed: {allowed}")
-    return cls(**data)
+    try:
+        return config_from(ExtractConfig, value, "mapping.topo")
+    except ValueError as exc:
+        if str(exc).startswith("mapping.topo"):
+            raise
+        # a bad field value: ExtractConfig names the field, not where it was given
+        raise ValueError(f"mapping.topo: {exc}") from exc
 
 
 @dataclass(frozen=True, slots=True)
@@ -375,10 +353,10 @@ class EnvConfig:
     action_type: str = "continuous"
 
     def __post_init__(self) -> None:
-        _set(self, "world", _build(WorldConfig, self.world, "world"))
-        _set(self, "robot", _build(RobotConfig, self.robot, "robot"))
-        _set(self, "sonar", _build(SonarConfig, self.sonar, "sonar"))
-        _set(self, "mapping", _build(MappingConfig, self.mapping, "mapping"))
+        _set(self, "world", config_from(WorldConfig, self.world, "world"))
+        _set(self, "robot", config_from(RobotConfig, self.robot, "robot"))
+        _set(self, "sonar", config_from(SonarConfig, self.sonar, "sonar"))
+        _set(self, "mapping", config_from(MappingConfig, self.mapping, "mapping"))
         _set(self, "max_cycles", check_int(self.max_cycles, "max_cycles", low=1))
         _set(self, "target_coverage", check_real(self.target_coverage, "target_coverage",
                                                  low=0.0, high=1.0))

@@ -58,8 +58,9 @@ read through the env (Infos, below).
 
 The Pioneer front ring: 8 sonars at -90, -50, -30, -10, 10, 30, 50, 90° from the heading, on the
 robot's rim (ranges are measured from there). Each is a 15° cone sampled by ``sonar.rays`` rays
-(3); a ray is a pymunk segment query from the robot's centre that skips the robot's own disc and
-sees walls and the teammate — **the very segments the robots collide with**. Range 0.15–5 m,
+(3); a ray is cast from the robot's centre against the walls and the teammate's disc (not the
+robot's own) — **the very shapes the robots collide with**, with pymunk's segment-query
+arithmetic (``envs.two_robot_explore.raycast``). Range 0.15–5 m,
 Gaussian noise (σ = 0.01 m), an echo hitting a wall more than 60° off its normal is lost with
 probability 0.5 (specular reflection). A sonar reads its nearest surviving echo; 5 m means no
 echo. ``sonar.measure_every = 0.1`` scans only
@@ -285,9 +286,11 @@ robots; other keys are ignored with a warning.
 
 ## Version History
 
-* v0: initial release. (Unreleased changes within v0, observations and dynamics unchanged:
-  small numeric infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact
-  copies by replay.)
+* v0: initial release. (Unreleased changes within v0, dynamics unchanged: small numeric
+  infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact copies by replay,
+  the sonar cast by the env's own ray caster with the same readings; the topological maps
+  re-extracted (places, gateways, dead ends, clearance and frontier flags), so
+  ``graph_nodes`` has 9 features and merges, hence rewards, differ.)
 """
 
 from __future__ import annotations
@@ -316,6 +319,7 @@ from envs.two_robot_explore.mapping import (
     compose_pose,
     run_merge,
 )
+from envs.two_robot_explore.raycast import RayCaster
 from envs.two_robot_explore.robot import Robot, build_space, simulate
 from envs.two_robot_explore.sonar import Sonar
 from envs.two_robot_explore.worlds import World, load_world, procedural_world
@@ -480,7 +484,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         generator's state at ``reset``, the start poses given, the commands of every step
         since (a ``(steps, 2, 2)`` float64 array) and ``max_cycles`` changes — plus the
         original's step count, agents, poses and contact counts, which the restored env must
-        reproduce. No physics, grids or cffi objects: :meth:`__setstate__` replays."""
+        reproduce. No physics or grids: :meth:`__setstate__` replays."""
         h = self._history
         episode = None
         if h is not None:
@@ -669,6 +673,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             self._check_starts(starts)
         self.robots = [Robot(i, starts[i], cfg.robot) for i in range(2)]
         self.space = build_space(world.segments, self.robots)
+        self.caster = RayCaster(world.segments, cfg.robot.radius)
         self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(2)]
         # map frames: each robot's start; the truth frame_i -> world is its start pose
         self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
@@ -845,14 +850,16 @@ class TwoRobotExploreEnv(ParallelEnv):
         half = math.radians(scfg.cone) / 2.0
         self._shared_delta = 0
         self._oracle_delta = 0
-        for i, (robot, sonar) in enumerate(zip(self.robots, self.sonars, strict=True)):
-            pose = robot.true_pose()
-            sonar.measure(self.space, pose, robot.sensor_filter, self._rng, travelled[i])
+        poses = [robot.true_pose() for robot in self.robots]
+        for i, pose in enumerate(poses):
+            self.caster.discs[i] = pose[:2]
+        for i, (pose, sonar) in enumerate(zip(poses, self.sonars, strict=True)):
+            sonar.measure(self.caster, pose, i, self._rng, travelled[i])
             if not sonar.fresh:
                 self._own_delta[i] = 0
                 continue
             rmap = self.maps[i]
-            fresh = rmap.integrate(robot.odometry, sonar.last, sonar.angles,
+            fresh = rmap.integrate(self.robots[i].odometry, sonar.last, sonar.angles,
                                    sonar.mount_radius, scfg.max_range, half)
             n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
             self._own_delta[i] = n_fresh

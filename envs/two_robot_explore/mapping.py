@@ -28,20 +28,17 @@ from typing import Any
 import numpy as np
 
 from envs.two_robot_explore._map_kernels import (
-    NO_LOG_ODDS,
     NO_STATES,
     cell_box,
-    integrate_scan,
     or_patch,
     sample_image,
     sample_states,
     warp_patch,
 )
 from fusion.rigid import Rigid2D
-from topo._grid_kernels import NO_MASK
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
-from topo.grid import IMAGE_VALUES, OccupancyGrid
+from topo.grid import IMAGE_VALUES, OccupancyGrid, sweep_scan
 
 LOCAL_MAP_VALUES = IMAGE_VALUES
 """``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
@@ -117,19 +114,6 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
     return dwin, out
 
 
-def _integrate(log_odds: np.ndarray, states: np.ndarray, ever: np.ndarray, g: Geometry,
-               model: Any, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
-               mount_radius: float, max_range: float, half_cone: float, union: np.ndarray,
-               reachable: np.ndarray) -> np.ndarray:
-    """:func:`_map_kernels.integrate_scan` of one scan with the sensor ``model``'s numbers (a
-    ``topo.grid.SensorModel``) on a grid of geometry ``g``; returns its counts."""
-    return integrate_scan(log_odds, states, ever, g.origin[0], g.origin[1], g.resolution,
-                          float(pose[0]), float(pose[1]), float(pose[2]), ranges, angles,
-                          mount_radius, max_range, half_cone,
-                          (model.hit_width or g.resolution) / 2.0, model.l_free,
-                          model.l_occupied, model.clamp, model.threshold, union, reachable)
-
-
 class RobotMap:
     """An occupancy grid with "ever known" bookkeeping and a topological map: one robot's maps
     in its own start frame.
@@ -148,13 +132,12 @@ class RobotMap:
         topomap: the latest extracted ``topo.TopoMap`` (own frame).
     """
 
-    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap", "_cells")
+    __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float) -> None:
         self.grid = OccupancyGrid(resolution=resolution, extent=extent)
         self.geometry = geometry_of(self.grid)
         self.states = self.grid.states()
-        self._cells = self.grid._states  # the grid's writable states, which integrate updates
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
         self.n_ever = 0
         self.bbox: list[int] | None = None
@@ -166,16 +149,14 @@ class RobotMap:
 
         Readings are measured from the transducers on the rim; the grid's sensor model puts all
         sensors at the robot centre, so ``mount_radius`` is added to ranges and to
-        ``max_range``. Returns the counts of :func:`_map_kernels.integrate_scan`, of which
+        ``max_range``. Returns the counts of ``OccupancyGrid.update_tracked``, of which
         ``[n_fresh, r0, r1, c0, c1]`` matter here: how many cells became known for the first
         time and their bounding box (all zero if none).
         """
-        # one compiled call: the grid's update (OccupancyGrid.update_valid: the env's scans are
-        # valid by construction, the grid's checks would double the cost) and the "ever known"
-        # bookkeeping
-        counts = _integrate(self.grid.log_odds, self._cells, self.ever, self.geometry,
-                            self.grid.model, pose, ranges, angles, mount_radius, max_range,
-                            half_cone, NO_MASK, NO_MASK)
+        # the grid's checks are skipped (update_valid's contract): the env's scans are valid by
+        # construction, and the checks would double the cost
+        counts = self.grid.update_tracked(pose, ranges + mount_radius, angles,
+                                          max_range + mount_radius, half_cone, self.ever)
         n = int(counts[0])
         if n:
             self.n_ever += n
@@ -231,8 +212,7 @@ class RobotMapSnapshot:
     def of(cls, robot_map: RobotMap, odometry: np.ndarray, step: int) -> RobotMapSnapshot:
         """Copy ``robot_map``'s grid (about 0.1 ms at the default 20 m world) and freeze it."""
         grid = robot_map.grid.copy()
-        grid.log_odds.setflags(write=False)
-        grid._states.setflags(write=False)
+        grid.freeze()
         odo = np.array(odometry, dtype=np.float64)
         odo.setflags(write=False)
         return cls(grid, robot_map.topomap, odo, int(robot_map.n_ever), int(step))
@@ -372,8 +352,9 @@ class OracleCoverage:
         """Sweep robot ``index``'s scan from its true world ``pose`` (ranges from the
         transducers, as :meth:`RobotMap.integrate`); returns how many world cells the team
         swept for the first time."""
-        counts = _integrate(NO_LOG_ODDS, NO_STATES, self.swept[index], self.geometry,
-                            self._model, pose, true_ranges, angles, mount_radius, max_range,
+        g = self.geometry
+        counts = sweep_scan(self.swept[index], g.origin, g.resolution, self._model, pose,
+                            true_ranges + mount_radius, angles, max_range + mount_radius,
                             half_cone, self.union, self.reachable)
         fresh, both, new, covered = counts[[0, 5, 6, 7]].tolist()
         self.n_swept[index] += fresh

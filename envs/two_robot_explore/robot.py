@@ -5,11 +5,6 @@ segments, one dynamic disc per robot, contacts counted), and :class:`Robot` wrap
 turns a ``(v, ω)`` command into body velocities before each physics substep, and keeps the
 robot's odometry in its own start frame. The physics is stepped once per substep for the whole
 space (never per robot).
-
-The per-substep body reads and writes (:meth:`Robot.drive`, :meth:`Robot.true_pose`) call
-chipmunk's getters and setters through pymunk's own cffi binding, as pymunk's ``Body``
-properties do (without their Python layers: a ``__setattr__`` hook, a ``Vec2d`` per read),
-as ``sonar`` does for its casts; a test checks they match the properties.
 """
 
 from __future__ import annotations
@@ -19,15 +14,7 @@ import math
 import numpy as np
 import pymunk
 
-# pymunk's cffi binding of chipmunk (pymunk 7.x), as in sonar.py
-from pymunk._chipmunk_cffi import lib as _lib
-
 from envs.two_robot_explore.config import RobotConfig
-
-_GET_POSITION = _lib.cpBodyGetPosition
-_GET_ANGLE = _lib.cpBodyGetAngle
-_SET_VELOCITY = _lib.cpBodySetVelocity
-_SET_ANGULAR_VELOCITY = _lib.cpBodySetAngularVelocity
 
 MOTOR_FORCE = 2000.0
 """Newtons (and newton-metres) the wheels can exert on the 10 kg disc: full speed in ~4 ms."""
@@ -42,9 +29,9 @@ class Robot:
     Attributes:
         index: 0 or 1.
         body, shape: the pymunk dynamic body and its circle.
-        sensor_filter: a ``ShapeFilter`` for ray casts that skips this robot's own disc (a ray
-            starting inside the disc would hit it at ``alpha = 0``) but sees walls and the
-            teammate.
+        sensor_filter: a ``ShapeFilter`` for pymunk queries that skips this robot's own disc (a
+            ray starting inside the disc would hit it at ``alpha = 0``) but sees walls and the
+            teammate: what the env's ray caster does for this robot's sonar.
         start: ``(x, y, heading)`` true start pose in the world frame.
         odometry: ``(x, y, heading)`` estimated pose in the robot's own start frame (the frame
             of its maps).
@@ -96,11 +83,9 @@ class Robot:
 
     def drive(self) -> None:
         """Apply the command to the motor body (called before every physics substep)."""
-        # Body._body: the chipmunk body (a cffi pointer; not kept here, so a Robot pickles)
-        a = _GET_ANGLE(self.body._body)
-        motor = self.motor._body
-        _SET_VELOCITY(motor, (self._v * math.cos(a), self._v * math.sin(a)))
-        _SET_ANGULAR_VELOCITY(motor, self._w)
+        a = self.body.angle
+        self.motor.velocity = (self._v * math.cos(a), self._v * math.sin(a))
+        self.motor.angular_velocity = self._w
 
     def true_pose(self) -> np.ndarray:
         """``(x, y, heading)`` in the world frame, heading wrapped to ``(-pi, pi]``."""
@@ -108,9 +93,8 @@ class Robot:
 
     def _pose(self) -> tuple[float, float, float]:
         """:meth:`true_pose` as a tuple of floats."""
-        body = self.body._body
-        p = _GET_POSITION(body)
-        a = _GET_ANGLE(body)
+        p = self.body.position
+        a = self.body.angle
         return p.x, p.y, math.atan2(math.sin(a), math.cos(a))
 
     def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:

@@ -1,12 +1,12 @@
-"""The sonar ring: a sensor object (VMAS ``Lidar`` style) over pymunk ray casts.
+"""The sonar ring: a sensor object (VMAS ``Lidar`` style) over the world's ray caster.
 
 Each of the ``S`` sonars (the Pioneer front ring by default) is a cone sampled by ``K`` rays
-spread evenly across it. A ray is a ``space.segment_query_first`` from the robot's centre
-with the robot's own :attr:`Robot.sensor_filter`, so its own disc is skipped; it sees the
-world's wall segments (the very shapes robots collide with) and the teammate's disc. Ranges are
-reported from the transducers on the rim (``mount_radius`` less than the distance from the
-centre). Rays start at the centre, not on the rim, because a robot pressed against a wall has
-its rim on (or, within the contact slop, just past) the wall: a ray from there could miss it.
+spread evenly across it. The rays are cast from the robot's centre by the world's
+:class:`~envs.two_robot_explore.raycast.RayCaster`, which sees the wall segments (the very
+shapes robots collide with) and the teammate's disc, not the robot's own. Ranges are reported
+from the transducers on the rim (``mount_radius`` less than the distance from the centre).
+Rays start at the centre, not on the rim, because a robot pressed against a wall has its rim
+on (or, within the contact slop, just past) the wall: a ray from there could miss it.
 
 Per ray, an echo whose incidence angle (between the ray and the surface normal) exceeds
 ``dropout_incidence`` is lost with probability ``dropout_prob`` (specular reflection: the sound
@@ -15,16 +15,8 @@ clipped to ``[min_range, max_range]``; ``max_range`` means "no echo". With ``mea
 set, a new scan is taken only after the robot has travelled that far since the last one (the
 paper's robots measured every 0.10 m); otherwise every step.
 
-The casts call chipmunk's ``cpSpaceSegmentQueryFirst`` (the function
-``Space.segment_query_first`` wraps, with the same arguments) without pymunk's wrapper, whose
-Python (a fresh query struct, a shape lookup, two ``Vec2d`` and a result tuple per ray) cost two
-thirds of every cast; the env casts 48 rays per step. Where the platform's calling convention
-allows (:mod:`._chipmunk`: Linux and macOS on x86-64 and ARM64), one compiled call casts a
-whole scan; elsewhere a Python loop calls the function through pymunk's cffi binding. Tests
-check both against the public query, bit for bit (pymunk is pinned to the 7.x series whose
-binding this uses). The rays' end points are computed by a compiled loop into an array that
-cffi also views as the ``cpVect`` structs the query takes, and the hits are turned into ranges
-and readings by compiled loops.
+The rays' end points, the echoes and the readings are compiled loops over arrays the sonar
+keeps (no Python arithmetic per ray).
 """
 
 from __future__ import annotations
@@ -32,21 +24,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pymunk
 from numba import njit
 
-# pymunk's cffi binding of chipmunk (pymunk 7.x); see the module docstring
-from pymunk._chipmunk_cffi import ffi as _ffi
-from pymunk._chipmunk_cffi import lib as _lib
-
-from envs.two_robot_explore import _chipmunk
 from envs.two_robot_explore.config import SonarConfig
-
-_QUERY_FIRST = _lib.cpSpaceSegmentQueryFirst
-_NULL = _ffi.NULL
-_COMPILED = _chipmunk.AVAILABLE
-"""Whether scans are cast by :func:`._chipmunk.cast_rays` where :func:`._chipmunk.usable` (else
-the cffi loop)."""
+from envs.two_robot_explore.raycast import RayCaster
 
 
 @njit(cache=True, nogil=True)
@@ -121,10 +102,8 @@ class Sonar:
     """
 
     __slots__ = ("cfg", "mount_radius", "angles", "ray_angles", "last", "true_last",
-                 "last_pose", "fresh",
-                 "_local_dir", "_length", "_cos_dropout", "_since", "_n_rays", "_rays",
-                 "_info", "_filter", "_filter_words", "_filter_of", "_ends", "_dirs",
-                 "_end_structs", "_hit", "_alpha", "_nx", "_ny")
+                 "last_pose", "fresh", "_local_dir", "_length", "_cos_dropout", "_since",
+                 "_n_rays", "_rays", "_ends", "_dirs", "_alpha", "_nx", "_ny")
 
     def __init__(self, cfg: SonarConfig, mount_radius: float) -> None:
         self.cfg = cfg
@@ -144,21 +123,10 @@ class Sonar:
         self.last_pose = np.zeros(3)
         self.fresh = False
         self._since = math.inf
-        # the one query result struct every cast of this sonar writes into
-        self._info = _ffi.new("cpSegmentQueryInfo *")
-        # each scan's ray directions and end points (written by _ray_ends; both arrays live as
-        # long as the sonar, never reallocated), the ends also seen by cffi as the cpVect
-        # structs passed to chipmunk (from_buffer checks the size: a row is a cpVect's two
-        # doubles), so no Python arithmetic or tuple conversion happens per ray
+        # each scan's ray directions and end points (written by _ray_ends) and per-ray hits
+        # (written by the caster): arrays kept for the sonar's life, overwritten every scan
         self._ends = np.zeros((self._n_rays, 2))
         self._dirs = np.zeros((self._n_rays, 2))
-        ends = _ffi.from_buffer("cpVect[]", self._ends)
-        self._end_structs = [ends[i] for i in range(self._n_rays)]
-        self._filter_of: pymunk.ShapeFilter | None = None  # the filter _filter was made from
-        self._filter = None
-        self._filter_words = np.zeros(2, dtype=np.uint64)  # the same, for the compiled casts
-        # the compiled casts' query result (a cpSegmentQueryInfo's 6 words) and per-ray hits
-        self._hit = np.zeros(6)
         self._alpha = np.zeros(self._n_rays)
         self._nx = np.zeros(self._n_rays)
         self._ny = np.zeros(self._n_rays)
@@ -179,14 +147,15 @@ class Sonar:
         ends = starts + (self._local_dir @ rot) * self._length
         return starts, ends
 
-    def cast(self, space: pymunk.Space, pose: np.ndarray,
-             shape_filter: pymunk.ShapeFilter) -> tuple[np.ndarray, np.ndarray]:
-        """Noise-free ray casts: ``(S*K,)`` hit distances from the transducers (``inf`` =
-        nothing within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
-        alpha, nx, ny = self._cast(space, pose, shape_filter)
+    def cast(self, caster: RayCaster, pose: np.ndarray, own: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free ray casts from ``pose`` by ``caster``, not seeing disc ``own`` (the robot
+        carrying the sonar): ``(S*K,)`` hit distances from the transducers (``inf`` = nothing
+        within ``max_range``) and ``(S*K,)`` cosines of the incidence angles."""
+        alpha, nx, ny = self._cast(caster, pose, own)
         return _echoes(alpha, nx, ny, self._dirs, self._length, self.mount_radius)
 
-    def _cast(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter
+    def _cast(self, caster: RayCaster, pose: np.ndarray, own: int
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per ray the hit fraction of its length (``inf``: no hit) and the surface normal
         ``(nx, ny)`` (0 without a hit); leaves the rays' world directions in ``_dirs``. The
@@ -194,44 +163,18 @@ class Sonar:
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         _ray_ends(x, y, math.cos(th), math.sin(th), self._length, self._local_dir, self._ends,
                   self._dirs)
-        # the filter as a C struct once, not converted on every ray
-        if shape_filter is not self._filter_of:
-            self._filter_of = shape_filter
-            self._filter = _ffi.new("cpShapeFilter *", tuple(shape_filter))[0]
-            self._filter_words = _chipmunk.filter_words(shape_filter)
-        if _COMPILED and _chipmunk.usable():
-            w = self._filter_words
-            _chipmunk.cast_rays(_chipmunk.QUERY_FIRST, _chipmunk.address(space._space), x, y,
-                                self._ends, w[0], w[1], self._hit, self._alpha, self._nx,
-                                self._ny)
-            return self._alpha, self._nx, self._ny
-        start = _ffi.new("cpVect *", (x, y))[0]
-        cspace, info, query, flt = space._space, self._info, _QUERY_FIRST, self._filter
-        inf = math.inf
-        alpha: list[float] = []
-        nx: list[float] = []
-        ny: list[float] = []
-        for end in self._end_structs:
-            if query(cspace, start, end, 0.0, flt, info) == _NULL:
-                alpha.append(inf)
-                nx.append(0.0)
-                ny.append(0.0)
-            else:
-                alpha.append(info.alpha)
-                n = info.normal
-                nx.append(n.x)
-                ny.append(n.y)
-        return np.array(alpha), np.array(nx), np.array(ny)
+        caster.cast(x, y, self._ends, own, self._alpha, self._nx, self._ny)
+        return self._alpha, self._nx, self._ny
 
-    def measure(self, space: pymunk.Space, pose: np.ndarray, shape_filter: pymunk.ShapeFilter,
+    def measure(self, caster: RayCaster, pose: np.ndarray, own: int,
                 rng: np.random.Generator, travelled: float = 0.0) -> np.ndarray:
         """Scan (or, with ``measure_every``, keep the last scan until the robot has travelled
         far enough) and return :attr:`last`.
 
         Args:
-            space: the physics space to cast rays in.
+            caster: the world's ray caster, its discs at the robots' positions.
             pose: the robot's true world pose ``(x, y, heading)``.
-            shape_filter: the robot's :attr:`Robot.sensor_filter`.
+            own: the index of the robot carrying the sonar (its disc is not seen).
             rng: the env's generator (dropout and noise; the same draws every scan).
             travelled: metres driven since the previous call.
         """
@@ -241,7 +184,7 @@ class Sonar:
             self.fresh = False
             return self.last
         self._since = 0.0
-        alpha, nx, ny = self._cast(space, pose, shape_filter)
+        alpha, nx, ny = self._cast(caster, pose, own)
         u = rng.random(self._n_rays)
         noise = rng.standard_normal(len(self.angles))
         self.last = np.empty(len(self.angles))

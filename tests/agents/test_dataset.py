@@ -23,7 +23,7 @@ from agents.dataset import (
 )
 from fusion import Rigid2D
 from fusion.pairs import LOCK_FILE, load_pairs, pair_files
-from topo._io import exclusive_lock
+from topo.fileio import exclusive_lock
 from topo.grid import CellState
 
 KW = {"explorer": "frontier", "snapshots": 2, "max_cycles": 200, "world_size": (10.0, 10.0),
@@ -242,7 +242,7 @@ def test_a_second_writer_is_locked_out(tmp_path, capsys):
 
 def test_a_killed_writer_leaves_no_stale_lock(tmp_path):
     lock = tmp_path / LOCK_FILE
-    code = ("import os, signal, sys\nfrom topo._io import exclusive_lock\n"
+    code = ("import os, signal, sys\nfrom topo.fileio import exclusive_lock\n"
             f"with exclusive_lock({str(lock)!r}):\n    os.kill(os.getpid(), signal.SIGKILL)\n")
     run = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[2],
                          timeout=60)

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from agents.base import run_episode
+from agents.frontier_planning import FrontierConfig
 from agents.metrics import EpisodeRecorder
-from agents.scripted import EXPLORERS, FrontierConfig, make_team
+from agents.scripted import RandomWalk, WallFollower
+from agents.team import EXPLORERS, make_team
 from envs.two_robot_explore_v0 import parallel_env
 
 SMALL = {"world": {"size": (10.0, 10.0)}}
@@ -66,3 +68,43 @@ def test_bad_arguments():
         FrontierConfig(min_cluster_cells=0)
     with pytest.raises(ValueError, match="FrontierConfig.lookahead must be > 0.0"):
         FrontierConfig(lookahead=-1.0)
+
+
+PIONEER = (-90.0, -50.0, -30.0, -10.0, 10.0, 30.0, 50.0, 90.0)
+
+
+def bound_to(explorer, **env_kwargs):
+    env = parallel_env(max_cycles=5, **SMALL, **env_kwargs)
+    explorer.bind(env, "robot_0")
+    explorer.reset(0)
+    return explorer
+
+
+def test_explorers_read_the_sonar_layout_of_the_env_they_are_bound_to():
+    # the Pioneer ring listed left to right: the right-hand sonars are the last two
+    follower = bound_to(WallFollower(), sonar={"angles": tuple(reversed(PIONEER))})
+    right_wall = np.ones(8)
+    right_wall[6:] = 0.7 / 5.0  # 0.7 m: the follower's distance
+    # following the wall it sees (straight on), not curving right to look for one
+    np.testing.assert_allclose(follower.command({"sonar": right_wall}, {}), [0.8, 0.0])
+    assert follower.sonar.right.tolist() == [False] * 6 + [True] * 2
+    # readings scale with the env's max_range: 0.2 of 3 m is 0.6 m ahead, closer than 0.7 m
+    near = bound_to(WallFollower(), sonar={"max_range": 3.0})
+    ahead = np.ones(8)
+    ahead[3:5] = 0.2
+    np.testing.assert_allclose(near.command({"sonar": ahead}, {}), [0.0, 1.0])
+
+
+@pytest.mark.parametrize("name", ["random_walk", "frontier"])
+def test_explorers_run_under_a_non_default_sonar(name):
+    env = parallel_env(max_cycles=60, sonar={"angles": (-60.0, 0.0, 60.0), "max_range": 3.0},
+                       **SMALL)
+    out = run_episode(env, make_team(name), seed=3)
+    assert out["steps"] == 60
+
+
+def test_an_unbound_explorer_says_to_bind_it():
+    walker = RandomWalk()
+    walker.reset(0)
+    with pytest.raises(RuntimeError, match=r"RandomWalk reads its robot's sonar layout"):
+        walker.act({"sonar": np.ones(8)}, {})

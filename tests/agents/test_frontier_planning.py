@@ -8,13 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from agents.scripted import (
-    Blackboard,
-    CoordinatedFrontier,
-    Frontier,
-    FrontierConfig,
-    frontier_map,
-)
+from agents.frontier_planning import FrontierConfig, frontier_map
+from agents.scripted import Blackboard, CoordinatedFrontier, Frontier
+from envs.two_robot_explore.config import SonarConfig
 from fusion import Rigid2D
 from topo.grid import OccupancyGrid
 
@@ -89,6 +85,7 @@ class Maps:
     transform in use (``None``: not merged)."""
 
     possible_agents = ("robot_0", "robot_1")
+    config = SimpleNamespace(sonar=SonarConfig())
 
     def __init__(self, grids, transform=None):
         self.grids, self.transform = grids, transform

@@ -201,7 +201,7 @@ def test_env_extracts_each_robots_whole_known_map():
 def test_structural_merge_on_a_small_env_pair():
     """Two Frontier robots in a 12 m building, 600 steps: the structural merge of their own
     topological maps (no grids) is accepted and within 2° and 0.3 m of the truth."""
-    from agents.scripted import make_team
+    from agents.team import make_team
     from envs import two_robot_explore_v0
     from fusion.merge import merge_maps
 

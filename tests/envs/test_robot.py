@@ -77,9 +77,7 @@ def test_robots_never_leave_free_space_and_walls_stop_them():
     assert sum(r.collisions for r in robots) > 0  # random driving does bump into walls
 
 
-def test_direct_chipmunk_body_calls_equal_pymunks_properties():
-    """drive and true_pose call chipmunk's getters/setters directly: the same values as
-    pymunk's Body properties."""
+def test_drive_sets_the_motor_along_the_heading_and_true_pose_reads_the_body():
     _, robots, space = _setup()
     r = robots[0]
     for k in range(20):

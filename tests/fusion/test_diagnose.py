@@ -3,7 +3,7 @@
 import numpy as np
 
 from fusion.diagnose import CLASSES, classify, diagnose, main
-from fusion.evaluate import EvalPair
+from fusion.eval_results import EvalPair
 from fusion.merge import MergeConfig
 from fusion.synthetic import make_pair
 

@@ -8,22 +8,25 @@ import numpy as np
 import pytest
 
 from fusion import evaluate as evaluate_module
-from fusion.evaluate import (
+from fusion.eval_results import (
     ROTATION_OK_DEG,
     TRANSLATION_OK_M,
     EvalPair,
+    is_success,
+    oracle_transform,
+    summarise,
+)
+from fusion.evaluate import (
     check_exhaustive,
     evaluate,
-    is_success,
     load_pair_dir,
     main,
-    oracle_transform,
     parse_methods,
-    summarise,
     synthetic_pairs,
 )
 from fusion.synthetic import make_pair
 from topo import TopoMap
+from topo.fileio import atomic_write_json
 
 
 def test_success_needs_both_errors_strictly_below_the_thresholds():
@@ -144,7 +147,7 @@ def test_reads_a_map_pair_dataset(tmp_path):
     import fusion.pairs as pairs_mod
 
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
-    pairs_mod.atomic_write_json(tmp_path / "dataset.json",
+    atomic_write_json(tmp_path / "dataset.json",
                                 {"format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
     for i, kind in enumerate(["overlap", "disjoint"]):
         p = make_pair(np.random.default_rng(i), overlap=0.8, kind=kind, nodes=(25, 25))
@@ -168,7 +171,7 @@ def test_grid_methods_need_grids():
 
 
 def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
-    from fusion.evaluate import Record
+    from fusion.eval_results import Record
 
     err = (0.5, 0.1) if right else (30.0, 3.0)
     return Record(name, "m", kind, overlap, None, 10.0, conf >= 0.5, *err,
@@ -176,7 +179,7 @@ def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
 
 
 def test_threshold_sweep_counts_what_each_threshold_accepts():
-    from fusion.evaluate import calibration_summary, is_right, threshold_sweep
+    from fusion.eval_results import calibration_summary, is_right, threshold_sweep
 
     records = [_rec("p0", 0.95, True), _rec("p1", 0.7, True), _rec("p2", 0.6, False),
                _rec("p3", 0.8, False, kind="no_overlap", overlap=0.0),
@@ -203,7 +206,7 @@ def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
     for folder in ("one", "two"):
         root = tmp_path / folder
-        pairs_mod.atomic_write_json(root / "dataset.json", {
+        atomic_write_json(root / "dataset.json", {
             "format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
         p = make_pair(np.random.default_rng(len(folder)), overlap=0.8, nodes=(20, 20))
         pairs_mod.write_pair(root, pairs_mod.MapPair(

@@ -277,18 +277,19 @@ def test_zero_length_paths_do_not_crash_the_evidence_kernel():
 
 
 def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
-    """The refitted coarse score (fusion._merge_kernels.refined_scores): a hypothesis 0.5° and
+    """The refitted coarse score (fusion.merge._search_kernels.refined_scores): a hypothesis 0.5° and
     0.1 m off the motion that made B from A lands on it after one fit, every B node exactly on
     its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
     scored 0. ``landed`` counts the nodes each paired before its refit."""
-    from fusion import _merge_kernels as K
-    from fusion.merge import _hit_grid, _prepare_pair
+    from fusion.merge import _search_kernels as K
+    from fusion.merge.hypotheses import hit_grid
+    from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
     truth = Rigid2D(0.7, np.array([3.0, -2.0]))
     b = a.transformed(truth.inverse())  # p_A = truth(p_B)
-    table, x0, y0, inv_cell = _hit_grid(_prepare_pair(a, a, cfg)[0], cfg.coarse_tolerance, cfg.eps)
+    table, x0, y0, inv_cell = hit_grid(prepare_pair(a, a, cfg)[0], cfg.coarse_tolerance, cfg.eps)
     theta = np.array([truth.theta + math.radians(0.5), truth.theta + 2.0])
     tx = np.array([truth.T[0] + 0.1, truth.T[0]])
     ty = np.array([truth.T[1] - 0.05, truth.T[1]])
@@ -306,18 +307,19 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
 def test_likelihood_rewards_tight_matches(pair):
     """MergeEvidence.likelihood: exact matches score the tightest spread's full log-ratio each;
     the same matches 0.3 m off score less (a chance-like distance), and the score with them."""
-    from fusion import _merge_kernels as K
-    from fusion.merge import _evaluate, _prepare_pair
+    from fusion.merge import _evidence_kernels as K
+    from fusion.merge.evidence import evaluate
+    from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
     truth = Rigid2D(1.1, np.array([-4.0, 2.5]))
-    pa, pb = _prepare_pair(a, a.transformed(truth.inverse()), cfg)
-    exact = _evaluate(pa, pb, truth.theta, truth.T, cfg).evidence
+    pa, pb = prepare_pair(a, a.transformed(truth.inverse()), cfg)
+    exact = evaluate(pa, pb, truth.theta, truth.T, cfg).evidence
     s2 = 2 * K.LIKELIHOOD_SIGMAS[0] ** 2
     assert exact.inliers == a.n_nodes
     assert exact.likelihood == pytest.approx(a.n_nodes * math.log(0.9 * cfg.eps**2 / s2 + 0.1))
-    off = _evaluate(pa, pb, truth.theta, truth.T + np.array([0.3, 0.0]), cfg).evidence
+    off = evaluate(pa, pb, truth.theta, truth.T + np.array([0.3, 0.0]), cfg).evidence
     assert off.likelihood < 0.5 * exact.likelihood
     assert off.score < exact.score
 
@@ -325,10 +327,10 @@ def test_likelihood_rewards_tight_matches(pair):
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_path_field_is_the_distance_to_the_nearest_segment(seed):
-    """fusion._merge_kernels.path_field against the obvious computation: every cell centre's
+    """fusion.merge._prepare_kernels.path_field against the obvious computation: every cell centre's
     squared distance to every segment (horizontal, vertical and zero-length ones included),
     capped at reach²."""
-    from fusion import _merge_kernels as K
+    from fusion.merge import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     seg = rng.uniform(0.0, 12.0, (9, 4))
@@ -347,7 +349,7 @@ def test_path_field_is_the_distance_to_the_nearest_segment(seed):
 
 
 def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
-    """fusion._merge_kernels.path_field as it was written before its rows were laid out first
+    """fusion.merge._prepare_kernels.path_field as it was written before its rows were laid out first
     (54fa37b), in plain Python: each row's extent, then its cells, one row after the other."""
     d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
     for ux, uy, wx, wy in seg.tolist():
@@ -386,10 +388,10 @@ def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_path_field_is_the_row_by_row_walk_bit_for_bit(seed):
-    """fusion._merge_kernels.path_field lays a segment's rows out before walking them, for
+    """fusion.merge._prepare_kernels.path_field lays a segment's rows out before walking them, for
     speed: the same raster, bit for bit, as walking one row after the other (grid-aligned
     coordinates, so that horizontal, vertical, zero-length and shared-end segments occur)."""
-    from fusion import _merge_kernels as K
+    from fusion.merge import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     seg = np.round(rng.uniform(0.0, 12.0, (12, 4)) * 2.5) / 2.5
@@ -415,29 +417,31 @@ def test_path_evidence_counts_paths_on_and_beside_the_other_maps():
     each other's (the raster's cells, PATH_CELL wide, cost a few tenths of the soft weight);
     moved 1.2 m aside the corridors run beside each other (path_off), and only the branches
     that still overlap agree."""
-    from fusion.merge import _evaluate, _prepare_pair
+    from fusion.merge.evidence import evaluate
+    from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
-    a, b = _prepare_pair(_corridors(), _corridors(), cfg)
-    same = _evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
+    a, b = prepare_pair(_corridors(), _corridors(), cfg)
+    same = evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
     assert 0.8 * 48.0 < same.path_agree <= 48.0 and same.path_off == 0.0
-    a, b = _prepare_pair(_corridors(), _corridors(1.2), cfg)
-    aside = _evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
+    a, b = prepare_pair(_corridors(), _corridors(1.2), cfg)
+    aside = evaluate(a, b, 0.0, np.zeros(2), cfg).evidence
     assert aside.path_off > 12.0 and aside.path_agree < 0.6 * same.path_agree  # the 2 × 12 m spines
 
 
 def test_path_evidence_follows_polylines():
     """A path's polyline, not the straight line between its nodes, is what lies on the other
     map: a path bowed 1.5 m out does not agree with a straight one; the same bow does."""
-    from fusion.merge import _evaluate, _prepare_pair
+    from fusion.merge.evidence import evaluate
+    from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]]
     bow = [np.array([[0.0, 0.0], [5.0, 1.5], [10.0, 0.0]]), np.array([[10.0, 0.0], [10.0, 5.0]])]
     straight_map = TopoMap.from_arrays(xy, [[0, 1], [1, 2]])
     bowed_map = TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=bow)
-    ev_bow = _evaluate(*_prepare_pair(bowed_map, bowed_map, cfg), 0.0, np.zeros(2), cfg).evidence
-    ev_mixed = _evaluate(*_prepare_pair(straight_map, bowed_map, cfg), 0.0, np.zeros(2),
+    ev_bow = evaluate(*prepare_pair(bowed_map, bowed_map, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_mixed = evaluate(*prepare_pair(straight_map, bowed_map, cfg), 0.0, np.zeros(2),
                          cfg).evidence
     assert ev_mixed.path_agree < ev_bow.path_agree - 10.0
     assert ev_mixed.path_off > 5.0 and ev_bow.path_off == 0.0
@@ -472,18 +476,19 @@ def test_final_fit_uses_the_paths(monkeypatch):
     """The final least-squares fit pairs B's path points with A's paths: B's nodes off by noise
     but its polylines where the corridors are pull the fit onto the truth (identity here) closer
     than the nodes alone."""
-    import fusion.merge as merge
+    import fusion.merge.refine as refine
+    from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = _corridors()
     rng = np.random.default_rng(4)
     xy = a.xy + rng.normal(0.0, 0.15, a.xy.shape)
     exact = [np.array([a.xy[u], a.xy[v]]) for u, v in a.edges]
-    pa, pb = merge._prepare_pair(a, TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
+    pa, pb = prepare_pair(a, TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
     matches = np.column_stack([np.arange(a.n_nodes), np.arange(a.n_nodes)])
-    theta, t = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
-    monkeypatch.setattr(merge, "PATH_FIT_WEIGHT", 0.0)
-    theta0, t0 = merge._least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    monkeypatch.setattr(refine, "PATH_FIT_WEIGHT", 0.0)
+    theta0, t0 = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
     assert abs(theta) < 0.5 * abs(theta0)
     assert np.linalg.norm(t) < np.linalg.norm(t0)
 
@@ -492,14 +497,15 @@ def test_pixel_fine_polylines_are_read_as_chords():
     """Extracted maps carry a polyline point per grid cell; the path evidence reads them as
     chords about PATH_CHORD long that keep each polyline's ends and stay on its pixels, so a
     pixel-fine map scores like the same map drawn with straight pieces."""
-    from fusion.merge import PATH_CHORD, _evaluate, _prepare_pair, _segments
+    from fusion.merge.evidence import evaluate
+    from fusion.merge.prepare import PATH_CHORD, path_segments, prepare_pair
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
     fine = [np.stack([np.arange(0.0, 6.05, 0.1), np.zeros(61)], 1),
             np.stack([np.full(41, 6.0), np.arange(0.0, 4.05, 0.1)], 1)]
     m = TopoMap.from_arrays(xy, [[0, 1], [1, 2]], paths=fine)
-    chords = _segments(m)
+    chords = path_segments(m)
     lengths = np.hypot(chords[:, 2] - chords[:, 0], chords[:, 3] - chords[:, 1])
     assert 25 <= len(chords) <= 27 and lengths.max() <= PATH_CHORD + 0.1 + 1e-9  # 15 + 10
     assert lengths.sum() == pytest.approx(10.0)
@@ -507,13 +513,14 @@ def test_pixel_fine_polylines_are_read_as_chords():
     assert [0.0, 0.0] in starts and [6.0, 0.0] in ends and [6.0, 0.0] in starts
     assert [6.0, 4.0] in ends
     plain = TopoMap.from_arrays(xy, [[0, 1], [1, 2]])
-    ev_fine = _evaluate(*_prepare_pair(m, m, cfg), 0.0, np.zeros(2), cfg).evidence
-    ev_plain = _evaluate(*_prepare_pair(plain, plain, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_fine = evaluate(*prepare_pair(m, m, cfg), 0.0, np.zeros(2), cfg).evidence
+    ev_plain = evaluate(*prepare_pair(plain, plain, cfg), 0.0, np.zeros(2), cfg).evidence
     assert ev_fine.path_agree == pytest.approx(ev_plain.path_agree, rel=0.05)
 
 
 def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
-    """The numpy form of fusion._merge_kernels.polyline_chords (what merge._segments was)."""
+    """The numpy form of fusion.merge._prepare_kernels.polyline_chords (what
+    fusion.merge.prepare.path_segments was)."""
     pts = np.concatenate(paths).astype(np.float64)
     sizes = np.array([len(q) for q in paths])
     last = np.cumsum(sizes) - 1
@@ -537,10 +544,10 @@ def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), chord=st.sampled_from([0.05, 0.4, 1.3]))
 def test_polyline_chords_are_the_numpy_form(seed, chord):
-    """fusion._merge_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
+    """fusion.merge._prepare_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
     (cumulative arc length, a chord end at the first point past each multiple of ``chord``),
     single-point polylines and repeated points included."""
-    from fusion import _merge_kernels as K
+    from fusion.merge import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     paths = [np.cumsum(rng.normal(0.0, 0.2, (int(rng.integers(1, 40)), 2)), axis=0)

@@ -10,7 +10,6 @@ from fusion.pairs import (
     DatasetError,
     GridSnapshot,
     MapPair,
-    atomic_write_json,
     load_pairs,
     pair_files,
     pair_path,
@@ -19,6 +18,7 @@ from fusion.pairs import (
     write_pair,
 )
 from topo import TopoMap
+from topo.fileio import atomic_write_json
 
 
 def make_pair(pair_id: int, rng: np.random.Generator, with_paths: bool = True) -> MapPair:
@@ -96,7 +96,7 @@ def test_interrupted_write_leaves_only_a_temp_file(tmp_path, monkeypatch):
     def crash(src, dst):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("topo._io.os.replace", crash)
+    monkeypatch.setattr("topo.fileio.os.replace", crash)
     with pytest.raises(KeyboardInterrupt):
         write_pair(root, make_pair(1, np.random.default_rng(3)))
     monkeypatch.undo()

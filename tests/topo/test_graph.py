@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from motion import Motion
 
-from fusion import Rigid2D
 from topo import KIND_LABELS, NodeKind, TopoMap
 
 T_XY = [[0.0, 0.0], [2.0, 0.0], [4.0, 0.0], [2.0, 3.0]]
@@ -88,7 +88,7 @@ def test_networkx_round_trip(m):
 
 @given(topomaps(with_paths=True), st.floats(-7, 7), st.floats(-20, 20), st.floats(-20, 20))
 def test_transformed_is_rigid(m, theta, tx, ty):
-    t = Rigid2D(theta, (tx, ty))
+    t = Motion(theta, (tx, ty))
     moved = m.transformed(t)
     np.testing.assert_allclose(moved.xy, t.apply(m.xy))
     np.testing.assert_allclose(moved.transformed(t.inverse()).xy, m.xy, atol=1e-9)

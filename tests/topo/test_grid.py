@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from motion import Motion
 
-from fusion import Rigid2D
 from topo.grid import CellState, OccupancyGrid
 
 BETA = math.radians(7.5)
@@ -84,7 +84,7 @@ def test_transformed_and_union():
     a = OccupancyGrid(0.1, (-6, -6, 6, 6))
     b = a.empty_like()
     b.update((0.0, 0.0, 0.0), [3.0], [0.0], 5.0, BETA)
-    t = Rigid2D.from_degrees(90.0, (0.0, 0.0))
+    t = Motion(math.pi / 2)
     moved = b.transformed(t, into=a)
     # the beam along +x in B lies along +y once moved
     cy, cx = moved.world_to_cell([0.0, 2.0])[0]
@@ -173,7 +173,7 @@ def test_bad_extent_and_combining_arguments():
     with pytest.raises(TypeError, match="rigid must have apply"):
         g.transformed((0.0, 0.0, 0.0))
     with pytest.raises(TypeError, match="into must be an OccupancyGrid"):
-        g.transformed(Rigid2D(), into=np.zeros((40, 40)))
+        g.transformed(Motion(), into=np.zeros((40, 40)))
     with pytest.raises(TypeError, match="other must be an OccupancyGrid"):
         g.union(np.zeros((40, 40)))
 

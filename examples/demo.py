@@ -3,6 +3,8 @@
 Prints the coverage and how good the map merge was, writes the last frame to ``out/demo.png``
 and a short GIF (every 20th step) to ``out/demo.gif``. The explorers are ``agents.scripted``
 ones (``--explorer``, default ``coordinated_frontier``).
+
+    python examples/demo.py [--out out] [--seed 0] [--explorer NAME]
 """
 
 from __future__ import annotations
@@ -16,9 +18,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agents.scripted import make_team  # noqa: E402
+from agents.team import make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-from topo._io import atomic_write  # noqa: E402
+from topo.fileio import atomic_write  # noqa: E402
 
 
 def main() -> None:
@@ -28,7 +30,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out"))
     parser.add_argument("--no-gif", action="store_true")
     parser.add_argument("--explorer", default="coordinated_frontier",
-                        help="agents.scripted explorer driving both robots")
+                        help="agents.team.EXPLORERS name of the explorer driving both robots")
     args = parser.parse_args()
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     import imageio.v3 as iio

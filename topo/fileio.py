@@ -1,6 +1,6 @@
 """File writing shared by every package: atomic writes (write to a temporary file in the target's
-folder, flush and fsync it, then rename it into place — a file exists whole or not at all) and an
-exclusive lock file (one writer of a folder at a time)."""
+folder, flush and fsync it, then rename it into place — a file exists whole or not at all), JSON
+written that way, and an exclusive lock file (one writer of a folder at a time)."""
 
 from __future__ import annotations
 
@@ -41,6 +41,13 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (:func:`atomic_write`)."""
     return atomic_write(path, lambda fh: fh.write(data))
+
+
+def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> Path:
+    """JSON-encode ``obj`` (indented, sorted keys) and write it atomically; returns the path.
+    ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
+    text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
+    return atomic_write_bytes(path, text.encode())
 
 
 class LockHeld(RuntimeError):

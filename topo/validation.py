@@ -1,13 +1,19 @@
-"""Input validation shared by topo and fusion: every error names the argument, the value and
-what is allowed (STYLE.md §8)."""
+"""Input validation shared by every package: every error names the argument, the value and what
+is allowed (STYLE.md §8); :func:`config_from` turns plain dicts into the frozen config
+dataclasses."""
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
+from collections.abc import Mapping
+from typing import Any, TypeVar
 
 import numpy as np
 
 _NOT_ARRAYS = (str, bytes, dict, set, frozenset)
+
+C = TypeVar("C")
 
 
 def _describe(value: object) -> str:
@@ -66,3 +72,27 @@ def check_int(value: object, name: str, *, low: int | None = None) -> int:
     if low is not None and out < low:
         raise ValueError(f"{name} must be >= {low}, got {out}")
     return out
+
+
+def config_from(cls: type[C], value: Any, name: str = "config") -> C:
+    """``value`` as a ``cls`` config dataclass: ``None`` → the defaults, a ``cls`` as is, a
+    mapping → ``cls(**value)`` (the one dict-to-config adapter of every package's configs).
+
+    Raises:
+        ValueError: a key that is not a field of ``cls`` (the message lists the allowed ones),
+            or an invalid field value (``cls.__post_init__``).
+        TypeError: anything else than ``None``, a ``cls`` or a mapping.
+    """
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        allowed = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(str(k) for k in value if k not in allowed)
+        if unknown:
+            raise ValueError(f"{name} has unknown keys {unknown}; allowed: {allowed}")
+        return cls(**value)
+    raise TypeError(
+        f"{name} must be a {cls.__name__}, a dict of its fields or None, got {type(value).__name__}"
+    )

@@ -5,13 +5,16 @@ a 7-vertex map B whose true relation is the paper's R (≈ 17.44°) and T = (−
 Prints, for each method, the recovered R and T, the error against the truth, iterations /
 evaluations and time; writes ``out/paper_fig8_merged.png`` and ``out/paper_fig9_convergence.png``.
 
-    python benchmarks/paper_example.py [--out out]
+    python examples/paper_example.py [--out out]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import statistics
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -19,11 +22,21 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from _timing import median_time  # noqa: E402
 
 from fusion import Rigid2D, exhaustive_search, icp_svd, paper_example, similarity  # noqa: E402
 from fusion.paper import PAPER_ITERATIONS, PAPER_TAU  # noqa: E402
 from topo.plotting import equal_axes, kind_legend_handles, plot_topomap, save_figure  # noqa: E402
+
+
+def median_time(fn: Callable[[], object], repeats: int) -> float:
+    """Median wall time of ``fn()`` over ``repeats`` calls, after one warm-up call."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
 
 
 def fmt_rigid(t: Rigid2D) -> str:

@@ -1,15 +1,13 @@
-"""The README's demo script runs end to end and writes both figures."""
+"""The paper's example (``make demo``'s first step) runs end to end and writes both figures."""
 
 import importlib.util
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def load(name: str):
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # as when run as a script
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

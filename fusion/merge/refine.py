@@ -1,0 +1,45 @@
+"""Refinement of a found alignment: trimmed, gated ICP-SVD, then least-squares fits on matched
+nodes and on B's paths lying on A's."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.icp import icp_checked, rigid_fit
+from fusion.merge import _refine_kernels as RK
+from fusion.merge.config import MergeConfig
+from fusion.merge.evidence import Evaluated, evaluate
+from fusion.merge.prepare import PATH_CELL, PATH_FIT_WEIGHT, PATH_TOL, Prepared
+
+
+def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
+                  t: np.ndarray) -> tuple[float, np.ndarray]:
+    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
+    B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
+    paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
+    P, Q, w = RK.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
+                            PATH_FIT_WEIGHT, theta, t[0], t[1], PATH_TOL, pa.field,
+                            *pa.field_origin, PATH_CELL)
+    return rigid_fit(P, Q, w)
+
+
+def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Evaluated:
+    """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then least-squares
+    fits on mutually nearest nodes of any kinds within ``fit_eps`` (what the oracle does with
+    the true matches; a node at the edge of explored space may have another kind in each
+    map) and on B's path points lying on A's paths (:func:`least_squares`: long corridors fix
+    the rotation far better than the 3–6 nodes a small overlap shares)."""
+    best = start
+    if start.evidence.inliers >= 2:
+        trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))
+        icp = icp_checked(pa.xy, pb.xy, None, cfg.icp_max_iter, start.transform, 1e-9,
+                          cfg.eps, trim)  # the maps' nodes were checked by merge_maps
+        ev = evaluate(pa, pb, icp.transform.theta, icp.transform.T, cfg)
+        best = max((best, ev), key=Evaluated.key)
+    theta, t, moved = best.theta, best.t, False
+    for _ in range(3):
+        pairs = RK.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
+        if len(pairs) < 3:
+            break
+        theta, t, moved = *least_squares(pa, pb, pairs, theta, t), True
+    return evaluate(pa, pb, theta, t, cfg) if moved else best
