@@ -52,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs import two_robot_explore_v0  # noqa: E402
 from envs.two_robot_explore import env as env_module  # noqa: E402
-from envs.two_robot_explore import mapping, raycast, robot, sonar  # noqa: E402
+from envs.two_robot_explore import mapping, merging, raycast, robot, sonar  # noqa: E402
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,15 +164,15 @@ def breakdown(steps: int, seed: int = 0) -> tuple[dict[str, float], float]:
     """Seconds per stage over ``steps`` steps, and the whole run's seconds."""
     timer = StageTimer()
     env_cls = env_module.TwoRobotExploreEnv
-    timer.wrap(env_cls, "_parse_actions", "actions")
+    timer.wrap(env_module, "parse_actions", "actions")
     timer.wrap(env_cls, "_simulate", "physics (substeps)")
     timer.wrap(robot.Robot, "update_odometry", "odometry")
     timer.wrap(sonar.Sonar, "measure", "sonar ray casts")
     timer.wrap(mapping.RobotMap, "integrate", "grid updates (2 robot maps)")
     timer.wrap(mapping.SharedMap, "add", "shared map")
     timer.wrap(mapping.OracleCoverage, "add", "true coverage (sweeps)")
-    timer.wrap(mapping.RobotMap, "extract", "topo extraction (every 10)")
-    timer.wrap(env_module, "run_merge", "merge_maps (every 25)")
+    timer.wrap(mapping.RobotMap, "extract", "topo extraction (every 25)")
+    timer.wrap(merging, "run_merge", "merges (every 25)")
     timer.wrap(env_cls, "_rewards", "rewards/ends")
     timer.wrap(env_cls, "_observe", "observations")
     timer.wrap(env_cls, "_infos", "infos")

@@ -98,7 +98,7 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
             row["first_right"] = row["first_right"] or k
 
     out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
-    row.update(steps=out["steps"], drops=env.merge_drops)
+    row.update(steps=out["steps"], drops=env.merge_state().drops)
     return row
 
 

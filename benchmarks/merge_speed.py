@@ -139,16 +139,16 @@ def reference_times(rev: str, sizes: list[int], n_pairs: int, seed: int,
 
 
 def _env_merge_calls(steps: int) -> list[dict]:
-    """The arguments of every merge the environment makes (``mapping.run_merge``, default
+    """The arguments of every merge the environment makes (``merging.run_merge``, default
     config) in ``steps`` steps of seeds 0, 1, 2 under the fixed actions of
     ``benchmarks/_actions.py`` (its :func:`episode`), the grids copied as they were then."""
     from _actions import episode
 
-    from envs.two_robot_explore import env as env_module
+    from envs.two_robot_explore import merging
     from fusion.pairs import GridSnapshot
 
     calls: list[dict] = []
-    run_merge = env_module.run_merge
+    run_merge = merging.run_merge
 
     def recording(map_a, map_b, method, grid_a=None, grid_b=None, try_grids=False, **kwargs):
         grids = [GridSnapshot(np.array(g.states()), float(g.resolution),
@@ -156,13 +156,13 @@ def _env_merge_calls(steps: int) -> list[dict]:
         calls.append({"maps": (map_a, map_b), "grids": grids, "try_grids": try_grids})
         return run_merge(map_a, map_b, method, grid_a, grid_b, try_grids=try_grids, **kwargs)
 
-    env_module.run_merge = recording
+    merging.run_merge = recording
     try:
         for seed in (0, 1, 2):
             for _ in episode(seed, steps):
                 pass
     finally:
-        env_module.run_merge = run_merge
+        merging.run_merge = run_merge
     return calls
 
 

@@ -306,81 +306,43 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from envs.two_robot_explore._map_kernels import adjacency, block_fractions, nearest_nodes
-from envs.two_robot_explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
+from envs.two_robot_explore.actions import DISCRETE_ACTIONS, action_space, parse_actions
 from envs.two_robot_explore.config import EnvConfig
+from envs.two_robot_explore.global_state import (
+    STATE_MAP_SIZE,
+    STATE_SAMPLES,
+    STATE_SCALARS,
+    GlobalState,
+    state_space,
+)
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
     OracleCoverage,
     RobotMap,
     RobotMapSnapshot,
     SharedMap,
-    cell_indices,
     compose_pose,
-    run_merge,
+)
+from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES, MergeLoop, MergeState
+from envs.two_robot_explore.observations import (
+    MAX_CLEARANCE,
+    MAX_DEGREE,
+    N_NODE_FEATURES,
+    GraphEncoder,
+    observation_space,
 )
 from envs.two_robot_explore.raycast import RayCaster
 from envs.two_robot_explore.robot import Robot, build_space, simulate
 from envs.two_robot_explore.sonar import Sonar
 from envs.two_robot_explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
-from topo.graph import NodeKind, TopoMap
 
 AGENTS = ("robot_0", "robot_1")
 
-DISCRETE_ACTIONS = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [-1.0, 0.0]])
-"""``(v, ω)`` of each discrete action: stop, forward, turn left, turn right, backward."""
-
-MAX_DEGREE = 16
-"""Upper bound of the ``graph_nodes`` degree feature (larger degrees are clipped)."""
-
-MAX_CLEARANCE = 10.0
-"""Upper bound of the ``graph_nodes`` clearance feature, metres (larger values are clipped)."""
-
-N_NODE_FEATURES = 2 + len(NodeKind) + 3
-"""Per node: ``x, y``, the kind one-hot, degree, clearance, frontier flag (the manual)."""
-
-MERGE_SOURCES = ("none", "structural", "grid")
-"""The ``merge_source`` info's codes: what supplied the transform in use — the structural merge
-of the topological maps (checked by the grids in ``"hybrid"``) or the grid alignment."""
-
-MERGE_METHODS = ("none", *(m for m in CONFIG_MERGE_METHODS if m != "none"))
-"""The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
-the merge result that supplied the transform in use (``"none"``: no transform in use); the
-``mapping.merge_method`` values, "none" first."""
-
-STATE_MAP_SIZE = 32
-"""Side of the world-frame maps in :meth:`TwoRobotExploreEnv.state` (blocks per side)."""
-
-STATE_SAMPLES = 4
-"""Each state map block is the mean of ``STATE_SAMPLES²`` points sampled evenly inside it."""
-
-STATE_SCALARS = 12
-"""Entries of the state vector before its maps (manual, State)."""
-
-
-@dataclass(frozen=True, slots=True)
-class MergeState:
-    """The merge state at one env step (:meth:`TwoRobotExploreEnv.merge_state`).
-
-    Attributes:
-        transform: the robot-1 → robot-0 transform in use (``fusion.Rigid2D``, ``p_0 = R p_1 +
-            T``), ``None`` when none is (never merged, or dropped).
-        method: ``method`` of the merge result that supplied it (``"none"`` without one).
-        source: what supplied it: ``"structural"`` (the topological maps' merge) or ``"grid"``
-            (the grid alignment); ``"none"`` without one.
-        last: the last merge call's ``fusion.MergeResult`` (``None`` before the first).
-        merges: merge calls this episode; ``drops``: transforms dropped (the grids refuted them).
-        time_s: wall time of the last merge call, seconds (NaN before the first).
-    """
-
-    transform: Rigid2D | None
-    method: str
-    source: str
-    last: Any
-    merges: int
-    drops: int
-    time_s: float
+__all__ = ["AGENTS", "DISCRETE_ACTIONS", "MAX_CLEARANCE", "MAX_DEGREE", "MERGE_METHODS",
+           "MERGE_SOURCES", "N_NODE_FEATURES", "STATE_MAP_SIZE", "STATE_SAMPLES",
+           "STATE_SCALARS", "MergeState", "TwoRobotExploreEnv", "env", "parallel_env",
+           "raw_env"]
 
 
 @dataclass(slots=True)
@@ -417,7 +379,7 @@ class TwoRobotExploreEnv(ParallelEnv):
     (:class:`~envs.two_robot_explore.mapping.SharedMap`), ``oracle``
     (:class:`~envs.two_robot_explore.mapping.OracleCoverage`), ``frames`` (each robot's map
     frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
-    transform), ``merge`` (the last ``MergeResult``), ``merge_time_s``, ``steps``.
+    transform), ``merge`` (the last ``MergeResult``), ``steps``.
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
     the original would. A copy replays the episode since ``reset`` (manual, Copies), so
@@ -467,13 +429,12 @@ class TwoRobotExploreEnv(ParallelEnv):
             diag = math.hypot(*cfg.world.size)
         self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
         self._build_spaces()
-        self.state_space = self._state_space()
+        self.state_space = state_space()
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
-        self._merge_errors = None  # (transform, robot 1's topomap, truth, errors) last used
         self._snapshots: list[RobotMapSnapshot | None] = [None, None]  # this step's, if taken
         self._history: _History | None = None  # how this episode came about (Copies)
 
@@ -566,47 +527,13 @@ class TwoRobotExploreEnv(ParallelEnv):
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
         """One observation and one action space object per agent, built once."""
-        self._observation_spaces = {a: self._observation_space() for a in AGENTS}
-        self._action_spaces = {a: self._action_space() for a in AGENTS}
+        self._observation_spaces = {a: observation_space(self.config, self.frame_radius)
+                                    for a in AGENTS}
+        self._action_spaces = {a: action_space(self.config.action_type) for a in AGENTS}
         obs = self._observation_spaces[AGENTS[0]]
         self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
         self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
         self._odo_bound = float(self._obs_high["odometry"][0])  # R as a float32 value
-
-    def _observation_space(self) -> spaces.Dict:
-        cfg = self.config
-        r = self.frame_radius
-        n = cfg.mapping.max_nodes
-        size = cfg.mapping.local_map_size
-        f32 = np.float32
-        node_lo = np.zeros((n, N_NODE_FEATURES), dtype=f32)
-        node_hi = np.ones((n, N_NODE_FEATURES), dtype=f32)
-        node_lo[:, :2] = -2 * r
-        node_hi[:, :2] = 2 * r
-        node_hi[:, -3] = MAX_DEGREE
-        node_hi[:, -2] = MAX_CLEARANCE
-        return spaces.Dict({
-            "sonar": spaces.Box(0.0, 1.0, (len(cfg.sonar.angles),), f32),
-            "odometry": spaces.Box(np.array([-r, -r, -1, -1], f32), np.array([r, r, 1, 1], f32)),
-            "graph_nodes": spaces.Box(node_lo, node_hi, dtype=f32),
-            "graph_mask": spaces.Box(0.0, 1.0, (n,), f32),
-            "graph_adjacency": spaces.Box(0.0, 1.0, (n, n), f32),
-            "local_map": spaces.Box(0, 255, (1, size, size), np.uint8),
-            "teammate": spaces.Box(np.array([-2 * r, -2 * r, -1, -1, 0], f32),
-                                   np.array([2 * r, 2 * r, 1, 1, 1], f32)),
-        })
-
-    def _action_space(self) -> spaces.Space:
-        if self.config.action_type == "continuous":
-            return spaces.Box(-1.0, 1.0, (2,), np.float32)
-        return spaces.Discrete(len(DISCRETE_ACTIONS))
-
-    def _state_space(self) -> spaces.Box:
-        """The :meth:`state` vector's space (manual, State)."""
-        n = STATE_SCALARS + 3 * STATE_MAP_SIZE ** 2
-        low = np.zeros(n, dtype=np.float32)
-        low[[2, 3, 6, 7]] = -1.0  # cos, sin of the headings
-        return spaces.Box(low, np.ones(n, dtype=np.float32), dtype=np.float32)
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object every call)."""
@@ -633,6 +560,12 @@ class TwoRobotExploreEnv(ParallelEnv):
         self._max_cycles = self.config.max_cycles
         if self._history is not None:  # replayed by copies at this step
             self._history.max_cycles_changes.append((self.steps, self._max_cycles))
+
+    @property
+    def merge(self) -> Any:
+        """The last merge call's result (``None`` before the first; :meth:`merge_state`)."""
+        self._require_reset()
+        return self._merging.result
 
     @property
     def world(self) -> World:
@@ -689,24 +622,18 @@ class TwoRobotExploreEnv(ParallelEnv):
         self.shared = SharedMap(self.maps[0].geometry)
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
-        self.merge = None
-        self.merges = 0
-        self.merge_drops = 0
-        self._merge_method = "none"  # method of the result that supplied the transform in use
-        self._merge_source = "none"  # and what supplied it (MERGE_SOURCES)
-        self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
+        self._merging = MergeLoop(cfg.mapping)
         self._extracted_at = [0, 0]  # known cells of each map at its last extraction
-        self._merged_maps: tuple = (None, None)  # the topological maps of the last merge
-        self.merge_time_s = math.nan
         self.steps = 0
         self._snapshots = [None, None]
-        self._prepare_state()
+        self._state = GlobalState(world.extent, self.frames[0], self.oracle, self.shared)
         self._prev_collisions = [0, 0]
         self._shared_delta = 0
         self._own_delta = [0, 0]
         self._oracle_delta = 0
         self._coll_delta = [0, 0]
-        self._graph_cache: list[tuple] = [(None, None, None), (None, None, None)]
+        self._graphs = [GraphEncoder(cfg.mapping.max_nodes, self.frame_radius)
+                        for _ in range(2)]
         self.agents = list(AGENTS)
         self._ready = True
         self._sense_and_map(travelled=[0.0, 0.0])
@@ -754,7 +681,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             raise RuntimeError(
                 "step() called after the episode ended (all agents terminated or truncated); "
                 "call reset() to start a new episode")
-        self._advance(self._parse_actions(actions))
+        self._advance(parse_actions(actions, self.agents, AGENTS, self.config.action_type))
         rewards = self._rewards()
         terminations = self._terminations()
         truncations = self._truncations()
@@ -785,51 +712,6 @@ class TwoRobotExploreEnv(ParallelEnv):
     def _require_reset(self) -> None:
         if not self._ready:
             raise RuntimeError("call reset() before step(), render() or world")
-
-    def _parse_actions(self, actions: dict[str, Any]) -> list[tuple[float, float]]:
-        if not isinstance(actions, dict):
-            raise TypeError(f"actions must be a dict {{agent: action}}, got "
-                            f"{type(actions).__name__}")
-        agents = self.agents
-        if len(actions) == len(agents) and all(a in actions for a in agents):
-            # one action per live agent (the keys are distinct): nothing unknown or missing
-            return [self._parse_action(agent, actions[agent]) for agent in AGENTS]
-        unknown = sorted(str(a) for a in actions if a not in self.agents)
-        if unknown:
-            raise ValueError(f"actions has unknown or finished agents {unknown}; live agents: "
-                             f"{self.agents}")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"actions is missing agents {missing}; every live agent acts "
-                             f"every step")
-        return [self._parse_action(agent, actions[agent]) for agent in AGENTS]
-
-    def _parse_action(self, agent: str, action: Any) -> tuple[float, float]:
-        if self.config.action_type == "discrete":
-            if isinstance(action, (bool, np.bool_)) or not isinstance(
-                    action, (int, np.integer)) and not (
-                    isinstance(action, np.ndarray) and action.shape == ()
-                    and np.issubdtype(action.dtype, np.integer)):
-                raise TypeError(f"action of {agent} must be an int in [0, "
-                                f"{len(DISCRETE_ACTIONS)}), got {action!r}")
-            a = int(action)
-            if not 0 <= a < len(DISCRETE_ACTIONS):
-                raise ValueError(f"action of {agent} must be in [0, {len(DISCRETE_ACTIONS)}), "
-                                 f"got {a}")
-            v, w = DISCRETE_ACTIONS[a]
-            return float(v), float(w)
-        try:
-            arr = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"action of {agent} must be a numeric (v, w) pair, got "
-                            f"{action!r}") from exc
-        if arr.shape != (2,):
-            raise ValueError(f"action of {agent} must have shape (2,) (v, w), got shape "
-                             f"{arr.shape}")
-        v, w = arr.tolist()
-        if not (math.isfinite(v) and math.isfinite(w)):
-            raise ValueError(f"action of {agent} must be finite, got {[v, w]}")
-        return min(max(v, -1.0), 1.0), min(max(w, -1.0), 1.0)
 
     def _apply_actions(self, commands: list[tuple[float, float]]) -> None:
         rcfg = self.config.robot
@@ -875,61 +757,10 @@ class TwoRobotExploreEnv(ParallelEnv):
                         1.0 + cfg.mapping.topo_growth):
                     self._extracted_at[i] = rmap.n_ever
                     rmap.extract(cfg.mapping.topo)
-                    self._cache_graph(i)
+                    self._graphs[i].refresh(rmap.topomap)
 
     def _fuse(self) -> None:
-        try_grids = self._merge_due()
-        if try_grids is None:
-            return
-        self._install_merge(*run_merge(self.maps[0].topomap, self.maps[1].topomap,
-                                       self.config.mapping.merge_method, self.maps[0].grid,
-                                       self.maps[1].grid, try_grids=try_grids,
-                                       in_use=self.shared.transform,
-                                       accept_threshold=self.config.mapping.accept_threshold))
-
-    def _merge_due(self) -> bool | None:
-        """``None`` if no merge is due this step, else whether it also tries the grids (and
-        then counts it as tried)."""
-        mcfg = self.config.mapping
-        if not mcfg.merge_every or mcfg.merge_method == "none" or self.steps % mcfg.merge_every:
-            return None
-        # the structural merge needs 3 nodes a map; the grid alignment (hybrid) only grids
-        small = min(m.topomap.n_nodes for m in self.maps) < 3
-        if small and mcfg.merge_method != "hybrid":
-            return None
-        known = self.maps[0].n_ever + self.maps[1].n_ever
-        try_grids = bool(mcfg.grid_merge_every and self.steps % mcfg.grid_merge_every == 0
-                         and known >= self._grid_tried_at * (1.0 + mcfg.grid_merge_growth))
-        maps = (self.maps[0].topomap, self.maps[1].topomap)
-        unchanged = maps[0] is self._merged_maps[0] and maps[1] is self._merged_maps[1]
-        if (small or unchanged) and not try_grids:
-            return None  # no structural merge to try, or the same maps: the same answer
-        self._merged_maps = maps
-        if try_grids:
-            self._grid_tried_at = known
-        return try_grids
-
-    def _install_merge(self, result, refuted: str | None = None) -> None:
-        """Keep a merge's result; an accepted new transform re-warps the shared map, and one
-        the grids ``refuted`` (why, from ``run_merge``) is dropped: robot 0's map alone."""
-        self.merge = result
-        self.merges += 1
-        self.merge_time_s = float(result.time_s)
-        if result.accepted and (self.shared.transform is None
-                                or not result.transform.allclose(self.shared.transform)):
-            if result.method not in MERGE_METHODS:
-                raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
-                                   f"code; known: {list(MERGE_METHODS)}")
-            self._merge_method = result.method
-            # a hybrid result says what supplied it; any other method is the structural merge
-            self._merge_source = getattr(result, "supplied_by", None) or "structural"
-            self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1],
-                                                      result.transform)
-        elif refuted is not None and self.shared.transform is not None:
-            self.merge_drops += 1
-            self._merge_method = "none"
-            self._merge_source = "none"
-            self._shared_delta += self.shared.rebuild(self.maps[0], self.maps[1], None)
+        self._shared_delta += self._merging.step(self.steps, self.maps, self.shared)
 
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:
@@ -988,7 +819,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         r = self._odo_bound
         odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
-        nodes, mask, adj = self._graph_obs(i, odo, c, s)
+        nodes, mask, adj = self._graphs[i].encode(self.maps[i].topomap, ox, oy, c, s)
         teammate = np.zeros(5, dtype=np.float32)
         if across is not None:
             peer = across[1 - i]
@@ -1006,35 +837,6 @@ class TwoRobotExploreEnv(ParallelEnv):
             "teammate": teammate,
         }
 
-    def _graph_obs(self, i: int, odo: np.ndarray, c: float, s: float):
-        n_max = self.config.mapping.max_nodes
-        nodes = np.zeros((n_max, N_NODE_FEATURES), dtype=np.float32)
-        mask = np.zeros(n_max, dtype=np.float32)
-        topo: TopoMap = self.maps[i].topomap
-        n = topo.n_nodes
-        if n == 0:
-            return nodes, mask, np.zeros((n_max, n_max), dtype=np.float32)
-        static, last_order, last_adj = self._graph_cache[i]
-        order = nearest_nodes(topo.xy, float(odo[0]), float(odo[1]), c, s, static,
-                              2 * self.frame_radius, nodes, mask)
-        if last_order is not None and order.tobytes() == last_order.tobytes():
-            return nodes, mask, last_adj.copy()
-        adj = np.zeros((n_max, n_max), dtype=np.float32)
-        if topo.n_edges:
-            adjacency(order, topo.edges, n, adj)
-        self._graph_cache[i] = (static, order, adj)
-        return nodes, mask, adj.copy()
-
-    def _cache_graph(self, i: int) -> None:
-        """Per-node features that change only when the map is re-extracted."""
-        topo = self.maps[i].topomap
-        static = np.zeros((topo.n_nodes, N_NODE_FEATURES - 2), dtype=np.float32)
-        static[np.arange(topo.n_nodes), topo.kinds] = 1.0
-        static[:, -3] = np.minimum(topo.degree(), MAX_DEGREE)
-        static[:, -2] = np.minimum(topo.clearance, MAX_CLEARANCE)
-        static[:, -1] = topo.frontier
-        self._graph_cache[i] = (static, None, None)
-
     def _local_map(self, i: int, across: list[np.ndarray] | None) -> np.ndarray:
         own = self.maps[i]
         other = None
@@ -1047,19 +849,8 @@ class TwoRobotExploreEnv(ParallelEnv):
     def merge_errors(self) -> tuple[float, float]:
         """Rotation error (degrees) and translation error (metres, at the centroid of robot
         1's map) of the merge transform in use against ground truth; NaN before a merge."""
-        t = self.shared.transform
-        if t is None:
-            return math.nan, math.nan
-        topo, truth = self.maps[1].topomap, self.true_merge
-        cached = self._merge_errors
-        if cached is not None and cached[0] is t and cached[1] is topo and cached[2] is truth:
-            return cached[3]  # same transform, map and truth: the same errors
-        xy = topo.xy
-        at = xy.mean(axis=0) if len(xy) else self.robots[1].odometry[:2]
-        errors = (math.degrees(t.rotation_error(truth)), t.translation_error(truth, at))
-        # with no nodes the errors are measured at the moving robot: not kept
-        self._merge_errors = (t, topo, truth, errors) if len(xy) else None
-        return errors
+        return self._merging.errors(self.shared.transform, self.maps[1].topomap,
+                                    self.true_merge, self.robots[1].odometry[:2])
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         """Small, numeric, comparable infos (manual, Infos): no NaN, no wall clock, no live
@@ -1073,13 +864,13 @@ class TwoRobotExploreEnv(ParallelEnv):
             "shared_coverage": self.shared.area / self._world_area,
             "overlap": self.oracle.overlap,
             "merge_accepted": in_use,
-            "merge_method": MERGE_METHODS.index(self._merge_method),
-            "merge_source": MERGE_SOURCES.index(self._merge_source),
+            "merge_method": MERGE_METHODS.index(self._merging.method),
+            "merge_source": MERGE_SOURCES.index(self._merging.source),
             "merge_errors_valid": in_use,
             "merge_rotation_error_deg": rot_err,
             "merge_translation_error_m": trans_err,
-            "merges": self.merges,
-            "merge_drops": self.merge_drops,
+            "merges": self._merging.calls,
+            "merge_drops": self._merging.drops,
         }
         out = {}
         for i, a in enumerate(AGENTS):
@@ -1120,56 +911,14 @@ class TwoRobotExploreEnv(ParallelEnv):
         """The merge state now (:class:`MergeState`: the transform in use, the method that
         supplied it, the last merge result, counts, the last merge call's wall time)."""
         self._require_reset()
-        return MergeState(self.shared.transform, self._merge_method, self._merge_source,
-                          self.merge, self.merges,
-                          self.merge_drops, self.merge_time_s)
-
-    def _prepare_state(self) -> None:
-        """Per episode: the world points :meth:`state` samples, as cell indices of the world
-        grid and of the shared map (robot 0's frame), and the static reachable channel."""
-        s, k = STATE_MAP_SIZE, STATE_SAMPLES
-        x0, y0, x1, y1 = self._world.extent
-        # sample (a, b) of block (r, c) at row r·k + a, column c·k + b of an (s·k)² lattice
-        # (row 0 at the bottom, like the grids), listed block by block so that a block's
-        # samples are contiguous
-        r, c, a, b = np.meshgrid(*(np.arange(n) for n in (s, s, k, k)), indexing="ij")
-        points = np.stack([x0 + ((c * k + b).ravel() + 0.5) * ((x1 - x0) / (s * k)),
-                           y0 + ((r * k + a).ravel() + 0.5) * ((y1 - y0) / (s * k))], axis=1)
-        self._state_world_cells = cell_indices(points, self.oracle.geometry)
-        self._state_shared_cells = cell_indices(self.frames[0].inverse().apply(points),
-                                                self.shared.geometry)
-        self._state_reachable = self._state_blocks(self.oracle.reachable,
-                                                   self._state_world_cells)
-
-    @staticmethod
-    def _state_blocks(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
-        """Mean of ``mask`` at the sampled ``cells`` (listed block by block; ``-1``: outside,
-        False) per state block, ``(STATE_MAP_SIZE**2,)`` float32, row-major, row 0 at the
-        bottom."""
-        out = np.empty(STATE_MAP_SIZE ** 2, dtype=np.float32)
-        block_fractions(mask, cells, out)
-        return out
+        return self._merging.state(self.shared.transform)
 
     def state(self) -> np.ndarray:
         """The global state for centralised critics: a ``(STATE_SCALARS + 3 ·
         STATE_MAP_SIZE²,)`` float32 vector in :attr:`state_space` (manual, State)."""
         self._require_reset()
-        x0, y0, x1, y1 = self._world.extent
-        head = np.zeros(STATE_SCALARS, dtype=np.float64)
-        for i, robot in enumerate(self.robots):
-            x, y, th = robot._pose()
-            head[4 * i: 4 * i + 4] = ((x - x0) / (x1 - x0), (y - y0) / (y1 - y0),
-                                      math.cos(th), math.sin(th))
-        head[[0, 1, 4, 5]] = np.clip(head[[0, 1, 4, 5]], 0.0, 1.0)
-        head[8:] = (self.oracle.fraction, self.oracle.overlap,
-                    float(self.shared.transform is not None),
-                    min(self.steps / self._max_cycles, 1.0))
-        return np.concatenate([
-            head.astype(np.float32),
-            self._state_blocks(self.oracle.union, self._state_world_cells),
-            self._state_blocks(self.shared.ever, self._state_shared_cells),
-            self._state_reachable,
-        ])
+        return self._state.vector([r._pose() for r in self.robots], self.oracle, self.shared,
+                                  self.steps, self._max_cycles)
 
     # ------------------------------------------------------------------ render, close
     def render(self) -> np.ndarray | None:

@@ -1,5 +1,5 @@
-"""Mapping and fusion in the loop: per-robot grids and topological maps, the shared map, and
-the bookkeeping of covered area.
+"""Mapping in the loop: per-robot grids and topological maps, the shared map, and the
+bookkeeping of covered area.
 
 Frames: robot ``i`` maps in its own start frame (its odometry frame). The **shared map** lives
 in robot 0's frame ("A"); robot 1's map ("B") enters it through the latest accepted
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -417,28 +416,3 @@ def compose_pose(transform: Rigid2D, pose: np.ndarray) -> np.ndarray:
     xy = transform.R @ pose[:2] + transform.T
     th = pose[2] + transform.theta
     return np.array([xy[0], xy[1], math.atan2(math.sin(th), math.cos(th))])
-
-
-def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
-              grid_b: OccupancyGrid | None = None, try_grids: bool = False,
-              in_use: Rigid2D | None = None, accept_threshold: float | None = None
-              ) -> tuple[Any, str | None]:
-    """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"``
-    (the grids are aligned only when ``try_grids``; with ``in_use``, the transform the env
-    uses now, ``fusion.hybrid.recheck``; accepted when the confidence reaches
-    ``accept_threshold``, ``None``: the library's default), else ``fusion.merge_maps(map_a,
-    map_b, method=method)``. Returns the result and why the grids refute ``in_use``
-    (``None``: they do not, or were not asked)."""
-    if method == "hybrid":
-        from fusion.grid_merge import GridMergeConfig
-        from fusion.hybrid import hybrid_merge, recheck
-
-        config = (None if accept_threshold is None
-                  else GridMergeConfig(accept_threshold=accept_threshold))
-        if try_grids and in_use is not None:
-            return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
-        return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
-                            config=config), None
-    from fusion.merge import merge_maps
-
-    return merge_maps(map_a, map_b, method=method), None

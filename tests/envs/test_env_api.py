@@ -48,9 +48,9 @@ def test_rgb_array_shows_robot_1_in_the_shared_panel_once_merged():
         par.step({a: np.array([0.8, 0.2]) for a in par.agents})
     assert par.maps[1].topomap.n_nodes
     par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
-    par.merge = SimpleNamespace(accepted=True, merged=par.maps[0].topomap)  # robot 0's graph
+    par._merging.result = SimpleNamespace(accepted=True, merged=par.maps[0].topomap)  # robot 0's graph
     own_graph = par.render()
-    par.merge = SimpleNamespace(accepted=False, merged=par.maps[0].topomap)  # kept transform
+    par._merging.result = SimpleNamespace(accepted=False, merged=par.maps[0].topomap)  # kept transform
     both_graphs = par.render()
     assert both_graphs.shape == own_graph.shape and not np.array_equal(both_graphs, own_graph)
     par.close()
