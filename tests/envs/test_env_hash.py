@@ -21,19 +21,30 @@ from envs import two_robot_explore_v0
 
 STEPS = 1200
 EXPECTED = {
-    0: ("792cfed240603f8b", "3cb292344cdd5187"),
-    4: ("798351966db11c3c", "e968ba5b8691e199"),
+    0: ("792cfed240603f8b", "8c0221db67a59a53"),
+    4: ("798351966db11c3c", "6a8310c3d65f5590"),
 }
 """``seed: (observation digest, infos digest)`` after :data:`STEPS` steps."""
 
 SCALARS = (int, float, bool, str)
 
 
+def _rounded(value):
+    """Float64 infos to 10 significant digits: their last bits (merge errors, poses) move with
+    numpy's and scipy's releases, which must not fail this test; the float32 observations are
+    hashed exactly."""
+    if isinstance(value, float):
+        return float(f"{value:.10g}")
+    if isinstance(value, np.ndarray) and value.dtype == np.float64:
+        return np.array([float(f"{v:.10g}") for v in value.ravel()]).reshape(value.shape)
+    return value
+
+
 def fingerprint(seed: int, steps: int = STEPS) -> tuple[str, str]:
     """Running SHA-256 digests of ``steps`` steps of ``seed`` (a new random command every 10
     steps from ``default_rng(seed)``): of the observations, rewards, terminations, truncations
-    and topological maps, and of the infos (their scalars and array bytes) apart, so that a
-    change of the infos alone shows in the second only."""
+    and topological maps, and of the infos (their scalars and arrays, floats to 10 significant
+    digits) apart, so that a change of the infos alone shows in the second only."""
     par = two_robot_explore_v0.parallel_env(max_cycles=2000)
     par.reset(seed=seed)
     rng = np.random.default_rng(seed)
@@ -49,11 +60,11 @@ def fingerprint(seed: int, steps: int = STEPS) -> tuple[str, str]:
                 h.update(np.ascontiguousarray(obs[a][key]).tobytes())
             h.update(repr((rew[a], term[a], trunc[a])).encode())
             inf = info[a]
-            hi.update(repr([(key, inf[key]) for key in sorted(inf)
+            hi.update(repr([(key, _rounded(inf[key])) for key in sorted(inf)
                             if isinstance(inf[key], SCALARS)]).encode())
             for key in sorted(inf):
                 if isinstance(inf[key], np.ndarray):
-                    hi.update(np.ascontiguousarray(inf[key]).tobytes())
+                    hi.update(np.ascontiguousarray(_rounded(inf[key])).tobytes())
         for m in par.maps:
             tm = m.topomap
             for arr in (tm.xy, tm.kinds, tm.edges, tm.lengths, *(tm.paths or ())):
