@@ -75,6 +75,10 @@ class Args:
     """At the goals level, score every sector with one shared network
     (:class:`agents.policy.SectorPolicy`, or :class:`agents.rllib.TopoExplorerModule`'s
     sector head); ``False``: one linear layer from the context to the 8 logits."""
+    mask_sectors: bool = True
+    """With the sector scorer, never choose a sector without a reachable frontier (action
+    masking read from the ``frontiers`` observation); ``False`` lets the policy pick an empty
+    sector, where the planner falls back to the cheapest frontier anywhere."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
@@ -374,7 +378,8 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
                 clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
-                               "net_arch": {"pi": [64], "vf": [64]}},
+                               "net_arch": {"pi": [64], "vf": [64]},
+                               **({"mask_empty": args.mask_sectors} if sectors else {})},
             )
             if args.level == "goals":
                 model.goal_hold = args.hold  # saved with the model, read by SB3Explorer
@@ -420,7 +425,8 @@ def rllib_config(args: Args) -> Any:
 
     return rllib.ppo_config(
         env_config=args.env_config(), level=args.level, hold=args.hold,
-        sector_head=args.sector_head, seed=args.seed, num_env_runners=args.num_env_runners,
+        sector_head=args.sector_head, mask_sectors=args.mask_sectors, seed=args.seed,
+        num_env_runners=args.num_env_runners,
         envs_per_runner=args.envs_per_runner, train_batch_size=args.n_steps * args.n_envs,
         minibatch_size=args.batch_size, num_epochs=args.n_epochs, lr=args.learning_rate,
         gamma=args.gamma ** args.steps_per_decision, gae_lambda=args.gae_lambda,

@@ -10,10 +10,12 @@ global policy over a local planner):
   :data:`SECTORS` directions around the robot (0 ahead, counter-clockwise, 45° each). At each
   decision it plans to the cheapest frontier cluster whose centroid lies in that sector (the
   cheapest anywhere if that sector has none). :meth:`GoalFrontier.frontier_features` summarises
-  the frontier clusters per sector for the policy.
+  the frontier clusters per sector for the policy (:data:`FRONTIER_FEATURES`).
 * :class:`FrontierGoalEnv` — a PettingZoo ``ParallelEnv`` wrapper of ``two_robot_explore``
   whose action is a sector (``Discrete(8)``) held for ``hold`` env steps (the reward is their
-  sum) and whose observation adds ``frontiers`` (:data:`SECTORS` × 3) to the env's own.
+  sum) and whose observation adds ``frontiers`` (:data:`SECTORS` ×
+  ``len(FRONTIER_FEATURES)``) to the env's own. Its first column says which sectors hold a
+  reachable frontier: :class:`agents.policy.SectorPolicy` masks the others.
 * ``agents.SB3Explorer`` runs a policy trained on the wrapper on the plain env (same decisions
   every ``hold`` steps), so it evaluates and generates datasets like any explorer.
 * :class:`SectorRule` — the same decisions made by a fixed rule (always ahead, or a random
@@ -52,6 +54,13 @@ COST_SCALE = 20.0
 AREA_SCALE = 10.0
 """Frontier cluster area (m²) that maps to feature 1.0."""
 
+FRONTIER_FEATURES = ("reachable", "cost", "area", "cost_gap", "current")
+"""Columns of :meth:`GoalFrontier.frontier_features`, per sector: a reachable frontier
+cluster is there (0/1); the path cost to its cheapest one (``/ COST_SCALE``, 1 if none); the
+clusters' total area (``/ AREA_SCALE``); how much dearer than the cheapest frontier anywhere
+(``/ COST_SCALE``, 1 if none: 0 marks the sector ``Frontier`` would choose); whether the goal
+being driven to lies there (0/1: keeping it costs no turn-around)."""
+
 
 def sector_of(xy: np.ndarray, pose: np.ndarray) -> int:
     """The sector (0 ahead, CCW) in which point ``xy`` lies, seen from ``pose``."""
@@ -85,23 +94,31 @@ class GoalFrontier(Frontier):
         self.plan = None
 
     def frontier_features(self, info: Mapping[str, Any]) -> np.ndarray:
-        """``(SECTORS, 3)`` float32 in ``[0, 1]``, per sector: a reachable frontier cluster is
-        there (0/1), the path cost to the cheapest one (``/ COST_SCALE``; 1 if none), their
-        total area (``/ AREA_SCALE``)."""
+        """``(SECTORS, len(FRONTIER_FEATURES))`` float32 in ``[0, 1]``: the columns of
+        :data:`FRONTIER_FEATURES` for each sector, from this robot's map at ``info``'s
+        odometry pose."""
         pose = odometry_pose(info)
         fmap = self._frontier_map(info, pose)
         # the plan of the very next step reuses it (unless a goal was given up meanwhile)
         self._cached = ((len(self.given_up), self._steps + 1), fmap)
-        out = np.zeros((SECTORS, 3), dtype=np.float32)
-        out[:, 1] = 1.0
+        out = np.zeros((SECTORS, len(FRONTIER_FEATURES)), dtype=np.float32)
+        out[:, 1] = out[:, 3] = 1.0
+        goal = self._track.get("goal") if self.plan is not None else None
+        if goal is not None:
+            out[sector_of(goal, pose), 4] = 1.0
         if fmap is None:
             return out
         cell_area = fmap.resolution ** 2
-        for c in fmap.clusters(self.cfg.min_cluster_cells):
+        clusters = fmap.clusters(self.cfg.min_cluster_cells)
+        if not clusters:
+            return out
+        cheapest = min(c["cost"] for c in clusters)
+        for c in clusters:
             k = sector_of(c["centroid"], pose)
             out[k, 0] = 1.0
             out[k, 1] = min(out[k, 1], c["cost"] / COST_SCALE)
             out[k, 2] = min(out[k, 2] + c["size"] * cell_area / AREA_SCALE, 1.0)
+            out[k, 3] = min(out[k, 3], (c["cost"] - cheapest) / COST_SCALE)
         return out
 
     def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
@@ -197,7 +214,8 @@ class FrontierGoalEnv(ParallelEnv):
         inner = env.observation_space(self.possible_agents[0])
         self._obs_space = spaces.Dict({
             **inner.spaces,
-            "frontiers": spaces.Box(0.0, 1.0, (SECTORS, 3), dtype=np.float32),
+            "frontiers": spaces.Box(0.0, 1.0, (SECTORS, len(FRONTIER_FEATURES)),
+                                    dtype=np.float32),
         })
         self._act_space = spaces.Discrete(SECTORS)
         self._rng: np.random.Generator | None = None

@@ -139,13 +139,22 @@ class _SectorLatent(nn.Module):
         return self.value_net(features[:, :-self.n_raw])
 
 
+MASKED_LOGIT = -1e8
+"""Logit of a masked sector: probability 0 and a finite entropy (as ``sb3-contrib``'s
+``MaskableCategorical``)."""
+
+
 class _SectorScorer(nn.Module):
     """The action head of :class:`SectorPolicy`: logit of sector ``k`` =
-    ``MLP([context, frontiers[k], one_hot(k)])``, the same MLP for every sector."""
+    ``MLP([context, frontiers[k], one_hot(k)])``, the same MLP for every sector. With
+    ``mask_empty``, sectors whose first ``frontiers`` column (a reachable frontier is there) is
+    0 get :data:`MASKED_LOGIT`, unless no sector has one."""
 
-    def __init__(self, context_dim: int, sectors: int, row: int, hidden: int) -> None:
+    def __init__(self, context_dim: int, sectors: int, row: int, hidden: int,
+                 mask_empty: bool = False) -> None:
         super().__init__()
         self.context_dim, self.sectors, self.row = context_dim, sectors, row
+        self.mask_empty = bool(mask_empty)
         self.register_buffer("direction", torch.eye(sectors))
         self.net = nn.Sequential(nn.Linear(context_dim + row + sectors, hidden), nn.Tanh(),
                                  nn.Linear(hidden, 1))
@@ -155,7 +164,12 @@ class _SectorScorer(nn.Module):
         context = latent[:, :self.context_dim].unsqueeze(1).expand(b, self.sectors, -1)
         rows = latent[:, self.context_dim:].reshape(b, self.sectors, self.row)
         x = torch.cat([context, rows, self.direction.expand(b, -1, -1)], dim=2)
-        return self.net(x).squeeze(-1)
+        logits = self.net(x).squeeze(-1)
+        if not self.mask_empty:
+            return logits
+        empty = rows[..., 0] < 0.5
+        empty &= ~empty.all(dim=1, keepdim=True)
+        return logits.masked_fill(empty, MASKED_LOGIT)
 
 
 class SectorPolicy(MultiInputActorCriticPolicy):
@@ -164,11 +178,16 @@ class SectorPolicy(MultiInputActorCriticPolicy):
 
     ``net_arch`` may give ``pi`` / ``vf`` widths (one layer each, default 64); the scorer's
     hidden width is ``pi``'s. The action space must be ``Discrete(S)`` and the observation
-    must have ``frontiers`` of shape ``(S, F)``.
+    must have ``frontiers`` of shape ``(S, F)``. With ``mask_empty`` (the default), sectors
+    whose first ``frontiers`` column is 0 (no reachable frontier there) cannot be chosen: the
+    policy decides among the frontiers that exist instead of falling back to the cheapest one
+    (action masking, as ``sb3-contrib``'s ``MaskablePPO`` but read from the observation, so
+    saved policies need nothing else at inference).
     """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space,
-                 lr_schedule, net_arch: dict | None = None, **kwargs) -> None:
+                 lr_schedule, net_arch: dict | None = None, mask_empty: bool = True,
+                 **kwargs) -> None:
         if not isinstance(action_space, spaces.Discrete):
             raise TypeError(f"SectorPolicy needs a Discrete action space, got {action_space}")
         frontiers = observation_space.spaces.get("frontiers") if isinstance(
@@ -179,11 +198,15 @@ class SectorPolicy(MultiInputActorCriticPolicy):
         net_arch = net_arch or {"pi": [64], "vf": [64]}
         self._widths = (int(net_arch.get("pi", [64])[0]), int(net_arch.get("vf", [64])[0]))
         self._sectors, self._row = frontiers.shape
+        self._mask_empty = bool(mask_empty)
         kwargs.setdefault("features_extractor_class", TopoExplorerExtractor)
         kwargs["features_extractor_kwargs"] = {**kwargs.get("features_extractor_kwargs", {}),
                                                "pass_through": ("frontiers",)}
         super().__init__(observation_space, action_space, lr_schedule, net_arch=net_arch,
                          **kwargs)
+
+    def _get_constructor_parameters(self) -> dict:
+        return {**super()._get_constructor_parameters(), "mask_empty": self._mask_empty}
 
     def _build_mlp_extractor(self) -> None:
         pi, vf = self._widths
@@ -192,7 +215,7 @@ class SectorPolicy(MultiInputActorCriticPolicy):
     def _build(self, lr_schedule) -> None:
         super()._build(lr_schedule)
         pi = self._widths[0]
-        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi)
+        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty)
         if self.ortho_init:
             self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))
             self.init_weights(self.action_net.net[-1], gain=0.01)

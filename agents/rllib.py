@@ -78,9 +78,10 @@ POLICY_FILE = "topomerge_policy.json"
 MODULE_PATH = ("learner_group", "learner", "rl_module", POLICY_ID)
 """Where the shared module lies inside an algorithm checkpoint."""
 
-DEFAULT_MODEL_CONFIG = {"sector_head": False, "pi": 64, "vf": 64}
-"""``model_config`` of :class:`TopoExplorerModule`: the per-sector scorer at the goal level,
-and the widths of the actor's and the critic's layer (as ``train.py``'s SB3 ``net_arch``)."""
+DEFAULT_MODEL_CONFIG = {"sector_head": False, "mask_empty": True, "pi": 64, "vf": 64}
+"""``model_config`` of :class:`TopoExplorerModule`: the per-sector scorer at the goal level
+(masking sectors without a reachable frontier: ``mask_empty``), and the widths of the actor's
+and the critic's layer (as ``train.py``'s SB3 ``net_arch``)."""
 
 RLLIB_KEYS = frozenset({"vf_share_layers"})
 """``model_config`` keys RLlib's PPO adds itself; ignored (actor and critic always share the
@@ -241,7 +242,7 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
         if self.sector_head:
             sectors, row = frontiers.shape
             self.latent = _SectorLatent(n, sectors * row, pi, vf)
-            self.actor = _SectorScorer(pi, sectors, row, pi)
+            self.actor = _SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]))
         else:
             self.latent = _Latent(n, pi, vf)
             if isinstance(act_space, spaces.Discrete):
@@ -326,7 +327,8 @@ class ExploreMetrics(RLlibCallback):
 
 # ------------------------------------------------------------------------------- config
 def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int = DEFAULT_HOLD,
-               sector_head: bool = True, seed: int = 0, num_env_runners: int = 1,
+               sector_head: bool = True, mask_sectors: bool = True, seed: int = 0,
+               num_env_runners: int = 1,
                envs_per_runner: int = 1, train_batch_size: int = 256, minibatch_size: int = 64,
                num_epochs: int = 4, lr: float = 3e-4, gamma: float = 0.99,
                gae_lambda: float = 0.95, entropy_coeff: float = 0.005,
@@ -338,6 +340,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         level, hold: :func:`agents.goals.make_env`'s (``gamma`` is per decision: pass
             ``gamma ** hold`` for a per-step discount).
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).
+        mask_sectors: with the sector scorer, sectors without a reachable frontier cannot be
+            chosen (:class:`agents.policy.SectorPolicy`'s ``mask_empty``).
         seed: RLlib's seed (env runner ``k`` seeds its envs from ``seed + k``).
         num_env_runners: Ray actors sampling in parallel (``0``: sample in the driver).
         envs_per_runner: envs each runner steps in turn.
@@ -354,7 +358,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     register()
-    model_config = {**DEFAULT_MODEL_CONFIG, "sector_head": bool(sector_head and level == "goals")}
+    model_config = {**DEFAULT_MODEL_CONFIG, "sector_head": bool(sector_head and level == "goals"),
+                    "mask_empty": bool(mask_sectors)}
     return (
         PPOConfig()
         .environment(ENV_NAME, env_config={"config": dict(env_config), "level": level,

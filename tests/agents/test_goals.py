@@ -9,6 +9,7 @@ from pettingzoo.test import parallel_api_test
 
 from agents.base import run_episode
 from agents.goals import (
+    FRONTIER_FEATURES,
     SECTORS,
     FrontierGoalEnv,
     GoalFrontier,
@@ -53,7 +54,7 @@ def test_a_decision_is_held_and_its_reward_is_the_sum_of_the_held_steps():
     obs, rewards, *_rest, infos = env.step({"robot_0": 0, "robot_1": 3})
     assert infos["robot_0"]["env_steps"] == 5 == len(inner_rewards)
     assert rewards["robot_0"] == pytest.approx(sum(inner_rewards))
-    assert obs["robot_0"]["frontiers"].shape == (SECTORS, 3)
+    assert obs["robot_0"]["frontiers"].shape == (SECTORS, len(FRONTIER_FEATURES))
     assert env.observation_space("robot_0").contains(obs["robot_0"])
 
 
@@ -118,6 +119,31 @@ def test_the_chosen_sector_decides_the_goal():
         # the goal is the cheapest cell of a cluster whose centroid lies in sector k
         assert robot.plan.cost == pytest.approx(features[k, 1] * 20.0, abs=1e-6)
         assert sector_of(robot.plan.goal, pose) in {(k - 1) % SECTORS, k, (k + 1) % SECTORS}
+
+
+def test_frontier_features_mark_the_cheapest_sector_and_the_current_goal():
+    env = two_robot_explore_v0.parallel_env(**SMALL)
+    obs, infos = env.reset(seed=2)
+    for _ in range(15):
+        obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
+    robot = GoalFrontier()
+    robot.bind(env, "robot_0")
+    robot.reset(0)
+    features = robot.frontier_features(infos["robot_0"])
+    reachable = features[:, 0] == 1
+    assert features.shape == (SECTORS, len(FRONTIER_FEATURES))
+    # cost gap: 0 where the cheapest frontier is, the cost difference elsewhere, 1 if none
+    assert features[reachable, 3].min() == 0.0
+    np.testing.assert_allclose(features[reachable, 3],
+                               features[reachable, 1] - features[reachable, 1].min(), atol=1e-6)
+    assert np.all(features[~reachable][:, [1, 3]] == 1.0)
+    assert features[:, 4].sum() == 0  # no goal yet
+    k = int(np.flatnonzero(reachable)[0])
+    robot.choose_sector(k)
+    robot.act(obs["robot_0"], infos["robot_0"])
+    features = robot.frontier_features(infos["robot_0"])
+    pose = np.asarray(infos["robot_0"]["odometry"])[:3]
+    assert np.flatnonzero(features[:, 4]).tolist() == [sector_of(robot.plan.goal, pose)]
 
 
 def test_bad_wrapper_arguments_name_the_problem():

@@ -94,6 +94,27 @@ def test_sector_scorer_is_one_network_for_every_sector():
     torch.testing.assert_close(other[:, [0, 1, 3, 4, 5, 7]], base[:, [0, 1, 3, 4, 5, 7]])
 
 
+def test_sector_mask_leaves_only_sectors_with_a_frontier():
+    from agents.policy import MASKED_LOGIT, _SectorScorer
+
+    torch.manual_seed(0)
+    scorer = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32, mask_empty=True)
+    latent = torch.rand(3, 16 + 8 * 3)
+    rows = latent[:, 16:].view(3, 8, 3)
+    rows[..., 0] = 0.0
+    rows[0, [1, 6], 0] = 1.0  # two sectors with a frontier
+    rows[1, 3, 0] = 1.0  # one
+    logits = scorer(latent)  # row 2: none, so nothing is masked
+    assert torch.isfinite(torch.distributions.Categorical(logits=logits).entropy()).all()
+    probs = torch.softmax(logits, dim=1)
+    assert (probs[0, [0, 2, 3, 4, 5, 7]] == 0).all() and probs[0, [1, 6]].sum() == 1
+    assert probs[1, 3] == 1 and (logits[1, [0, 1, 2, 4, 5, 6, 7]] == MASKED_LOGIT).all()
+    assert (logits[2] > MASKED_LOGIT).all()
+    unmasked = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
+    unmasked.load_state_dict(scorer.state_dict())
+    assert (unmasked(latent) > MASKED_LOGIT).all()
+
+
 def test_sector_policy_acts_and_checks_its_spaces():
     from agents.policy import SectorPolicy
 
