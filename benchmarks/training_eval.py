@@ -1,119 +1,363 @@
-"""Re-evaluate finished ``train.py`` runs with the current code and print the comparison table
-of ``benchmarks/training.md``: the policy's T85 against ``Frontier`` and ``RandomWalk`` on each
-run's own fixed evaluation worlds.
+"""Evaluate trained exploration policies on held-out worlds and print the table and plot of
+``benchmarks/training.md``: the T85 ratio to ``Frontier`` as an interquartile mean with a 95 %
+bootstrap interval, T50/T95 ratios, final coverage, against the scripted explorers and the
+goal-level rules.
 
 Usage::
 
-    python benchmarks/training_eval.py runs/seed1 runs/seed2 --episodes 10 --out out/training_eval
+    python benchmarks/training_eval.py runs/goal_s1 runs/goal_s2 ... --worlds 20 \\
+        --out out/training_eval
 
-Each run is evaluated by ``train.evaluate`` (the same worlds and episode length as the run's
-own evaluation: ``eval_max_cycles``, default 3 × ``max_cycles``) into ``OUT/<run name>/``; the
-scripted baselines are computed once per set of worlds. Runs of either backend work (SB3's
-``model.zip``, RLlib's ``rllib/``). Use it after changing the explorers or
-the env, so that every row of a table comes from the same code.
+**Worlds.** ``--worlds`` procedural buildings whose sizes (each side 10–20 m) and seeds come
+from a fixed ``SeedSequence`` no training run uses (training envs are seeded ``seed + k``,
+``train.py``'s periodic evaluation from ``SeedSequence([seed, 0xE7A1])``), plus the real maps
+of ``../shared/maps`` (3 ROS maps and DungeonMaps 1; ``--skip-real`` leaves them out). An
+episode lasts 150 steps per metre of the longer side (1500–3000) on procedural worlds, 2000 on
+real ones; a T never reached counts as that length + 1 (censored).
+
+**Explorers.** Each run (a ``train.py`` folder with ``model.zip`` or ``rllib/``) with the
+deterministic policy on its own env config (world replaced), and once per world ``Frontier``,
+``RandomWalk`` and the goal-level rules of :class:`agents.goals.SectorRule` (``--rules``; by
+default ``ahead``: always the frontier in front), plus ``--baselines``.
+
+**Statistics** (the practice of ``rliable``, Agarwal et al. 2021): for every explorer and
+world, ratio = T / ``Frontier``'s T on that world; the interquartile mean (IQM, the mean of
+the middle 50 %: robust to the odd stuck episode, less noisy than the median) over all
+seed × world ratios, with a 95 % percentile interval from a two-level bootstrap (worlds drawn
+with replacement, then each world's seeds drawn with replacement), so the interval covers
+both which worlds were drawn and which training seeds. Scripted explorers have one run per
+world (the world level only).
+
+Every episode is cached in ``OUT/episodes.json`` (atomically, after each one) keyed by the
+explorer, the world and the model file, so an interrupted evaluation resumes and adding a run
+evaluates only that run. ``--workers`` processes share the episodes (default: one per core).
+Outputs ``OUT/summary.md``, ``OUT/summary.json`` and ``OUT/training_eval.png``.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
+import os
 import sys
-from dataclasses import fields
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import train  # noqa: E402
-from agents.evaluation import eval_worlds, run_explorer, summarise  # noqa: E402
-from agents.goals import SECTOR_RULES, SectorRule  # noqa: E402
-from topo.fileio import atomic_write_bytes  # noqa: E402
+from agents.goals import SECTOR_RULES  # noqa: E402
+from topo.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
+
+MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
+HELDOUT_ENTROPY = 0x4E1D_5EED
+"""Root of the held-out worlds' ``SeedSequence`` (no training or ``train.py`` evaluation
+world derives from it)."""
+SIZE_RANGE = (10.0, 20.0)
+STEPS_PER_METRE = 150
+REAL_MAX_CYCLES = 2000
+CURVE_EVERY = 10
+"""Coverage curves are kept every this many steps (for the plot)."""
+METRICS = ("T50", "T85", "T95")
 
 
-def run_args(run_dir: Path, episodes: int | None) -> train.Args:
-    """The ``train.Args`` a run was made with (``args.json``), evaluation-only changes applied."""
+@dataclass(frozen=True)
+class World:
+    """One held-out world: its id, the env config fields that make it, its reset seed."""
+
+    id: str
+    config: dict[str, Any]
+    seed: int
+    max_cycles: int
+
+
+def heldout_worlds(n: int, real: bool = True) -> list[World]:
+    """``n`` procedural worlds (sides uniform in :data:`SIZE_RANGE`, 0.5 m steps) from
+    :data:`HELDOUT_ENTROPY`, then the real maps of ``../shared/maps`` when ``real``."""
+    rng = np.random.default_rng(np.random.SeedSequence(HELDOUT_ENTROPY))
+    out = []
+    for k in range(n):
+        size = tuple(float(v) for v in np.round(rng.uniform(*SIZE_RANGE, 2) * 2) / 2)
+        seed = int(rng.integers(2**31))
+        out.append(World(f"procedural{k}_{size[0]:g}x{size[1]:g}",
+                         {"world": {"size": size}}, seed,
+                         int(STEPS_PER_METRE * max(size))))
+    if real:
+        for path in sorted((MAPS / "ros").glob("*.yaml")):
+            out.append(World(f"ros/{path.stem}", {"world": {"source": str(path)}}, 0,
+                             REAL_MAX_CYCLES))
+        png = MAPS / "dungeon" / "1.png"
+        if png.exists():
+            out.append(World("dungeon/1", {"world": {"source": str(png),
+                                                     "png_resolution": 0.05}}, 0,
+                             REAL_MAX_CYCLES))
+    return out
+
+
+# ------------------------------------------------------------------------------- episodes
+@functools.lru_cache(maxsize=8)
+def _policy(run: str) -> tuple[Any, dict[str, Any], int]:
+    """A run's policy, its env config and its goal hold (loaded once per process)."""
+    import train
+
+    run_dir = Path(run)
     saved = json.loads((run_dir / "args.json").read_text())
-    known = {f.name for f in fields(train.Args)}
+    known = {f for f in train.Args.__dataclass_fields__}
     kwargs = {k: v for k, v in saved.items() if k in known and k not in ("resume", "runs_dir")}
     for key in ("world_size", "eval_baselines"):
         kwargs[key] = tuple(kwargs[key])
-    if episodes is not None:
-        kwargs["eval_episodes"] = episodes
-    return train.Args(**kwargs)
+    args = train.Args(**kwargs)
+    if (run_dir / "model.zip").is_file():
+        from agents.sb3_explorer import SB3Explorer
+
+        policy = SB3Explorer.load_policy(run_dir / "model.zip")
+    elif (run_dir / "rllib").is_dir():
+        from agents.rllib import RLlibPolicy
+
+        policy = RLlibPolicy.load(run_dir / "rllib")
+    else:
+        raise SystemExit(f"{run}: no model.zip or rllib/ (not a finished train.py run)")
+    return policy, args.env_config(), args.hold
 
 
-def rule_row(rule: str, args: train.Args, cache: Path) -> dict:
-    """The summary row of :class:`SectorRule` ``rule`` on ``args``' evaluation worlds (cached
-    per seed in ``cache``, keyed by the worlds and the env config)."""
-    config, seeds, key = eval_worlds(args.env_config(), args.seed, args.eval_episodes,
-                                     args.eval_max_cycles)
-    if cache.exists() and (stored := json.loads(cache.read_text()))["key"] == key:
-        return stored["row"]
-    team = {a: SectorRule(rule, hold=args.hold) for a in ("robot_0", "robot_1")}
-    row = summarise(rule, run_explorer(team, config, seeds))
-    atomic_write_bytes(cache, json.dumps({"key": key, "row": row}).encode())
-    return row
+def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The team of ``explorer`` (``run:PATH``, ``rule:NAME`` or a scripted name) and the env
+    config it runs with (before the world is set)."""
+    from agents.goals import SectorRule
+    from agents.sb3_explorer import SB3Explorer
+    from agents.team import make_team
+
+    if explorer.startswith("run:"):
+        policy, config, _hold = _policy(explorer[4:])
+        return {f"robot_{i}": SB3Explorer(policy) for i in range(2)}, config
+    if explorer.startswith("rule:"):
+        return {f"robot_{i}": SectorRule(explorer[5:]) for i in range(2)}, {}
+    return make_team(explorer), {}
+
+
+def episode(explorer: str, world: World) -> dict[str, Any]:
+    """One episode of ``explorer`` on ``world``: T50/T85/T95, reached flags, final coverage,
+    overlap, collisions and the coverage curve every :data:`CURVE_EVERY` steps."""
+    import torch
+
+    torch.set_num_threads(1)
+    from agents.base import run_episode
+    from agents.metrics import EpisodeRecorder
+    from envs.two_robot_explore_v0 import parallel_env
+
+    team, config = _team(explorer)
+    config = {**config, **world.config, "max_cycles": world.max_cycles}
+    env = parallel_env(**config)
+    rec = EpisodeRecorder()
+    try:
+        run_episode(env, team, seed=world.seed, callback=rec)
+    finally:
+        env.close()
+    s = rec.summary()
+    curve = np.asarray(s.pop("coverage"), dtype=float)[CURVE_EVERY - 1::CURVE_EVERY]
+    keep = {k: s[k] for k in (*METRICS, *(f"reached_{m}" for m in METRICS),
+                              "final_coverage", "overlap", "collisions")}
+    return {**{k: (bool(v) if k.startswith("reached") else float(v)) for k, v in keep.items()},
+            "curve": np.round(curve, 4).tolist(), "max_cycles": world.max_cycles}
+
+
+def _key(explorer: str, world: World) -> str:
+    """Cache key: the explorer (a run with its model file's size and mtime) and the world."""
+    tag = explorer
+    if explorer.startswith("run:"):
+        run = Path(explorer[4:])
+        model = run / "model.zip" if (run / "model.zip").exists() else run / "rllib"
+        st = model.stat()
+        tag = f"{explorer}@{st.st_size}:{st.st_mtime_ns}"
+    return json.dumps([tag, world.id, world.config, world.seed, world.max_cycles],
+                      sort_keys=True)
+
+
+def run_all(explorers: list[str], worlds: list[World], cache_path: Path,
+            workers: int) -> dict[tuple[str, str], dict[str, Any]]:
+    """Every (explorer, world) episode, from the cache or run now (saved after each)."""
+    cache = json.loads(cache_path.read_text()) if cache_path.exists() else {}
+    todo = [(e, w) for e in explorers for w in worlds if _key(e, w) not in cache]
+    print(f"{len(explorers) * len(worlds) - len(todo)} episodes cached, {len(todo)} to run "
+          f"with {workers} worker(s)", flush=True)
+    if todo:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(episode, e, w): (e, w) for e, w in todo}
+            for i, fut in enumerate(as_completed(futures), 1):
+                e, w = futures[fut]
+                cache[_key(e, w)] = fut.result()
+                atomic_write_json(cache_path, cache)
+                print(f"[{i}/{len(todo)}] {e} on {w.id}: T85 {cache[_key(e, w)]['T85']:.0f}",
+                      flush=True)
+    return {(e, w.id): cache[_key(e, w)] for e in explorers for w in worlds}
+
+
+# ------------------------------------------------------------------------------- statistics
+def iqm(values: np.ndarray) -> float:
+    """Interquartile mean: the mean of the middle 50 % (``scipy.stats.trim_mean``, 0.25)."""
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(np.asarray(values, dtype=float).ravel(), 0.25))
+
+
+def bootstrap_iqm(ratios: np.ndarray, rng: np.random.Generator, reps: int = 2000,
+                  level: float = 0.95) -> tuple[float, float, float]:
+    """IQM of ``ratios`` (``(worlds, seeds)``) and its percentile interval from a two-level
+    bootstrap: worlds with replacement, then each drawn world's seeds with replacement."""
+    ratios = np.asarray(ratios, dtype=float)
+    n_w, n_s = ratios.shape
+    stats = np.empty(reps)
+    for b in range(reps):
+        w = rng.integers(n_w, size=n_w)
+        s = rng.integers(n_s, size=(n_w, n_s))
+        stats[b] = iqm(ratios[w[:, None], s])
+    lo, hi = np.quantile(stats, [(1 - level) / 2, (1 + level) / 2])
+    return iqm(ratios), float(lo), float(hi)
+
+
+def summarise(groups: dict[str, list[str]], worlds: list[World],
+              episodes: dict[tuple[str, str], dict[str, Any]], seed: int = 0
+              ) -> list[dict[str, Any]]:
+    """One row per explorer group (a name → its explorers, one per training seed): the IQM
+    ratios to Frontier with intervals, final coverage and the share of episodes reaching 85 %."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for name, members in groups.items():
+        row: dict[str, Any] = {"explorer": name, "seeds": len(members), "worlds": len(worlds)}
+        for m in METRICS:
+            ratios = np.array([[episodes[(e, w.id)][m] / episodes[("frontier", w.id)][m]
+                                for e in members] for w in worlds])
+            row[f"{m}_ratio"] = bootstrap_iqm(ratios, rng)
+        eps = [episodes[(e, w.id)] for e in members for w in worlds]
+        row["final_coverage"] = float(np.mean([e["final_coverage"] for e in eps]))
+        row["reached_T85"] = float(np.mean([e["reached_T85"] for e in eps]))
+        row["overlap"] = float(np.mean([e["overlap"] for e in eps]))
+        row["per_seed_T85_ratio"] = [iqm([episodes[(e, w.id)]["T85"]
+                                          / episodes[("frontier", w.id)]["T85"]
+                                          for w in worlds]) for e in members]
+        rows.append(row)
+    return rows
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """The Markdown table of :func:`summarise`'s rows."""
+    def cell(v: tuple[float, float, float]) -> str:
+        return f"{v[0]:.2f} [{v[1]:.2f}, {v[2]:.2f}]"
+
+    lines = ["| explorer | seeds × worlds | T85 / Frontier, IQM [95 % CI] | T50 / Frontier | "
+             "T95 / Frontier | final coverage | reached 85 % | overlap | per-seed T85 IQM |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        per_seed = ", ".join(f"{v:.2f}" for v in r["per_seed_T85_ratio"]) if r["seeds"] > 1 \
+            else ""
+        lines.append(f"| {r['explorer']} | {r['seeds']} × {r['worlds']} | "
+                     f"{cell(r['T85_ratio'])} | {cell(r['T50_ratio'])} | {cell(r['T95_ratio'])} "
+                     f"| {r['final_coverage']:.2f} | {r['reached_T85']:.0%} | "
+                     f"{r['overlap']:.2f} | {per_seed} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(rows: list[dict[str, Any]], groups: dict[str, list[str]], worlds: list[World],
+         episodes: dict[tuple[str, str], dict[str, Any]], path: Path) -> None:
+    """Left: every seed × world T85 ratio with the IQM and its interval, per explorer; right:
+    mean coverage against the share of the episode elapsed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topo.plotting import save_figure
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8))
+    for i, r in enumerate(rows):
+        vals = [episodes[(e, w.id)]["T85"] / episodes[("frontier", w.id)]["T85"]
+                for e in groups[r["explorer"]] for w in worlds]
+        jitter = np.random.default_rng(i).uniform(-0.15, 0.15, len(vals))
+        ax.scatter(i + jitter, vals, s=8, alpha=0.35)
+        mid, lo, hi = r["T85_ratio"]
+        ax.errorbar(i, mid, yerr=[[mid - lo], [hi - mid]], fmt="D", color="k", capsize=5)
+    ax.axhline(1.0, color="0.5", lw=0.8)
+    ax.axhline(0.9, color="tab:green", lw=0.8, ls="--", label="target 0.9")
+    ax.set_xticks(range(len(rows)), [r["explorer"] for r in rows], rotation=20)
+    ax.set_yscale("log")
+    ax.set_ylabel("T85 / Frontier's T85 (per world; IQM ± 95 % CI)")
+    ax.legend(loc="upper left")
+    grid = np.linspace(0, 1, 101)
+    for r in rows:
+        curves = []
+        for e in groups[r["explorer"]]:
+            for w in worlds:
+                c = np.asarray(episodes[(e, w.id)]["curve"])
+                x = (np.arange(1, len(c) + 1) * CURVE_EVERY) / w.max_cycles
+                curves.append(np.interp(grid, x, c, left=0.0))
+        bx.plot(grid, np.mean(curves, axis=0), label=r["explorer"])
+    for level in (0.5, 0.85, 0.95):
+        bx.axhline(level, color="0.7", lw=0.8, ls="--")
+    bx.set_xlabel("share of the episode (1500–3000 steps procedural, 2000 real)")
+    bx.set_ylabel("true coverage (mean over seeds × worlds)")
+    bx.set_ylim(0, 1)
+    bx.legend()
+    bx.grid(alpha=0.3)
+    save_figure(fig, path)
+    plt.close(fig)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", type=Path,
-                        help="run folders (with model.zip or rllib/)")
-    parser.add_argument("--episodes", type=int, default=None,
-                        help="evaluation worlds per run (default: the run's eval_episodes)")
+    parser.add_argument("runs", nargs="*", type=Path, help="train.py run folders")
+    parser.add_argument("--label", action="append", default=[],
+                        help="NAME=GLOB: group runs under NAME (default: one group 'ppo' of "
+                             "all runs); repeat for ablations, e.g. --label masked='runs/m*'")
+    parser.add_argument("--worlds", type=int, default=20, help="procedural held-out worlds")
+    parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
+    parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
+    parser.add_argument("--baselines", nargs="*", default=["random_walk"],
+                        help="scripted explorers besides frontier")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=Path("out/training_eval"))
-    parser.add_argument("--rules", nargs="*", default=[], choices=SECTOR_RULES,
-                        help="goal-level rules evaluated on each seed's worlds too")
     opts = parser.parse_args()
-    import torch
-    from stable_baselines3 import PPO
+    if opts.worlds < 1:
+        parser.error(f"--worlds must be >= 1, got {opts.worlds}")
+    if opts.workers < 1:
+        parser.error(f"--workers must be >= 1, got {opts.workers}")
+    groups: dict[str, list[str]] = {}
+    if opts.label:
+        import glob
 
-    torch.set_num_threads(1)
-    rows = []
-    for run in opts.runs:
-        args = run_args(run, opts.episodes)
-        missing = {"frontier", "random_walk"} - set(args.eval_baselines)
-        args.eval_baselines = tuple(args.eval_baselines) + tuple(sorted(missing))
-        if (run / "model.zip").is_file():
-            model = PPO.load(run / "model.zip", device="cpu")
-            steps = model.num_timesteps * args.steps_per_decision
-        elif (run / "rllib").is_dir():  # --backend rllib: its final evaluation has the count
-            from agents.rllib import RLlibPolicy
+        for spec in opts.label:
+            name, sep, pattern = spec.partition("=")
+            paths = sorted(glob.glob(pattern))
+            if not sep or not name or not paths:
+                parser.error(f"--label must be NAME=GLOB matching run folders, got {spec!r}")
+            groups[name] = [f"run:{p}" for p in paths]
+    elif opts.runs:
+        groups["ppo"] = [f"run:{p}" for p in opts.runs]
+    for members in groups.values():
+        for m in members:
+            run = Path(m[4:])
+            if not (run / "args.json").is_file():
+                parser.error(f"{run}: not a train.py run folder (no args.json)")
+    scripted = ["frontier", *opts.baselines, *(f"rule:{r}" for r in opts.rules)]
+    groups = {**groups, **{s: [s] for s in scripted if s != "frontier"},
+              "frontier": ["frontier"]}
+    worlds = heldout_worlds(opts.worlds, real=not opts.skip_real)
+    opts.out.mkdir(parents=True, exist_ok=True)
+    explorers = list(dict.fromkeys(["frontier", *(m for ms in groups.values() for m in ms)]))
+    episodes = run_all(explorers, worlds, opts.out / "episodes.json", opts.workers)
+    rows = summarise(groups, worlds, episodes)
+    text = table(rows)
+    print("\n" + text)
+    atomic_write_bytes(opts.out / "summary.md", text.encode())
+    atomic_write_json(opts.out / "summary.json", {"rows": rows,
+                                                  "worlds": [w.id for w in worlds],
+                                                  "groups": groups})
+    plot(rows, groups, worlds, episodes, opts.out / "training_eval.png")
+    print(f"wrote {opts.out / 'summary.md'} and {opts.out / 'training_eval.png'}")
 
-            model = RLlibPolicy.load(run / "rllib")
-            steps = json.loads((run / "eval.json").read_text())["step"]
-        else:
-            raise SystemExit(f"{run}: no model.zip or rllib/ (not a finished train.py run)")
-        out = opts.out / run.name
-        out.mkdir(parents=True, exist_ok=True)
-        cache = opts.out / f"baselines_seed{args.seed}.json"  # shared by runs of one seed
-        if cache.exists():
-            atomic_write_bytes(out / "eval_baselines.json", cache.read_bytes())
-        report = train.evaluate(model, args, out, steps)
-        atomic_write_bytes(cache, (out / "eval_baselines.json").read_bytes())
-        by = {r["explorer"]: r for r in report["rows"]}
-        for rule in opts.rules:
-            by[rule] = rule_row(rule, args, opts.out / f"rule_{rule}_seed{args.seed}.json")
-        rows.append((run.name, args, steps, by))
-        print(f"{run.name}: done", flush=True)
-
-    print("\n| run | level | reward | agent-steps | PPO T85 | Frontier T85 | PPO / Frontier | "
-          "RandomWalk T85 | PPO better than RandomWalk by | PPO T95 | Frontier T95 | "
-          "PPO reached 85 % |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for name, args, steps, by in rows:
-        ppo, fr, rw = by["ppo"], by["frontier"], by["random_walk"]
-        # RandomWalk's T85 is a lower bound when some episode never got there
-        bound = "≥ " if rw["reached_T85"] < 1 else ""
-        print(f"| {name} | {args.level} | {args.reward_mode} | {steps} | {ppo['T85']:.0f} | "
-              f"{fr['T85']:.0f} | {ppo['T85'] / fr['T85']:.2f} | {bound}{rw['T85']:.0f} | "
-              f"{bound}{1 - ppo['T85'] / rw['T85']:.0%} | {ppo['T95']:.0f} | {fr['T95']:.0f} | "
-              f"{ppo['reached_T85']:.0%} |")
-    if opts.rules:
-        print("\n| run | " + " | ".join(f"{r} T85" for r in ("ppo", *opts.rules)) + " |")
-        print("|---|" + "---|" * (1 + len(opts.rules)))
-        for name, _args, _steps, by in rows:
-            print(f"| {name} | " + " | ".join(f"{by[r]['T85']:.0f}" for r in ("ppo", *opts.rules))
-                  + " |")
 
 if __name__ == "__main__":
     main()

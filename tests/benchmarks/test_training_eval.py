@@ -1,0 +1,44 @@
+"""``benchmarks/training_eval.py``'s statistics and worlds: the IQM, its two-level bootstrap
+interval and the held-out world list (fixed, sized 10–20 m, disjoint from training seeds)."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+spec = importlib.util.spec_from_file_location("training_eval", ROOT / "benchmarks/training_eval.py")
+te = importlib.util.module_from_spec(spec)
+sys.modules["training_eval"] = te  # dataclasses look their module up there
+spec.loader.exec_module(te)
+
+
+def test_iqm_is_the_mean_of_the_middle_half():
+    assert te.iqm(np.arange(1, 9)) == pytest.approx(np.mean([3, 4, 5, 6]))
+    # an outlier moves the mean, not the IQM
+    assert te.iqm([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 50.0]) == 1.0
+
+
+def test_bootstrap_interval_brackets_the_iqm_and_narrows_with_data():
+    rng = np.random.default_rng(0)
+    small = rng.lognormal(0.0, 0.3, size=(6, 3))
+    large = rng.lognormal(0.0, 0.3, size=(60, 5))
+    mid, lo, hi = te.bootstrap_iqm(small, np.random.default_rng(1), reps=400)
+    assert lo <= mid <= hi
+    mid2, lo2, hi2 = te.bootstrap_iqm(large, np.random.default_rng(1), reps=400)
+    assert lo2 <= mid2 <= hi2 and hi2 - lo2 < hi - lo
+    assert te.bootstrap_iqm(np.ones((5, 2)), np.random.default_rng(0), reps=50) == (1.0, 1.0, 1.0)
+    # same generator state, same interval
+    assert te.bootstrap_iqm(small, np.random.default_rng(1), reps=400) == (mid, lo, hi)
+
+
+def test_heldout_worlds_are_fixed_and_in_range():
+    a, b = te.heldout_worlds(12, real=False), te.heldout_worlds(12, real=False)
+    assert a == b and len(a) == 12 and len({w.seed for w in a}) == 12
+    for w in a:
+        sx, sy = w.config["world"]["size"]
+        assert 10 <= sx <= 20 and 10 <= sy <= 20
+        assert w.max_cycles == int(150 * max(sx, sy))
+    assert te.heldout_worlds(3, real=False) == a[:3]
