@@ -50,7 +50,7 @@ from agents import evaluation
 from agents.goals import make_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
-from agents.sb3_explorer import SB3Explorer
+from agents.sb3_explorer import sb3_team
 from topo.fileio import atomic_write, atomic_write_json
 
 ENV_ID = "two_robot_explore_v0"
@@ -349,7 +349,7 @@ def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any
     """Evaluate ``policy`` (an SB3 model or an :class:`agents.rllib.RLlibPolicy`) against
     ``args.eval_baselines`` on the run's fixed worlds (:func:`agents.evaluation.evaluate`):
     writes ``eval.json``, ``eval.md`` and ``eval_coverage.png`` into ``run_dir``."""
-    team = {a: SB3Explorer(policy) for a in ("robot_0", "robot_1")}
+    team = sb3_team(policy)
     return evaluation.evaluate(team, run_dir, step, env_config=args.env_config(),
                                seed=args.seed, episodes=args.eval_episodes,
                                max_cycles=args.eval_max_cycles, baselines=args.eval_baselines)

@@ -6,10 +6,12 @@ frontiers is the decision that matters (which room next, whether to follow the t
 the policy acts at that level, as in hierarchical exploration policies (e.g. Active Neural SLAM's
 global policy over a local planner):
 
-* :class:`GoalFrontier` — a ``Frontier`` explorer steered by a **sector**: one of
+* :class:`GoalFrontier` — a ``CoordinatedFrontier`` explorer steered by a **sector**: one of
   :data:`SECTORS` directions around the robot (0 ahead, counter-clockwise, 45° each). At each
   decision it plans to the cheapest frontier cluster whose centroid lies in that sector (the
-  cheapest anywhere if that sector has none). :meth:`GoalFrontier.frontier_features` summarises
+  cheapest anywhere if that sector has none); once a merge is in use it plans on the shared
+  map (frontiers the teammate has explored are gone) and posts its goal on the team's
+  :class:`~agents.scripted.Blackboard`. :meth:`GoalFrontier.frontier_features` summarises
   the frontier clusters per sector for the policy (:data:`FRONTIER_FEATURES`).
 * :class:`FrontierGoalEnv` — a PettingZoo ``ParallelEnv`` wrapper of ``two_robot_explore``
   whose action is a sector (``Discrete(8)``) held for ``hold`` env steps (the reward is their
@@ -39,7 +41,7 @@ from pettingzoo import ParallelEnv
 
 from agents.base import Explorer, odometry_pose
 from agents.frontier_planning import FrontierConfig, FrontierMap
-from agents.scripted import Frontier
+from agents.scripted import Blackboard, CoordinatedFrontier
 from topo.validation import check_int
 
 SECTORS = 8
@@ -54,12 +56,14 @@ COST_SCALE = 20.0
 AREA_SCALE = 10.0
 """Frontier cluster area (m²) that maps to feature 1.0."""
 
-FRONTIER_FEATURES = ("reachable", "cost", "area", "cost_gap", "current")
+FRONTIER_FEATURES = ("reachable", "cost", "area", "cost_gap", "current", "teammate")
 """Columns of :meth:`GoalFrontier.frontier_features`, per sector: a reachable frontier
 cluster is there (0/1); the path cost to its cheapest one (``/ COST_SCALE``, 1 if none); the
 clusters' total area (``/ AREA_SCALE``); how much dearer than the cheapest frontier anywhere
 (``/ COST_SCALE``, 1 if none: 0 marks the sector ``Frontier`` would choose); whether the goal
-being driven to lies there (0/1: keeping it costs no turn-around)."""
+being driven to lies there (0/1: keeping it costs no turn-around); how close its nearest
+frontier is to the teammate or the teammate's goal (``1 − d / coordination_radius``, clipped at
+0; always 0 before a merge, when the teammate's place is unknown)."""
 
 
 def sector_of(xy: np.ndarray, pose: np.ndarray) -> int:
@@ -68,17 +72,33 @@ def sector_of(xy: np.ndarray, pose: np.ndarray) -> int:
     return int(round(bearing / (2 * math.pi / SECTORS))) % SECTORS
 
 
-class GoalFrontier(Frontier):
-    """A :class:`~agents.scripted.Frontier` explorer whose goals lie in a chosen sector
-    (module docstring). Without a sector (``sector is None``) it is plain ``Frontier``."""
+class GoalFrontier(CoordinatedFrontier):
+    """A :class:`~agents.scripted.CoordinatedFrontier` explorer whose goals lie in a chosen
+    sector (module docstring). Without a sector (``sector is None``) it is plain
+    ``CoordinatedFrontier``; its robot (``robot_0`` or ``robot_1``) is the one it is bound to.
+
+    Args:
+        config: see :class:`~agents.scripted.Frontier`.
+        action_type: the env's ``action_type``.
+        blackboard: shared with the teammate's controller, so that each sees the other's goal
+            (default: a board of its own; the shared map and the teammate's position still
+            come from the env).
+    """
 
     name = "goal_frontier"
 
     def __init__(self, config: FrontierConfig | None = None,
-                 action_type: str = "continuous") -> None:
-        super().__init__(config, action_type)
+                 action_type: str = "continuous", blackboard: Blackboard | None = None) -> None:
+        super().__init__(0, blackboard if blackboard is not None else Blackboard(), config,
+                         action_type=action_type)
         self.sector: int | None = None
         self._cached: tuple[tuple[int, int], FrontierMap | None] | None = None
+
+    def bind(self, env: Any, agent: str) -> None:
+        if agent not in ("robot_0", "robot_1"):
+            raise ValueError(f"agent must be 'robot_0' or 'robot_1', got {agent!r}")
+        self.index = int(agent[-1])
+        super().bind(env, agent)
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
@@ -113,17 +133,23 @@ class GoalFrontier(Frontier):
         if not clusters:
             return out
         cheapest = min(c["cost"] for c in clusters)
+        mates = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
+                 if p is not None]
         for c in clusters:
             k = sector_of(c["centroid"], pose)
             out[k, 0] = 1.0
             out[k, 1] = min(out[k, 1], c["cost"] / COST_SCALE)
             out[k, 2] = min(out[k, 2] + c["size"] * cell_area / AREA_SCALE, 1.0)
             out[k, 3] = min(out[k, 3], (c["cost"] - cheapest) / COST_SCALE)
+            for p in mates:
+                near = 1.0 - float(np.linalg.norm(c["centroid"] - p)) / self.coordination_radius
+                out[k, 5] = max(out[k, 5], near)
         return out
 
     def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
         cached, self._cached = self._cached, None
         if cached is not None and cached[0] == (len(self.given_up), self._steps):
+            self._fmap = cached[1]
             return cached[1]
         return super()._frontier_map(info, pose)
 
@@ -132,7 +158,9 @@ class GoalFrontier(Frontier):
         if self.sector is None:
             return super()._choose(clusters, info, pose)
         inside = [c for c in clusters if sector_of(c["centroid"], pose) == self.sector]
-        return min(inside or clusters, key=lambda c: c["cost"])
+        best = min(inside or clusters, key=lambda c: c["cost"])
+        self.board.goals[self.index] = best["centroid"]
+        return best
 
 
 SECTOR_RULES = ("ahead", "random")
@@ -149,18 +177,19 @@ class SectorRule(Explorer):
         rule: one of :data:`SECTOR_RULES`.
         hold: env steps each choice is held, ``>= 1`` (as :class:`FrontierGoalEnv`'s).
         action_type: the env's ``action_type``.
+        blackboard: shared with the teammate's (see :class:`GoalFrontier`).
     """
 
     name = "sector_rule"
 
     def __init__(self, rule: str = "ahead", hold: int = DEFAULT_HOLD,
-                 action_type: str = "continuous") -> None:
+                 action_type: str = "continuous", blackboard: Blackboard | None = None) -> None:
         super().__init__(action_type)
         if rule not in SECTOR_RULES:
             raise ValueError(f"rule must be one of {list(SECTOR_RULES)}, got {rule!r}")
         self.rule = rule
         self.hold = check_int(hold, "hold", low=1)
-        self.controller = GoalFrontier(action_type=action_type)
+        self.controller = GoalFrontier(action_type=action_type, blackboard=blackboard)
         self._since = self.hold
 
     def bind(self, env: Any, agent: str) -> None:
@@ -207,7 +236,8 @@ class FrontierGoalEnv(ParallelEnv):
         self.agents: list[str] = []
         self.render_mode = env.render_mode
         action_type = env.config.action_type
-        self.controllers = {a: GoalFrontier(config, action_type=action_type)
+        board = Blackboard()
+        self.controllers = {a: GoalFrontier(config, action_type=action_type, blackboard=board)
                             for a in self.possible_agents}
         for agent, controller in self.controllers.items():
             controller.bind(env, agent)

@@ -28,6 +28,8 @@ class SB3Explorer(Explorer):
             sharing, as trained).
         deterministic: use the policy's mode instead of sampling.
         action_type: must match what the model was trained with.
+        blackboard: a goal-level policy's planner shares it with the teammate's, so each sees
+            the other's goal (:func:`sb3_team` wires one; default: a board of its own).
 
     A goal-level model holds each decision for its ``goal_hold`` attribute's steps (saved with
     the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise).
@@ -39,7 +41,7 @@ class SB3Explorer(Explorer):
     name = "sb3"
 
     def __init__(self, policy: Any, deterministic: bool = True,
-                 action_type: str = "continuous") -> None:
+                 action_type: str = "continuous", blackboard: Any = None) -> None:
         super().__init__(action_type)
         if not hasattr(policy, "predict"):
             raise TypeError(f"policy must be a Stable-Baselines3 model or have its "
@@ -52,7 +54,7 @@ class SB3Explorer(Explorer):
         if self.goal_level:
             from agents.goals import DEFAULT_HOLD, GoalFrontier
 
-            self.controller = GoalFrontier(action_type=action_type)
+            self.controller = GoalFrontier(action_type=action_type, blackboard=blackboard)
             self.hold = int(getattr(policy, "goal_hold", DEFAULT_HOLD))
             self._since = self.hold
 
@@ -90,3 +92,15 @@ class SB3Explorer(Explorer):
         if self.action_type == "discrete":
             return int(action)
         return np.asarray(action, dtype=np.float32)
+
+
+def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "continuous"
+             ) -> dict[str, SB3Explorer]:
+    """``{"robot_0": ..., "robot_1": ...}``: both robots driven by ``policy`` (parameter
+    sharing, as trained), their goal-level planners sharing one
+    :class:`~agents.scripted.Blackboard` as in :class:`agents.goals.FrontierGoalEnv`."""
+    from agents.scripted import Blackboard
+
+    board = Blackboard()
+    return {f"robot_{i}": SB3Explorer(policy, deterministic, action_type, blackboard=board)
+            for i in range(2)}

@@ -23,10 +23,9 @@ def make_team(name: str, action_type: str = "continuous", env: Any = None
     shares one :class:`Blackboard`. With ``env``, each is bound to its robot of it
     (:meth:`agents.base.Explorer.bind`: the frontier explorers read their maps there)."""
     if name.startswith("sb3:"):
-        from agents.sb3_explorer import SB3Explorer
+        from agents.sb3_explorer import SB3Explorer, sb3_team
 
-        policy = SB3Explorer.load_policy(name[4:])
-        team = {f"robot_{i}": SB3Explorer(policy, action_type=action_type) for i in range(2)}
+        team = sb3_team(SB3Explorer.load_policy(name[4:]), action_type=action_type)
     elif name == "coordinated_frontier":
         board = Blackboard()
         team = {f"robot_{i}": CoordinatedFrontier(i, board, action_type=action_type)

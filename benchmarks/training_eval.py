@@ -128,14 +128,16 @@ def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The team of ``explorer`` (``run:PATH``, ``rule:NAME`` or a scripted name) and the env
     config it runs with (before the world is set)."""
     from agents.goals import SectorRule
-    from agents.sb3_explorer import SB3Explorer
+    from agents.sb3_explorer import sb3_team
+    from agents.scripted import Blackboard
     from agents.team import make_team
 
     if explorer.startswith("run:"):
         policy, config, _hold = _policy(explorer[4:])
-        return {f"robot_{i}": SB3Explorer(policy) for i in range(2)}, config
+        return sb3_team(policy), config
     if explorer.startswith("rule:"):
-        return {f"robot_{i}": SectorRule(explorer[5:]) for i in range(2)}, {}
+        board = Blackboard()
+        return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(2)}, {}
     return make_team(explorer), {}
 
 
@@ -341,6 +343,8 @@ def main() -> None:
             run = Path(m[4:])
             if not (run / "args.json").is_file():
                 parser.error(f"{run}: not a train.py run folder (no args.json)")
+            if not ((run / "model.zip").is_file() or (run / "rllib").is_dir()):
+                parser.error(f"{run}: no model.zip or rllib/ yet (an unfinished run)")
     scripted = ["frontier", *opts.baselines, *(f"rule:{r}" for r in opts.rules)]
     groups = {**groups, **{s: [s] for s in scripted if s != "frontier"},
               "frontier": ["frontier"]}

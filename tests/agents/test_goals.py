@@ -146,6 +146,34 @@ def test_frontier_features_mark_the_cheapest_sector_and_the_current_goal():
     assert np.flatnonzero(features[:, 4]).tolist() == [sector_of(robot.plan.goal, pose)]
 
 
+def test_teammate_column_marks_frontiers_near_the_teammates_goal_once_merged():
+    from agents.scripted import Blackboard
+    from fusion.rigid import Rigid2D
+
+    env = two_robot_explore_v0.parallel_env(**SMALL)
+    obs, infos = env.reset(seed=2)
+    for _ in range(15):
+        obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
+    board = Blackboard()
+    robots = {a: GoalFrontier(blackboard=board) for a in env.agents}
+    for a, r in robots.items():
+        r.bind(env, a)
+        r.reset(0)
+    me, info = robots["robot_0"], infos["robot_0"]
+    before = me.frontier_features(info)
+    assert before[:, 5].sum() == 0  # no merge: the teammate's place is unknown
+    board.transform = Rigid2D.identity()  # as if merged, robot 1's frame = robot 0's
+    fmap = me._frontier_map(info, np.asarray(info["odometry"])[:3])
+    target = fmap.clusters(me.cfg.min_cluster_cells)[0]["centroid"]
+    board.goals[1] = target  # the teammate heads there (its frame = this one)
+    features = me.frontier_features(info)
+    k = sector_of(target, np.asarray(info["odometry"])[:3])
+    assert features[k, 5] == pytest.approx(1.0)
+    assert np.all((features[:, 5] >= 0) & (features[:, 5] <= 1))
+    with pytest.raises(ValueError, match="agent must be 'robot_0' or 'robot_1', got 'r2'"):
+        GoalFrontier().bind(env, "r2")
+
+
 def test_bad_wrapper_arguments_name_the_problem():
     with pytest.raises(ValueError, match="hold must be >= 1, got 0"):
         goal_env(hold=0)
