@@ -79,6 +79,10 @@ class Args:
     """With the sector scorer, never choose a sector without a reachable frontier (action
     masking read from the ``frontiers`` observation); ``False`` lets the policy pick an empty
     sector, where the planner falls back to the cheapest frontier anywhere."""
+    cost_prior: float = 0.0
+    """With the sector scorer, logits subtracted per metre by which a sector's frontier is
+    dearer than the cheapest one: > 0 starts the policy as a soft ``Frontier`` that PPO
+    refines (:class:`agents.policy.SectorPolicy`)."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
@@ -192,6 +196,10 @@ class Args:
         if self.reward_mode not in ("shared", "oracle", "individual"):
             raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
                              f"got {self.reward_mode!r}")
+        prior = self.cost_prior
+        if isinstance(prior, bool) or not isinstance(prior, (int, float)) or not (
+                math.isfinite(prior) and prior >= 0):
+            raise ValueError(f"cost_prior must be a finite number >= 0, got {prior!r}")
         for name in ("learning_rate", "gamma", "gae_lambda", "clip_range"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and 0 < value <= 1):
@@ -379,7 +387,8 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
                                "net_arch": {"pi": [64], "vf": [64]},
-                               **({"mask_empty": args.mask_sectors} if sectors else {})},
+                               **({"mask_empty": args.mask_sectors,
+                                   "cost_prior": args.cost_prior} if sectors else {})},
             )
             if args.level == "goals":
                 model.goal_hold = args.hold  # saved with the model, read by SB3Explorer
@@ -425,7 +434,8 @@ def rllib_config(args: Args) -> Any:
 
     return rllib.ppo_config(
         env_config=args.env_config(), level=args.level, hold=args.hold,
-        sector_head=args.sector_head, mask_sectors=args.mask_sectors, seed=args.seed,
+        sector_head=args.sector_head, mask_sectors=args.mask_sectors,
+        cost_prior=args.cost_prior, seed=args.seed,
         num_env_runners=args.num_env_runners,
         envs_per_runner=args.envs_per_runner, train_batch_size=args.n_steps * args.n_envs,
         minibatch_size=args.batch_size, num_epochs=args.n_epochs, lr=args.learning_rate,

@@ -29,6 +29,9 @@ from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
+from agents.goals import COST_SCALE, FRONTIER_FEATURES
+from topo.validation import check_real
+
 VECTOR_KEYS = ("sonar", "odometry", "teammate")
 OPTIONAL_VECTOR_KEYS = ("frontiers",)
 GRAPH_KEYS = ("graph_nodes", "graph_mask", "graph_adjacency")
@@ -146,15 +149,16 @@ MASKED_LOGIT = -1e8
 
 class _SectorScorer(nn.Module):
     """The action head of :class:`SectorPolicy`: logit of sector ``k`` =
-    ``MLP([context, frontiers[k], one_hot(k)])``, the same MLP for every sector. With
-    ``mask_empty``, sectors whose first ``frontiers`` column (a reachable frontier is there) is
-    0 get :data:`MASKED_LOGIT`, unless no sector has one."""
+    ``MLP([context, frontiers[k], one_hot(k)]) − prior · frontiers[k, prior_column]``, the
+    same MLP for every sector. With ``mask_empty``, sectors whose first ``frontiers`` column (a
+    reachable frontier is there) is 0 get :data:`MASKED_LOGIT`, unless no sector has one."""
 
     def __init__(self, context_dim: int, sectors: int, row: int, hidden: int,
-                 mask_empty: bool = False) -> None:
+                 mask_empty: bool = False, prior: float = 0.0, prior_column: int = 0) -> None:
         super().__init__()
         self.context_dim, self.sectors, self.row = context_dim, sectors, row
         self.mask_empty = bool(mask_empty)
+        self.prior, self.prior_column = float(prior), int(prior_column)
         self.register_buffer("direction", torch.eye(sectors))
         self.net = nn.Sequential(nn.Linear(context_dim + row + sectors, hidden), nn.Tanh(),
                                  nn.Linear(hidden, 1))
@@ -165,6 +169,8 @@ class _SectorScorer(nn.Module):
         rows = latent[:, self.context_dim:].reshape(b, self.sectors, self.row)
         x = torch.cat([context, rows, self.direction.expand(b, -1, -1)], dim=2)
         logits = self.net(x).squeeze(-1)
+        if self.prior:
+            logits = logits - self.prior * rows[..., self.prior_column]
         if not self.mask_empty:
             return logits
         empty = rows[..., 0] < 0.5
@@ -183,11 +189,17 @@ class SectorPolicy(MultiInputActorCriticPolicy):
     policy decides among the frontiers that exist instead of falling back to the cheapest one
     (action masking, as ``sb3-contrib``'s ``MaskablePPO`` but read from the observation, so
     saved policies need nothing else at inference).
+
+    ``cost_prior`` (logits per metre, ``>= 0``) subtracts that much per metre by which a
+    sector's frontier is dearer than the cheapest one (the ``cost_gap`` column of
+    :data:`agents.goals.FRONTIER_FEATURES`): the untrained policy is then a soft ``Frontier``
+    and PPO learns where to deviate from it (a residual on the scripted rule) instead of
+    rediscovering it.
     """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space,
                  lr_schedule, net_arch: dict | None = None, mask_empty: bool = True,
-                 **kwargs) -> None:
+                 cost_prior: float = 0.0, **kwargs) -> None:
         if not isinstance(action_space, spaces.Discrete):
             raise TypeError(f"SectorPolicy needs a Discrete action space, got {action_space}")
         frontiers = observation_space.spaces.get("frontiers") if isinstance(
@@ -199,6 +211,10 @@ class SectorPolicy(MultiInputActorCriticPolicy):
         self._widths = (int(net_arch.get("pi", [64])[0]), int(net_arch.get("vf", [64])[0]))
         self._sectors, self._row = frontiers.shape
         self._mask_empty = bool(mask_empty)
+        self._cost_prior = check_real(cost_prior, "cost_prior", low=0.0, low_inclusive=True)
+        if self._cost_prior and self._row != len(FRONTIER_FEATURES):
+            raise ValueError(f"cost_prior needs the {len(FRONTIER_FEATURES)} frontiers columns "
+                             f"of agents.goals.FRONTIER_FEATURES, got {self._row}")
         kwargs.setdefault("features_extractor_class", TopoExplorerExtractor)
         kwargs["features_extractor_kwargs"] = {**kwargs.get("features_extractor_kwargs", {}),
                                                "pass_through": ("frontiers",)}
@@ -206,7 +222,8 @@ class SectorPolicy(MultiInputActorCriticPolicy):
                          **kwargs)
 
     def _get_constructor_parameters(self) -> dict:
-        return {**super()._get_constructor_parameters(), "mask_empty": self._mask_empty}
+        return {**super()._get_constructor_parameters(), "mask_empty": self._mask_empty,
+                "cost_prior": self._cost_prior}
 
     def _build_mlp_extractor(self) -> None:
         pi, vf = self._widths
@@ -215,7 +232,9 @@ class SectorPolicy(MultiInputActorCriticPolicy):
     def _build(self, lr_schedule) -> None:
         super()._build(lr_schedule)
         pi = self._widths[0]
-        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty)
+        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty,
+                                        self._cost_prior * COST_SCALE,
+                                        FRONTIER_FEATURES.index("cost_gap"))
         if self.ortho_init:
             self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))
             self.init_weights(self.action_net.net[-1], gain=0.01)

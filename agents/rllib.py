@@ -46,8 +46,9 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from torch import nn
 
-from agents.goals import DEFAULT_HOLD, LEVELS, make_env
+from agents.goals import COST_SCALE, DEFAULT_HOLD, FRONTIER_FEATURES, LEVELS, make_env
 from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
+from topo.validation import check_real
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
               "lz4, ...): pip install 'topomerge[rllib]'")
@@ -78,9 +79,11 @@ POLICY_FILE = "topomerge_policy.json"
 MODULE_PATH = ("learner_group", "learner", "rl_module", POLICY_ID)
 """Where the shared module lies inside an algorithm checkpoint."""
 
-DEFAULT_MODEL_CONFIG = {"sector_head": False, "mask_empty": True, "pi": 64, "vf": 64}
+DEFAULT_MODEL_CONFIG = {"sector_head": False, "mask_empty": True, "cost_prior": 0.0, "pi": 64,
+                        "vf": 64}
 """``model_config`` of :class:`TopoExplorerModule`: the per-sector scorer at the goal level
-(masking sectors without a reachable frontier: ``mask_empty``), and the widths of the actor's
+(masking sectors without a reachable frontier: ``mask_empty``; ``cost_prior`` as
+:class:`agents.policy.SectorPolicy`'s), and the widths of the actor's
 and the critic's layer (as ``train.py``'s SB3 ``net_arch``)."""
 
 RLLIB_KEYS = frozenset({"vf_share_layers"})
@@ -242,7 +245,13 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
         if self.sector_head:
             sectors, row = frontiers.shape
             self.latent = _SectorLatent(n, sectors * row, pi, vf)
-            self.actor = _SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]))
+            prior = check_real(cfg["cost_prior"], "model_config cost_prior", low=0.0,
+                               low_inclusive=True)
+            if prior and row != len(FRONTIER_FEATURES):
+                raise ValueError(f"model_config cost_prior needs the {len(FRONTIER_FEATURES)} "
+                                 f"frontiers columns of FRONTIER_FEATURES, got {row}")
+            self.actor = _SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]),
+                                       prior * COST_SCALE, FRONTIER_FEATURES.index("cost_gap"))
         else:
             self.latent = _Latent(n, pi, vf)
             if isinstance(act_space, spaces.Discrete):
@@ -327,7 +336,8 @@ class ExploreMetrics(RLlibCallback):
 
 # ------------------------------------------------------------------------------- config
 def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int = DEFAULT_HOLD,
-               sector_head: bool = True, mask_sectors: bool = True, seed: int = 0,
+               sector_head: bool = True, mask_sectors: bool = True, cost_prior: float = 0.0,
+               seed: int = 0,
                num_env_runners: int = 1,
                envs_per_runner: int = 1, train_batch_size: int = 256, minibatch_size: int = 64,
                num_epochs: int = 4, lr: float = 3e-4, gamma: float = 0.99,
@@ -342,6 +352,7 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).
         mask_sectors: with the sector scorer, sectors without a reachable frontier cannot be
             chosen (:class:`agents.policy.SectorPolicy`'s ``mask_empty``).
+        cost_prior: :class:`agents.policy.SectorPolicy`'s (logits per metre of cost gap).
         seed: RLlib's seed (env runner ``k`` seeds its envs from ``seed + k``).
         num_env_runners: Ray actors sampling in parallel (``0``: sample in the driver).
         envs_per_runner: envs each runner steps in turn.
@@ -359,7 +370,7 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     register()
     model_config = {**DEFAULT_MODEL_CONFIG, "sector_head": bool(sector_head and level == "goals"),
-                    "mask_empty": bool(mask_sectors)}
+                    "mask_empty": bool(mask_sectors), "cost_prior": float(cost_prior)}
     return (
         PPOConfig()
         .environment(ENV_NAME, env_config={"config": dict(env_config), "level": level,

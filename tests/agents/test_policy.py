@@ -1,5 +1,7 @@
 """TopoExplorerExtractor: shapes, padding is ignored, node order does not matter; SectorPolicy."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -127,3 +129,28 @@ def test_sector_policy_acts_and_checks_its_spaces():
         SectorPolicy(goal_space(), spaces.Box(-1, 1, (2,)), lambda _: 3e-4)
     with pytest.raises(ValueError, match=r"'frontiers' observation of shape \(5, F\)"):
         SectorPolicy(goal_space(), spaces.Discrete(5), lambda _: 3e-4)
+
+
+def test_cost_prior_starts_the_policy_as_a_soft_frontier():
+    """With a cost prior and an untrained scorer (its last layer near zero), the likeliest
+    sector is the one holding the cheapest frontier, and a sector 1 m dearer is e^prior less
+    likely."""
+    from agents.goals import COST_SCALE, FRONTIER_FEATURES
+    from agents.policy import SectorPolicy
+
+    space = spaces.Dict({**obs_space().spaces,
+                         "frontiers": spaces.Box(0, 1, (8, len(FRONTIER_FEATURES)), np.float32)})
+    policy = SectorPolicy(space, spaces.Discrete(8), lambda _: 3e-4, cost_prior=2.0)
+    obs = {k: torch.as_tensor(np.stack([s.sample() for _ in range(4)]), dtype=torch.float32)
+           for k, s in space.spaces.items()}
+    gap = FRONTIER_FEATURES.index("cost_gap")
+    obs["frontiers"][:, :, 0] = 1.0
+    obs["frontiers"][:, :, gap] = 5.0 / COST_SCALE
+    obs["frontiers"][:, 3, gap] = 0.0  # the cheapest frontier lies in sector 3
+    obs["frontiers"][:, 6, gap] = 1.0 / COST_SCALE  # 1 m dearer
+    logits = policy.get_distribution(obs).distribution.logits
+    assert (logits.argmax(1) == 3).all()
+    ratio = torch.exp(logits[:, 3] - logits[:, 6])
+    torch.testing.assert_close(ratio, torch.full((4,), math.e ** 2), rtol=0.1, atol=0)
+    with pytest.raises(ValueError, match="cost_prior must be >= 0"):
+        SectorPolicy(space, spaces.Discrete(8), lambda _: 3e-4, cost_prior=-1.0)
