@@ -53,7 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.goals import SECTOR_RULES  # noqa: E402
 from topo.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
 
-MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
+MAPS = (Path(__file__).resolve().parents[2] / "shared" / "maps").resolve()
 HELDOUT_ENTROPY = 0x4E1D_5EED
 """Root of the held-out worlds' ``SeedSequence`` (no training or ``train.py`` evaluation
 world derives from it)."""
@@ -77,7 +77,8 @@ class World:
 
 def heldout_worlds(n: int, real: bool = True) -> list[World]:
     """``n`` procedural worlds (sides uniform in :data:`SIZE_RANGE`, 0.5 m steps) from
-    :data:`HELDOUT_ENTROPY`, then the real maps of ``../shared/maps`` when ``real``."""
+    :data:`HELDOUT_ENTROPY`, then the real maps of ``../shared/maps`` when ``real`` (their
+    paths resolved, so that episodes cached from another checkout match)."""
     rng = np.random.default_rng(np.random.SeedSequence(HELDOUT_ENTROPY))
     out = []
     for k in range(n):
@@ -348,6 +349,9 @@ def main() -> None:
     scripted = ["frontier", *opts.baselines, *(f"rule:{r}" for r in opts.rules)]
     groups = {**groups, **{s: [s] for s in scripted if s != "frontier"},
               "frontier": ["frontier"]}
+    if not opts.skip_real and not MAPS.is_dir():
+        parser.error(f"the real maps are not at {MAPS} (shared/ beside the repository); "
+                     "pass --skip-real to evaluate on procedural worlds only")
     worlds = heldout_worlds(opts.worlds, real=not opts.skip_real)
     opts.out.mkdir(parents=True, exist_ok=True)
     explorers = list(dict.fromkeys(["frontier", *(m for ms in groups.values() for m in ms)]))
