@@ -105,6 +105,11 @@ class Args:
     the learner a GPU when torch sees one)."""
     world_size: tuple[float, float] = (10.0, 10.0)
     """Procedural building size in metres."""
+    world_size_max: float | None = None
+    """``--backend sb3``: train on buildings of several sizes, the ``n_envs`` envs spread
+    evenly from ``world_size`` to this side (metres), each env's episodes lengthened in
+    proportion (``max_cycles`` is the first's); evaluation stays on ``world_size``. Default:
+    every env on ``world_size``."""
     max_cycles: int = 500
     """Env steps per episode (truncation); with 10 m buildings Frontier reaches 85 % in
     about 300–500 steps, so T85 separates explorers."""
@@ -193,6 +198,14 @@ class Args:
                 raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
         if self.level not in ("goals", "motion"):
             raise ValueError(f"level must be one of ['goals', 'motion'], got {self.level!r}")
+        if self.world_size_max is not None:
+            top = self.world_size_max
+            if isinstance(top, bool) or not isinstance(top, (int, float)) or not (
+                    math.isfinite(top) and top >= max(self.world_size)):
+                raise ValueError(f"world_size_max must be a side in metres >= max(world_size) "
+                                 f"= {max(self.world_size)}, got {top!r}")
+            if self.backend != "sb3":
+                raise ValueError("world_size_max applies to backend='sb3' only")
         if self.reward_mode not in ("shared", "oracle", "individual"):
             raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
                              f"got {self.reward_mode!r}")
@@ -225,6 +238,21 @@ class Args:
     def steps_per_decision(self) -> int:
         """Env steps per policy decision: ``hold`` at the goals level, else 1."""
         return self.hold if self.level == "goals" else 1
+
+    def train_env_configs(self) -> list[dict[str, Any]]:
+        """One env config per training env: :meth:`env_config`, or with ``world_size_max``
+        the sizes spread from ``world_size`` to it (``max_cycles`` scaled by the side)."""
+        base = self.env_config()
+        if self.world_size_max is None:
+            return [base] * self.n_envs
+        out = []
+        for k in range(self.n_envs):
+            f = k / max(1, self.n_envs - 1)
+            size = tuple(float(s + f * (self.world_size_max - s)) for s in self.world_size)
+            scale = max(size) / max(self.world_size)
+            out.append({**base, "world": {**base["world"], "size": size},
+                        "max_cycles": int(round(self.max_cycles * scale))})
+        return out
 
     def env_config(self) -> dict[str, Any]:
         """The env's ``EnvConfig`` fields for training (``env_kwargs`` merged in)."""
@@ -368,8 +396,8 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
     """Train (or resume from ``checkpoint``) with Stable-Baselines3; save ``model.zip``.
     Returns the model and the agent-steps trained."""
     scale = args.steps_per_decision
-    venv = ParallelVecEnv([_EnvFactory(args.env_config(), args.level, args.hold)
-                           for _ in range(args.n_envs)], n_workers=args.n_workers)
+    venv = ParallelVecEnv([_EnvFactory(config, args.level, args.hold)
+                           for config in args.train_env_configs()], n_workers=args.n_workers)
     venv = VecMonitor(venv)
     venv.seed(args.seed)
     try:

@@ -112,11 +112,22 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"backend": "rllib", "num_env_runners": -1}, "num_env_runners must be an integer >= 0, got -1"),
         ({"backend": "rllib", "n_envs": 2, "num_env_runners": 3}, r"num_env_runners must be <= n_envs \(2\)"),
         ({"backend": "rllib", "address": ""}, "address must be a non-empty string, got ''"),
+        ({"world_size_max": 8.0}, r"world_size_max must be a side in metres >= max\(world_size\) "
+                                  r"= 10.0, got 8.0"),
+        ({"backend": "rllib", "world_size_max": 20.0}, "world_size_max applies to backend='sb3'"),
+        ({"cost_prior": -1.0}, "cost_prior must be a finite number >= 0, got -1.0"),
     ],
 )
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Args(**kwargs)
+
+
+def test_world_size_max_spreads_the_training_envs():
+    configs = Args(n_envs=3, world_size=(10.0, 12.0), world_size_max=20.0).train_env_configs()
+    assert [c["world"]["size"] for c in configs] == [(10.0, 12.0), (15.0, 16.0), (20.0, 20.0)]
+    assert [c["max_cycles"] for c in configs] == [500, 667, 833]
+    assert Args(n_envs=2).train_env_configs() == [Args().env_config()] * 2
 
 
 def test_rllib_defaults_split_the_envs_between_runners():
