@@ -337,8 +337,7 @@ class ExploreMetrics(RLlibCallback):
 # ------------------------------------------------------------------------------- config
 def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int = DEFAULT_HOLD,
                sector_head: bool = True, mask_sectors: bool = True, cost_prior: float = 0.0,
-               seed: int = 0,
-               num_env_runners: int = 1,
+               seed: int = 0, num_env_runners: int = 1,
                envs_per_runner: int = 1, train_batch_size: int = 256, minibatch_size: int = 64,
                num_epochs: int = 4, lr: float = 3e-4, gamma: float = 0.99,
                gae_lambda: float = 0.95, entropy_coeff: float = 0.005,
