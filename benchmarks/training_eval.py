@@ -285,7 +285,7 @@ def plot(rows: list[dict[str, Any]], groups: dict[str, list[str]], worlds: list[
         ax.errorbar(i, mid, yerr=[[mid - lo], [hi - mid]], fmt="D", color="k", capsize=5)
     ax.axhline(1.0, color="0.5", lw=0.8)
     ax.axhline(0.9, color="tab:green", lw=0.8, ls="--", label="target 0.9")
-    ax.set_xticks(range(len(rows)), [r["explorer"] for r in rows], rotation=20)
+    ax.set_xticks(range(len(rows)), [r["explorer"] for r in rows], rotation=30, ha="right")
     ax.set_yscale("log")
     ax.set_ylabel("T85 / Frontier's T85 (per world; IQM ± 95 % CI)")
     ax.legend(loc="upper left")
@@ -313,8 +313,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="*", type=Path, help="train.py run folders")
     parser.add_argument("--label", action="append", default=[],
-                        help="NAME=GLOB: group runs under NAME (default: one group 'ppo' of "
-                             "all runs); repeat for ablations, e.g. --label masked='runs/m*'")
+                        help="NAME=GLOB: group the run folders GLOB matches under NAME (default: "
+                             "one group 'ppo' of all runs); repeat for ablations, e.g. "
+                             "--label masked='runs/m*'")
     parser.add_argument("--worlds", type=int, default=20, help="procedural held-out worlds")
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
     parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
@@ -333,7 +334,7 @@ def main() -> None:
 
         for spec in opts.label:
             name, sep, pattern = spec.partition("=")
-            paths = sorted(glob.glob(pattern))
+            paths = sorted(p for p in glob.glob(pattern) if Path(p).is_dir())
             if not sep or not name or not paths:
                 parser.error(f"--label must be NAME=GLOB matching run folders, got {spec!r}")
             groups[name] = [f"run:{p}" for p in paths]
