@@ -149,16 +149,29 @@ MASKED_LOGIT = -1e8
 
 class _SectorScorer(nn.Module):
     """The action head of :class:`SectorPolicy`: logit of sector ``k`` =
-    ``MLP([context, frontiers[k], one_hot(k)]) − prior · frontiers[k, prior_column]``, the
-    same MLP for every sector. With ``mask_empty``, sectors whose first ``frontiers`` column (a
-    reachable frontier is there) is 0 get :data:`MASKED_LOGIT`, unless no sector has one."""
+    ``MLP([context, frontiers[k], one_hot(k)]) − cost_prior · gap_k``, the same MLP for every
+    sector, ``gap_k`` the metres by which sector ``k``'s frontier is dearer than the cheapest
+    (the ``cost_gap`` column of :data:`agents.goals.FRONTIER_FEATURES`). With ``mask_empty``,
+    sectors whose first ``frontiers`` column (a reachable frontier is there) is 0 get
+    :data:`MASKED_LOGIT`, unless no sector has one.
+
+    Raises:
+        ValueError: ``cost_prior`` < 0, or > 0 with rows other than ``FRONTIER_FEATURES``'s
+            (``name`` is the parameter named in the message).
+    """
 
     def __init__(self, context_dim: int, sectors: int, row: int, hidden: int,
-                 mask_empty: bool = False, prior: float = 0.0, prior_column: int = 0) -> None:
+                 mask_empty: bool = False, cost_prior: float = 0.0,
+                 name: str = "cost_prior") -> None:
         super().__init__()
+        cost_prior = check_real(cost_prior, name, low=0.0, low_inclusive=True)
+        if cost_prior and row != len(FRONTIER_FEATURES):
+            raise ValueError(f"{name} needs the {len(FRONTIER_FEATURES)} frontiers columns of "
+                             f"agents.goals.FRONTIER_FEATURES, got {row}")
         self.context_dim, self.sectors, self.row = context_dim, sectors, row
         self.mask_empty = bool(mask_empty)
-        self.prior, self.prior_column = float(prior), int(prior_column)
+        self.prior = cost_prior * COST_SCALE  # per unit of the cost_gap feature
+        self.prior_column = FRONTIER_FEATURES.index("cost_gap")
         self.register_buffer("direction", torch.eye(sectors))
         self.net = nn.Sequential(nn.Linear(context_dim + row + sectors, hidden), nn.Tanh(),
                                  nn.Linear(hidden, 1))
@@ -211,10 +224,7 @@ class SectorPolicy(MultiInputActorCriticPolicy):
         self._widths = (int(net_arch.get("pi", [64])[0]), int(net_arch.get("vf", [64])[0]))
         self._sectors, self._row = frontiers.shape
         self._mask_empty = bool(mask_empty)
-        self._cost_prior = check_real(cost_prior, "cost_prior", low=0.0, low_inclusive=True)
-        if self._cost_prior and self._row != len(FRONTIER_FEATURES):
-            raise ValueError(f"cost_prior needs the {len(FRONTIER_FEATURES)} frontiers columns "
-                             f"of agents.goals.FRONTIER_FEATURES, got {self._row}")
+        self._cost_prior = cost_prior
         kwargs.setdefault("features_extractor_class", TopoExplorerExtractor)
         kwargs["features_extractor_kwargs"] = {**kwargs.get("features_extractor_kwargs", {}),
                                                "pass_through": ("frontiers",)}
@@ -233,8 +243,7 @@ class SectorPolicy(MultiInputActorCriticPolicy):
         super()._build(lr_schedule)
         pi = self._widths[0]
         self.action_net = _SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty,
-                                        self._cost_prior * COST_SCALE,
-                                        FRONTIER_FEATURES.index("cost_gap"))
+                                        self._cost_prior)
         if self.ortho_init:
             self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))
             self.init_weights(self.action_net.net[-1], gain=0.01)

@@ -46,9 +46,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from torch import nn
 
-from agents.goals import COST_SCALE, DEFAULT_HOLD, FRONTIER_FEATURES, LEVELS, make_env
+from agents.goals import DEFAULT_HOLD, LEVELS, make_env
 from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
-from topo.validation import check_real
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
               "lz4, ...): pip install 'topomerge[rllib]'")
@@ -245,13 +244,8 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
         if self.sector_head:
             sectors, row = frontiers.shape
             self.latent = _SectorLatent(n, sectors * row, pi, vf)
-            prior = check_real(cfg["cost_prior"], "model_config cost_prior", low=0.0,
-                               low_inclusive=True)
-            if prior and row != len(FRONTIER_FEATURES):
-                raise ValueError(f"model_config cost_prior needs the {len(FRONTIER_FEATURES)} "
-                                 f"frontiers columns of FRONTIER_FEATURES, got {row}")
             self.actor = _SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]),
-                                       prior * COST_SCALE, FRONTIER_FEATURES.index("cost_gap"))
+                                       cfg["cost_prior"], name="model_config cost_prior")
         else:
             self.latent = _Latent(n, pi, vf)
             if isinstance(act_space, spaces.Discrete):
