@@ -101,8 +101,8 @@ def heldout_worlds(n: int, real: bool = True) -> list[World]:
 
 # ------------------------------------------------------------------------------- episodes
 @functools.lru_cache(maxsize=8)
-def _policy(run: str) -> tuple[Any, dict[str, Any], int]:
-    """A run's policy, its env config and its goal hold (loaded once per process)."""
+def _policy(run: str) -> tuple[Any, dict[str, Any]]:
+    """A run's policy and its env config (loaded once per process)."""
     import train
 
     run_dir = Path(run)
@@ -122,7 +122,7 @@ def _policy(run: str) -> tuple[Any, dict[str, Any], int]:
         policy = RLlibPolicy.load(run_dir / "rllib")
     else:
         raise SystemExit(f"{run}: no model.zip or rllib/ (not a finished train.py run)")
-    return policy, args.env_config(), args.hold
+    return policy, args.env_config()
 
 
 def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -134,7 +134,7 @@ def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
     from agents.team import make_team
 
     if explorer.startswith("run:"):
-        policy, config, _hold = _policy(explorer[4:])
+        policy, config = _policy(explorer[4:])
         return sb3_team(policy), config
     if explorer.startswith("rule:"):
         board = Blackboard()
@@ -235,13 +235,12 @@ def summarise(groups: dict[str, list[str]], worlds: list[World],
             ratios = np.array([[episodes[(e, w.id)][m] / episodes[("frontier", w.id)][m]
                                 for e in members] for w in worlds])
             row[f"{m}_ratio"] = bootstrap_iqm(ratios, rng)
+            if m == "T85":
+                row["per_seed_T85_ratio"] = [iqm(ratios[:, j]) for j in range(len(members))]
         eps = [episodes[(e, w.id)] for e in members for w in worlds]
         row["final_coverage"] = float(np.mean([e["final_coverage"] for e in eps]))
         row["reached_T85"] = float(np.mean([e["reached_T85"] for e in eps]))
         row["overlap"] = float(np.mean([e["overlap"] for e in eps]))
-        row["per_seed_T85_ratio"] = [iqm([episodes[(e, w.id)]["T85"]
-                                          / episodes[("frontier", w.id)]["T85"]
-                                          for w in worlds]) for e in members]
         rows.append(row)
     return rows
 

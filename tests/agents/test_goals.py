@@ -99,15 +99,28 @@ def test_bad_actions_name_the_problem(action, error, match):
         env.step({"robot_0": 0})
 
 
-def test_the_chosen_sector_decides_the_goal():
+def looked_around():
+    """A small env after both robots turned on the spot for 15 steps (frontiers in several
+    directions): ``(env, observations, infos)``."""
     env = two_robot_explore_v0.parallel_env(**SMALL)
     obs, infos = env.reset(seed=2)
-    for _ in range(15):  # look around a little: frontiers in several directions
+    for _ in range(15):
         obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
-    info = infos["robot_0"]
-    robot = GoalFrontier()
-    robot.bind(env, "robot_0")
+    return env, obs, infos
+
+
+def bound_robot(env, agent="robot_0", **kwargs):
+    """A :class:`GoalFrontier` bound to ``agent`` of ``env`` and reset."""
+    robot = GoalFrontier(**kwargs)
+    robot.bind(env, agent)
     robot.reset(0)
+    return robot
+
+
+def test_the_chosen_sector_decides_the_goal():
+    env, obs, infos = looked_around()
+    info = infos["robot_0"]
+    robot = bound_robot(env)
     features = robot.frontier_features(info)
     available = np.flatnonzero(features[:, 0])
     assert len(available) >= 2, features
@@ -122,13 +135,8 @@ def test_the_chosen_sector_decides_the_goal():
 
 
 def test_frontier_features_mark_the_cheapest_sector_and_the_current_goal():
-    env = two_robot_explore_v0.parallel_env(**SMALL)
-    obs, infos = env.reset(seed=2)
-    for _ in range(15):
-        obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
-    robot = GoalFrontier()
-    robot.bind(env, "robot_0")
-    robot.reset(0)
+    env, obs, infos = looked_around()
+    robot = bound_robot(env)
     features = robot.frontier_features(infos["robot_0"])
     reachable = features[:, 0] == 1
     assert features.shape == (SECTORS, len(FRONTIER_FEATURES))
@@ -150,15 +158,9 @@ def test_teammate_column_marks_frontiers_near_the_teammates_goal_once_merged():
     from agents.scripted import Blackboard
     from fusion.rigid import Rigid2D
 
-    env = two_robot_explore_v0.parallel_env(**SMALL)
-    obs, infos = env.reset(seed=2)
-    for _ in range(15):
-        obs, _r, _t, _u, infos = env.step({a: np.array([0.0, 1.0]) for a in env.agents})
+    env, obs, infos = looked_around()
     board = Blackboard()
-    robots = {a: GoalFrontier(blackboard=board) for a in env.agents}
-    for a, r in robots.items():
-        r.bind(env, a)
-        r.reset(0)
+    robots = {a: bound_robot(env, a, blackboard=board) for a in env.agents}
     me, info = robots["robot_0"], infos["robot_0"]
     before = me.frontier_features(info)
     assert before[:, 5].sum() == 0  # no merge: the teammate's place is unknown
