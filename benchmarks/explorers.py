@@ -30,11 +30,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _maps import REAL_MAX_CYCLES, real_worlds
 
-MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 EXPLORERS = ("random_walk", "wall_follower", "frontier", "coordinated_frontier")
 STEPS_PER_METRE = 150
-REAL_MAX_CYCLES = 2000
 
 
 def worlds(n: int, sizes: list[float], real: bool = True) -> list[tuple[str, str, dict, int]]:
@@ -47,14 +46,8 @@ def worlds(n: int, sizes: list[float], real: bool = True) -> list[tuple[str, str
                         int(STEPS_PER_METRE * size)))
     if not real:
         return out
-    for path in sorted((MAPS / "ros").glob("*.yaml")):
-        out.append(("real", f"ros/{path.stem}", {"seed": 0, "world": {"source": str(path)}},
-                    REAL_MAX_CYCLES))
-    png = MAPS / "dungeon" / "1.png"
-    if png.exists():
-        out.append(("real", "dungeon/1", {"seed": 0, "world": {"source": str(png),
-                                                               "png_resolution": 0.05}},
-                    REAL_MAX_CYCLES))
+    for world_id, world in real_worlds():
+        out.append(("real", world_id, {"seed": 0, "world": world}, REAL_MAX_CYCLES))
     return out
 
 

@@ -47,19 +47,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _maps import MAPS, REAL_MAX_CYCLES, real_worlds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.goals import SECTOR_RULES  # noqa: E402
 from topo.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
 
-MAPS = (Path(__file__).resolve().parents[2] / "shared" / "maps").resolve()
 HELDOUT_ENTROPY = 0x4E1D_5EED
 """Root of the held-out worlds' ``SeedSequence`` (no training or ``train.py`` evaluation
 world derives from it)."""
 SIZE_RANGE = (10.0, 20.0)
 STEPS_PER_METRE = 150
-REAL_MAX_CYCLES = 2000
 CURVE_EVERY = 10
 """Coverage curves are kept every this many steps (for the plot)."""
 METRICS = ("T50", "T85", "T95")
@@ -88,14 +87,8 @@ def heldout_worlds(n: int, real: bool = True) -> list[World]:
                          {"world": {"size": size}}, seed,
                          int(STEPS_PER_METRE * max(size))))
     if real:
-        for path in sorted((MAPS / "ros").glob("*.yaml")):
-            out.append(World(f"ros/{path.stem}", {"world": {"source": str(path)}}, 0,
-                             REAL_MAX_CYCLES))
-        png = MAPS / "dungeon" / "1.png"
-        if png.exists():
-            out.append(World("dungeon/1", {"world": {"source": str(png),
-                                                     "png_resolution": 0.05}}, 0,
-                             REAL_MAX_CYCLES))
+        out += [World(world_id, {"world": world}, 0, REAL_MAX_CYCLES)
+                for world_id, world in real_worlds()]
     return out
 
 

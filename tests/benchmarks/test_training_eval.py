@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))  # its shared helpers (_maps), as when run
 spec = importlib.util.spec_from_file_location("training_eval", ROOT / "benchmarks/training_eval.py")
 te = importlib.util.module_from_spec(spec)
 sys.modules["training_eval"] = te  # dataclasses look their module up there
