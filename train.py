@@ -82,8 +82,8 @@ class Args:
     cost_prior: float = 1.0
     """With the sector scorer, logits subtracted per metre by which a sector's frontier is
     dearer than the cheapest one: > 0 starts the policy as a soft ``Frontier`` that PPO
-    refines (:class:`agents.policy.SectorPolicy`); 0 learns from scratch (held-out T85 IQM
-    1.06× against 1.13× ``Frontier``'s, ``benchmarks/training.md``)."""
+    refines (:class:`agents.policy.SectorPolicy`); 0 learns from scratch
+    (``benchmarks/training.md`` compares both)."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4

@@ -154,3 +154,11 @@ def test_cost_prior_starts_the_policy_as_a_soft_frontier():
     torch.testing.assert_close(ratio, torch.full((4,), math.e ** 2), rtol=0.1, atol=0)
     with pytest.raises(ValueError, match="cost_prior must be >= 0"):
         SectorPolicy(space, spaces.Discrete(8), lambda _: 3e-4, cost_prior=-1.0)
+    from agents.policy import _SectorScorer
+
+    with pytest.raises(ValueError, match="model_config cost_prior must be >= 0"):
+        _SectorScorer(16, 8, len(FRONTIER_FEATURES), 32, cost_prior=-1.0,
+                      name="model_config cost_prior")
+    with pytest.raises(ValueError, match=r"cost_prior needs the 6 frontiers columns of "
+                                         r"agents.goals.FRONTIER_FEATURES, got 3"):
+        _SectorScorer(16, 8, 3, 32, cost_prior=1.0)
