@@ -69,8 +69,12 @@ class Args:
     level: Literal["goals", "motion"] = "goals"
     """What the policy decides: a frontier sector every ``hold`` steps (a planner drives), or
     the velocity command every step."""
-    hold: int = 10
-    """Env steps each goal decision is held (``level="goals"``)."""
+    hold: int | None = None
+    """Env steps each decision is held: a goal (default 10) or a velocity command (action
+    repeat; default 1, see :mod:`agents.motion`)."""
+    frontier_shaping: float = 0.0
+    """``level="motion"``: reward per metre of progress along the path to the nearest
+    frontier (potential-based shaping, :class:`agents.motion.MotionEnv`); 0: none."""
     sector_head: bool = True
     """At the goals level, score every sector with one shared network
     (:class:`agents.policy.SectorPolicy`, or :class:`agents.rllib.TopoExplorerModule`'s
@@ -84,6 +88,10 @@ class Args:
     dearer than the cheapest one: > 0 starts the policy as a soft ``Frontier`` that PPO
     refines (:class:`agents.policy.SectorPolicy`); 0 learns from scratch
     (``benchmarks/training.md`` compares both)."""
+    central_critic: bool = False
+    """At the goals level with the sector scorer (SB3): the value function also reads the
+    env's global ``state()`` (MAPPO-style centralised critic; the actors stay decentralised,
+    :class:`agents.policy.SectorPolicy`)."""
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
@@ -129,6 +137,9 @@ class Args:
     """GAE lambda."""
     ent_coef: float = 0.005
     """Entropy bonus."""
+    log_std_init: float = 0.0
+    """``level="motion"``, SB3: initial log standard deviation of the Gaussian velocity
+    command (SB3's ``log_std_init``; 0 is a standard deviation of 1, the whole action range)."""
     clip_range: float = 0.2
     """PPO clip range."""
     eval_every: int = 50_000
@@ -159,6 +170,8 @@ class Args:
 
     def __post_init__(self) -> None:
         goals = self.level == "goals"
+        if self.hold is None:
+            self.hold = 10 if goals else 1
         if self.n_steps is None:
             self.n_steps = 32 if goals else 128
         if self.batch_size is None:
@@ -210,6 +223,16 @@ class Args:
         if self.reward_mode not in ("shared", "oracle", "individual"):
             raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
                              f"got {self.reward_mode!r}")
+        shaping = self.frontier_shaping
+        if isinstance(shaping, bool) or not isinstance(shaping, (int, float)) or not (
+                math.isfinite(shaping) and shaping >= 0):
+            raise ValueError(f"frontier_shaping must be a finite number >= 0, got {shaping!r}")
+        if self.central_critic and not (goals and self.sector_head and self.backend == "sb3"):
+            raise ValueError("central_critic applies to level='goals' with the sector head on "
+                             "backend='sb3' only")
+        if shaping and goals:
+            raise ValueError("frontier_shaping applies to level='motion' only (the goal "
+                             "level's planner already drives to frontiers)")
         prior = self.cost_prior
         if isinstance(prior, bool) or not isinstance(prior, (int, float)) or not (
                 math.isfinite(prior) and prior >= 0):
@@ -237,8 +260,8 @@ class Args:
 
     @property
     def steps_per_decision(self) -> int:
-        """Env steps per policy decision: ``hold`` at the goals level, else 1."""
-        return self.hold if self.level == "goals" else 1
+        """Env steps per policy decision: ``hold``."""
+        return self.hold
 
     def train_env_configs(self) -> list[dict[str, Any]]:
         """One env config per training env: :meth:`env_config`, or with ``world_size_max``
@@ -270,11 +293,12 @@ class Args:
 class _EnvFactory:
     """Builds one training env (:func:`agents.goals.make_env`); picklable for workers."""
 
-    def __init__(self, config: dict[str, Any], level: str, hold: int) -> None:
-        self.config, self.level, self.hold = config, level, hold
+    def __init__(self, config: dict[str, Any], args: Args) -> None:
+        self.config, self.level, self.hold = config, args.level, args.hold
+        self.shaping, self.global_state = args.frontier_shaping, args.central_critic
 
     def __call__(self) -> Any:
-        return make_env(self.config, self.level, self.hold)
+        return make_env(self.config, self.level, self.hold, self.shaping, self.global_state)
 
 
 # ------------------------------------------------------------------------------- callbacks
@@ -397,7 +421,7 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
     """Train (or resume from ``checkpoint``) with Stable-Baselines3; save ``model.zip``.
     Returns the model and the agent-steps trained."""
     scale = args.steps_per_decision
-    venv = ParallelVecEnv([_EnvFactory(config, args.level, args.hold)
+    venv = ParallelVecEnv([_EnvFactory(config, args)
                            for config in args.train_env_configs()], n_workers=args.n_workers)
     venv = VecMonitor(venv)
     venv.seed(args.seed)
@@ -416,11 +440,16 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
                                "net_arch": {"pi": [64], "vf": [64]},
+                               **({} if args.level == "goals"
+                                  else {"log_std_init": args.log_std_init}),
                                **({"mask_empty": args.mask_sectors,
                                    "cost_prior": args.cost_prior} if sectors else {})},
             )
+            # saved with the model, read by SB3Explorer
             if args.level == "goals":
-                model.goal_hold = args.hold  # saved with the model, read by SB3Explorer
+                model.goal_hold = args.hold
+            else:
+                model.motion_hold = args.hold
         callbacks = CallbackList([
             InfoLogger(args.total_timesteps, args.progress, scale),
             Checkpointer(run_dir / "checkpoints", args.checkpoint_every, scale),
@@ -463,7 +492,8 @@ def rllib_config(args: Args) -> Any:
 
     return rllib.ppo_config(
         env_config=args.env_config(), level=args.level, hold=args.hold,
-        sector_head=args.sector_head, mask_sectors=args.mask_sectors,
+        frontier_shaping=args.frontier_shaping, sector_head=args.sector_head,
+        mask_sectors=args.mask_sectors,
         cost_prior=args.cost_prior, seed=args.seed,
         num_env_runners=args.num_env_runners,
         envs_per_runner=args.envs_per_runner, train_batch_size=args.n_steps * args.n_envs,

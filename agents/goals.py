@@ -217,6 +217,10 @@ class FrontierGoalEnv(ParallelEnv):
         env: a ``two_robot_explore_v0`` ``ParallelEnv``.
         hold: env steps each decision is held (the reward is their sum), ``>= 1``.
         config: the :class:`~agents.scripted.FrontierConfig` of the robots' planners.
+        global_state: add the env's ``state()`` (the global view: true poses, coverage and
+            world maps; the env manual's State) to every robot's observation as ``state``,
+            for a centralised critic (MAPPO-style: :class:`agents.policy.SectorPolicy` feeds
+            it to the value only; the actor never reads it).
 
     ``infos`` are the env's after the last held step, plus ``env_steps`` (how many were taken:
     fewer than ``hold`` when the episode ended).
@@ -226,7 +230,7 @@ class FrontierGoalEnv(ParallelEnv):
                 "is_parallelizable": True}
 
     def __init__(self, env: Any, hold: int = DEFAULT_HOLD,
-                 config: FrontierConfig | None = None) -> None:
+                 config: FrontierConfig | None = None, global_state: bool = False) -> None:
         if not hasattr(env, "possible_agents") or not hasattr(env, "config"):
             raise TypeError(f"env must be a two_robot_explore ParallelEnv, got "
                             f"{type(env).__name__}")
@@ -242,10 +246,12 @@ class FrontierGoalEnv(ParallelEnv):
         for agent, controller in self.controllers.items():
             controller.bind(env, agent)
         inner = env.observation_space(self.possible_agents[0])
+        self.global_state = bool(global_state)
         self._obs_space = spaces.Dict({
             **inner.spaces,
             "frontiers": spaces.Box(0.0, 1.0, (SECTORS, len(FRONTIER_FEATURES)),
                                     dtype=np.float32),
+            **({"state": env.unwrapped.state_space} if self.global_state else {}),
         })
         self._act_space = spaces.Discrete(SECTORS)
         self._rng: np.random.Generator | None = None
@@ -303,8 +309,9 @@ class FrontierGoalEnv(ParallelEnv):
         return self._augment(obs, infos), total, terms, truncs, infos
 
     def _augment(self, obs: dict, infos: dict) -> dict:
-        return {a: {**o, "frontiers": self.controllers[a].frontier_features(infos[a])}
-                for a, o in obs.items()}
+        extra = {"state": self.env.unwrapped.state()} if self.global_state and obs else {}
+        return {a: {**o, "frontiers": self.controllers[a].frontier_features(infos[a]),
+                    **extra} for a, o in obs.items()}
 
     def render(self) -> Any:
         return self.env.render()
@@ -317,14 +324,29 @@ LEVELS = ("goals", "motion")
 """What a policy decides: a frontier sector every ``hold`` steps, or the velocity command."""
 
 
-def make_env(config: Mapping[str, Any], level: str = "motion",
-             hold: int = DEFAULT_HOLD) -> ParallelEnv:
+def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None = None,
+             frontier_shaping: float = 0.0, global_state: bool = False) -> ParallelEnv:
     """One ``two_robot_explore_v0`` ``ParallelEnv`` built from ``config`` (``EnvConfig``
     fields), wrapped in :class:`FrontierGoalEnv` (holding decisions ``hold`` steps) when
-    ``level`` is ``"goals"``. A top-level function, so it pickles for worker processes."""
+    ``level`` is ``"goals"`` (with ``global_state``, observations carry the env's ``state()``
+    for a centralised critic), or at the motion level in :class:`agents.motion.MotionEnv` when
+    ``hold > 1`` or ``frontier_shaping > 0`` (commands held ``hold`` steps, progress towards
+    frontiers rewarded); ``hold`` defaults to :data:`DEFAULT_HOLD` at the goal
+    level and 1 at the motion level. A top-level function, so it pickles for worker
+    processes."""
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
+    if hold is None:
+        hold = DEFAULT_HOLD if level == "goals" else 1
     from envs.two_robot_explore_v0 import parallel_env
 
     env = parallel_env(**config)
-    return FrontierGoalEnv(env, hold=hold) if level == "goals" else env
+    if level == "goals":
+        return FrontierGoalEnv(env, hold=hold, global_state=global_state)
+    if global_state:
+        raise ValueError("global_state applies to level='goals' only")
+    if hold == 1 and not frontier_shaping:
+        return env
+    from agents.motion import MotionEnv
+
+    return MotionEnv(env, hold=hold, frontier_shaping=frontier_shaping)

@@ -50,24 +50,34 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         map_features, vector_features, graph_features: widths of the three encodings.
         pass_through: observation keys appended, flattened and scaled to [-1, 1], after the
             encodings (:class:`SectorPolicy` reads ``frontiers`` there).
+        state_features: width of an MLP encoding of the ``state`` observation (the env's
+            global state, :class:`agents.goals.FrontierGoalEnv`'s ``global_state``), placed
+            between the three encodings and the pass-through keys; 0 (the default) ignores
+            ``state``. :class:`SectorPolicy` gives it to the critic only.
     """
 
     def __init__(self, observation_space: spaces.Dict, map_features: int = 128,
                  vector_features: int = 64, graph_features: int = 64,
-                 pass_through: tuple[str, ...] = ()) -> None:
+                 pass_through: tuple[str, ...] = (), state_features: int = 0) -> None:
         if not isinstance(observation_space, spaces.Dict):
             raise TypeError("TopoExplorerExtractor needs a Dict observation space, got "
                             f"{type(observation_space).__name__}")
         missing = [k for k in ("local_map", *VECTOR_KEYS, *GRAPH_KEYS)
                    if k not in observation_space.spaces]
         missing += [k for k in pass_through if k not in observation_space.spaces]
+        if state_features:
+            missing += [k for k in ("state",) if k not in observation_space.spaces]
         if missing:
             raise ValueError(f"observation space lacks keys {missing}")
         sp = observation_space.spaces
         n_through = int(sum(np.prod(sp[k].shape) for k in pass_through))
-        super().__init__(observation_space,
-                         map_features + vector_features + graph_features + n_through)
+        self.state_features = int(state_features)
+        super().__init__(observation_space, map_features + vector_features + graph_features
+                         + self.state_features + n_through)
         self.pass_through = tuple(pass_through)
+        if self.state_features:
+            self.state_encoder = nn.Sequential(
+                nn.Linear(int(np.prod(sp["state"].shape)), self.state_features), nn.ReLU())
         if self.pass_through:
             self.register_buffer("through_scale", torch.cat([_bound(sp[k]).flatten()
                                                              for k in self.pass_through]))
@@ -112,30 +122,36 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         mean = h.sum(1) / count
         top = (h - (1.0 - mask) * 1e4).amax(1) * (mask.sum(1) > 0)
         g = self.graph_head(torch.cat([mean, top], dim=1))
-        if not self.pass_through:
-            return torch.cat([m, v, g], dim=1)
-        raw = torch.cat([obs[k].flatten(1) for k in self.pass_through], dim=1)
-        return torch.cat([m, v, g, raw / self.through_scale], dim=1)
+        parts = [m, v, g]
+        if self.state_features:
+            parts.append(self.state_encoder(obs["state"].flatten(1)))
+        if self.pass_through:
+            raw = torch.cat([obs[k].flatten(1) for k in self.pass_through], dim=1)
+            parts.append(raw / self.through_scale)
+        return torch.cat(parts, dim=1)
 
 
 class _SectorLatent(nn.Module):
     """SB3 ``mlp_extractor`` for :class:`SectorPolicy`: the actor's latent is an MLP of the
     context followed by the raw per-sector rows (the features' last ``n_raw`` columns); the
-    critic sees the context only."""
+    critic sees the context and the ``n_state`` global-state columns before the rows (a
+    centralised critic), which the actor never reads."""
 
-    def __init__(self, features_dim: int, n_raw: int, pi: int, vf: int) -> None:
+    def __init__(self, features_dim: int, n_raw: int, pi: int, vf: int,
+                 n_state: int = 0) -> None:
         super().__init__()
-        self.n_raw = n_raw
+        self.n_raw, self.n_state = n_raw, n_state
         self.context_dim = pi
         self.latent_dim_pi, self.latent_dim_vf = pi + n_raw, vf
-        self.policy_net = nn.Sequential(nn.Linear(features_dim - n_raw, pi), nn.Tanh())
+        self.policy_net = nn.Sequential(nn.Linear(features_dim - n_raw - n_state, pi),
+                                        nn.Tanh())
         self.value_net = nn.Sequential(nn.Linear(features_dim - n_raw, vf), nn.Tanh())
 
     def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.forward_actor(features), self.forward_critic(features)
 
     def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
-        context = features[:, :-self.n_raw]
+        context = features[:, :-(self.n_raw + self.n_state)]
         return torch.cat([self.policy_net(context), features[:, -self.n_raw:]], dim=1)
 
     def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
@@ -208,11 +224,17 @@ class SectorPolicy(MultiInputActorCriticPolicy):
     :data:`agents.goals.FRONTIER_FEATURES`): the untrained policy is then a soft ``Frontier``
     and PPO learns where to deviate from it (a residual on the scripted rule) instead of
     rediscovering it.
+
+    When the observation has ``state`` (the env's global state:
+    :class:`agents.goals.FrontierGoalEnv`'s ``global_state``), the value function reads it
+    through its own ``state_features``-wide encoder and the actor does not: a centralised
+    critic with decentralised actors (MAPPO, Yu et al. 2022). At inference only the actor
+    runs, so ``state`` may be zeros (:class:`agents.sb3_explorer.SB3Explorer` passes zeros).
     """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space,
                  lr_schedule, net_arch: dict | None = None, mask_empty: bool = True,
-                 cost_prior: float = 0.0, **kwargs) -> None:
+                 cost_prior: float = 0.0, state_features: int = 128, **kwargs) -> None:
         if not isinstance(action_space, spaces.Discrete):
             raise TypeError(f"SectorPolicy needs a Discrete action space, got {action_space}")
         frontiers = observation_space.spaces.get("frontiers") if isinstance(
@@ -225,19 +247,23 @@ class SectorPolicy(MultiInputActorCriticPolicy):
         self._sectors, self._row = frontiers.shape
         self._mask_empty = bool(mask_empty)
         self._cost_prior = cost_prior
+        self._state_features = int(state_features)
+        self._n_state = self._state_features if "state" in observation_space.spaces else 0
         kwargs.setdefault("features_extractor_class", TopoExplorerExtractor)
         kwargs["features_extractor_kwargs"] = {**kwargs.get("features_extractor_kwargs", {}),
-                                               "pass_through": ("frontiers",)}
+                                               "pass_through": ("frontiers",),
+                                               "state_features": self._n_state}
         super().__init__(observation_space, action_space, lr_schedule, net_arch=net_arch,
                          **kwargs)
 
     def _get_constructor_parameters(self) -> dict:
         return {**super()._get_constructor_parameters(), "mask_empty": self._mask_empty,
-                "cost_prior": self._cost_prior}
+                "cost_prior": self._cost_prior, "state_features": self._state_features}
 
     def _build_mlp_extractor(self) -> None:
         pi, vf = self._widths
-        self.mlp_extractor = _SectorLatent(self.features_dim, self._sectors * self._row, pi, vf)
+        self.mlp_extractor = _SectorLatent(self.features_dim, self._sectors * self._row, pi, vf,
+                                           self._n_state)
 
     def _build(self, lr_schedule) -> None:
         super()._build(lr_schedule)

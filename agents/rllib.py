@@ -155,14 +155,15 @@ class LightInfoEnv(ParallelEnv):
 
 def env_creator(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
     """RLlib's env factory: ``env_config`` holds ``config`` (the env's ``EnvConfig`` fields),
-    ``level`` and ``hold`` (:func:`agents.goals.make_env`); RLlib's ``EnvContext`` adds the
-    env runner's ``worker_index`` (the :class:`LightInfoEnv` stream)."""
-    unknown = set(env_config) - {"config", "level", "hold"}
+    ``level``, ``hold`` and ``frontier_shaping`` (:func:`agents.goals.make_env`);
+    RLlib's ``EnvContext`` adds the env runner's ``worker_index`` (the :class:`LightInfoEnv`
+    stream)."""
+    allowed = ["config", "frontier_shaping", "hold", "level"]
+    unknown = set(env_config) - set(allowed)
     if unknown:
-        raise ValueError(f"env_config has unknown keys {sorted(unknown)}; allowed: "
-                         "['config', 'level', 'hold']")
+        raise ValueError(f"env_config has unknown keys {sorted(unknown)}; allowed: {allowed}")
     env = make_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
-                   env_config.get("hold", DEFAULT_HOLD))
+                   env_config.get("hold"), env_config.get("frontier_shaping", 0.0))
     stream = int(getattr(env_config, "worker_index", 0) or 0)
     return ParallelPettingZooEnv(LightInfoEnv(env, stream=stream))
 
@@ -318,7 +319,8 @@ class ExploreMetrics(RLlibCallback):
         hold = 1
         if env_runner is not None:
             env_config = env_runner.config.env_config
-            hold = int(env_config.get("hold", 1)) if env_config.get("level") == "goals" else 1
+            default = DEFAULT_HOLD if env_config.get("level") == "goals" else 1
+            hold = int(env_config.get("hold") or default)
         log(("explore", "episode_env_steps"),
             (episode.env_t - 1) * hold + int(info.get("env_steps", hold)))
         if "merge_accepted" in info:
@@ -329,8 +331,9 @@ class ExploreMetrics(RLlibCallback):
 
 
 # ------------------------------------------------------------------------------- config
-def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int = DEFAULT_HOLD,
-               sector_head: bool = True, mask_sectors: bool = True, cost_prior: float = 0.0,
+def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int | None = None,
+               frontier_shaping: float = 0.0, sector_head: bool = True,
+               mask_sectors: bool = True, cost_prior: float = 0.0,
                seed: int = 0, num_env_runners: int = 1,
                envs_per_runner: int = 1, train_batch_size: int = 256, minibatch_size: int = 64,
                num_epochs: int = 4, lr: float = 3e-4, gamma: float = 0.99,
@@ -340,8 +343,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
 
     Args:
         env_config: the env's ``EnvConfig`` fields.
-        level, hold: :func:`agents.goals.make_env`'s (``gamma`` is per decision: pass
-            ``gamma ** hold`` for a per-step discount).
+        level, hold, frontier_shaping: :func:`agents.goals.make_env`'s (``gamma`` is per
+            decision: pass ``gamma ** hold`` for a per-step discount).
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).
         mask_sectors: with the sector scorer, sectors without a reachable frontier cannot be
             chosen (:class:`agents.policy.SectorPolicy`'s ``mask_empty``).
@@ -362,12 +365,14 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     register()
+    if hold is None:
+        hold = DEFAULT_HOLD if level == "goals" else 1
     model_config = {**DEFAULT_MODEL_CONFIG, "sector_head": bool(sector_head and level == "goals"),
                     "mask_empty": bool(mask_sectors), "cost_prior": float(cost_prior)}
     return (
         PPOConfig()
         .environment(ENV_NAME, env_config={"config": dict(env_config), "level": level,
-                                           "hold": hold},
+                                           "hold": hold, "frontier_shaping": frontier_shaping},
                      disable_env_checking=True)
         .multi_agent(policies={POLICY_ID},
                      policy_mapping_fn=_shared_policy)
@@ -493,16 +498,22 @@ class RLlibPolicy:
 
     Args:
         module: the shared RLModule (``algo.get_module(POLICY_ID)`` or from a checkpoint).
-        goal_hold: env steps a goal-level decision is held (``train.py``'s ``hold``).
+        hold: env steps each decision is held (``train.py``'s ``hold``); default
+            :data:`~agents.goals.DEFAULT_HOLD` for a goal-level module (one that observes
+            ``frontiers``), 1 at the motion level. Exposed as ``goal_hold`` / ``motion_hold``,
+            the attributes :class:`~agents.sb3_explorer.SB3Explorer` reads.
     """
 
-    def __init__(self, module: RLModule, goal_hold: int = DEFAULT_HOLD) -> None:
+    def __init__(self, module: RLModule, hold: int | None = None) -> None:
         if not hasattr(module, "forward_inference"):
             raise TypeError(f"module must be an RLlib RLModule, got {type(module).__name__}")
         self.module = module
         self.observation_space = module.observation_space
         self.action_space = module.action_space
-        self.goal_hold = int(goal_hold)
+        goals = "frontiers" in getattr(self.observation_space, "spaces", {})
+        if hold is None:
+            hold = DEFAULT_HOLD if goals else 1
+        self.goal_hold = self.motion_hold = int(hold)
 
     @classmethod
     def load(cls, checkpoint: str | Path) -> RLlibPolicy:

@@ -32,7 +32,8 @@ class SB3Explorer(Explorer):
             the other's goal (:func:`sb3_team` wires one; default: a board of its own).
 
     A goal-level model holds each decision for its ``goal_hold`` attribute's steps (saved with
-    the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise).
+    the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise), a motion-level
+    model each velocity command for its ``motion_hold`` steps (1 otherwise), as trained.
 
     Raises:
         TypeError: ``policy`` has no ``predict`` method.
@@ -56,7 +57,14 @@ class SB3Explorer(Explorer):
 
             self.controller = GoalFrontier(action_type=action_type, blackboard=blackboard)
             self.hold = int(getattr(policy, "goal_hold", DEFAULT_HOLD))
-            self._since = self.hold
+            # a centralised critic's global state: the actor never reads it (SectorPolicy)
+            state = space.spaces.get("state")
+            self._critic_only = ({"state": np.zeros(state.shape, state.dtype)}
+                                 if state is not None else {})
+        else:
+            self.hold = int(getattr(policy, "motion_hold", 1))
+        self._since = self.hold
+        self._action: Any = None
 
     def bind(self, env: Any, agent: str) -> None:
         super().bind(env, agent)
@@ -67,7 +75,7 @@ class SB3Explorer(Explorer):
         super().reset(seed)
         if self.controller is not None:
             self.controller.reset(int(self.rng.integers(2**31)))
-            self._since = self.hold
+        self._since = self.hold
 
     @staticmethod
     def load_policy(path: str | Path, device: str = "cpu") -> Any:
@@ -82,16 +90,20 @@ class SB3Explorer(Explorer):
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray | int:
         if self.controller is not None:
             if self._since >= self.hold:
-                obs = {**observation, "frontiers": self.controller.frontier_features(info)}
+                obs = {**observation, "frontiers": self.controller.frontier_features(info),
+                       **self._critic_only}
                 sector, _ = self.policy.predict(obs, deterministic=self.deterministic)
                 self.controller.choose_sector(int(sector))
                 self._since = 0
             self._since += 1
             return self.controller.act(observation, info)
-        action, _ = self.policy.predict(dict(observation), deterministic=self.deterministic)
-        if self.action_type == "discrete":
-            return int(action)
-        return np.asarray(action, dtype=np.float32)
+        if self._since >= self.hold:
+            action, _ = self.policy.predict(dict(observation), deterministic=self.deterministic)
+            self._action = (int(action) if self.action_type == "discrete"
+                            else np.asarray(action, dtype=np.float32))
+            self._since = 0
+        self._since += 1
+        return self._action
 
 
 def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "continuous"

@@ -116,11 +116,44 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
                                   r"= 10.0, got 8.0"),
         ({"backend": "rllib", "world_size_max": 20.0}, "world_size_max applies to backend='sb3'"),
         ({"cost_prior": -1.0}, "cost_prior must be a finite number >= 0, got -1.0"),
+        ({"level": "motion", "frontier_shaping": -0.5},
+         "frontier_shaping must be a finite number >= 0, got -0.5"),
+        ({"frontier_shaping": 0.3}, "frontier_shaping applies to level='motion' only"),
+        ({"level": "motion", "central_critic": True},
+         "central_critic applies to level='goals' with the sector head on backend='sb3' only"),
     ],
 )
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Args(**kwargs)
+
+
+def test_motion_level_holds_commands_and_shapes(tmp_path):
+    from stable_baselines3 import PPO
+
+    assert Args(level="motion").hold == 1 and Args().hold == 10
+    run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "hold": 4, "frontier_shaping": 0.3,
+                                                   "n_steps": 16, "batch_size": 16,
+                                                   "checkpoint_every": 0}))
+    model = PPO.load(run / "model.zip", device="cpu")
+    assert model.motion_hold == 4 and model.num_timesteps * 4 >= TINY["total_timesteps"]
+    assert "| ppo |" in (run / "eval.md").read_text()
+
+
+def test_central_critic_trains_and_its_policy_drives_without_the_state(tmp_path):
+    from stable_baselines3 import PPO
+
+    from agents.base import run_episode
+    from agents.sb3_explorer import sb3_team
+    from envs import two_robot_explore_v0
+
+    run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "level": "goals", "hold": 5,
+                                                   "central_critic": True, "n_steps": 16,
+                                                   "batch_size": 16, "checkpoint_every": 0}))
+    model = PPO.load(run / "model.zip", device="cpu")
+    assert "state" in model.observation_space.spaces and model.policy.mlp_extractor.n_state
+    env = two_robot_explore_v0.parallel_env(max_cycles=20, world={"size": (8.0, 8.0)})
+    run_episode(env, sb3_team(model), seed=1)  # SB3Explorer fills the critic-only state
 
 
 def test_world_size_max_spreads_the_training_envs():

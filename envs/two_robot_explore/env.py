@@ -122,6 +122,13 @@ not, a dropped one takes robot 1's cells out) enters the reward.
 ``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
 ``true_coverage``); ``"individual"`` gives each robot its own new area and its own contacts.
 
+Shaping for learning velocity commands lives outside the env, so that every explorer is
+scored on the same reward: ``agents.motion.MotionEnv`` (``train.py --level motion --hold K
+--frontier-shaping k``) holds each command ``K`` steps and adds, per robot, the
+potential-based term ``k · (γᵗ · Φ(s') − Φ(s))`` with ``Φ`` minus the path length to the
+nearest frontier of the robot's own map: it pays progress towards unexplored space and sums
+to the change of ``Φ`` over an episode, so it cannot be farmed.
+
 Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
 ``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
 merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map grows by

@@ -215,3 +215,15 @@ def test_make_env_builds_either_level_and_names_bad_levels():
     assert not isinstance(make_env({"max_cycles": 5}), FrontierGoalEnv)
     with pytest.raises(ValueError, match=r"level must be one of \['goals', 'motion'\], got 'x'"):
         make_env({}, "x")
+
+
+def test_global_state_adds_the_envs_state_for_a_central_critic():
+    env = FrontierGoalEnv(two_robot_explore_v0.parallel_env(**SMALL), hold=3, global_state=True)
+    obs, _ = env.reset(seed=2)
+    assert env.observation_space("robot_0").contains(obs["robot_0"])
+    np.testing.assert_array_equal(obs["robot_0"]["state"], env.unwrapped.state())
+    obs, *_ = env.step({"robot_0": 0, "robot_1": 1})
+    np.testing.assert_array_equal(obs["robot_1"]["state"], env.unwrapped.state())
+    assert "state" not in goal_env().observation_space("robot_0").spaces
+    with pytest.raises(ValueError, match="global_state applies to level='goals' only"):
+        make_env(SMALL, "motion", global_state=True)

@@ -162,3 +162,23 @@ def test_cost_prior_starts_the_policy_as_a_soft_frontier():
     with pytest.raises(ValueError, match=r"cost_prior needs the 6 frontiers columns of "
                                          r"agents.goals.FRONTIER_FEATURES, got 3"):
         _SectorScorer(16, 8, 3, 32, cost_prior=1.0)
+
+
+def test_central_critic_reads_the_global_state_and_the_actor_does_not():
+    """With a ``state`` observation the value changes with it and the action distribution does
+    not (decentralised actors): zeros at inference are then as good as the true state."""
+    from agents.policy import SectorPolicy
+
+    space = spaces.Dict({**goal_space().spaces, "state": spaces.Box(0, 1, (40,), np.float32)})
+    torch.manual_seed(0)
+    policy = SectorPolicy(space, spaces.Discrete(8), lambda _: 3e-4, state_features=16)
+    obs = {k: torch.zeros((4, *s.shape)) for k, s in space.spaces.items()}
+    obs["frontiers"][:, :, 0] = 1.0
+    obs["state"] = torch.rand(4, 40, generator=torch.Generator().manual_seed(1))
+    zeroed = {**obs, "state": torch.zeros(4, 40)}
+    torch.testing.assert_close(policy.get_distribution(obs).distribution.logits,
+                               policy.get_distribution(zeroed).distribution.logits)
+    assert not torch.allclose(policy.predict_values(obs), policy.predict_values(zeroed))
+    assert policy.mlp_extractor.n_state == 16
+    plain = SectorPolicy(goal_space(), spaces.Discrete(8), lambda _: 3e-4)
+    assert plain.mlp_extractor.n_state == 0 and plain.features_extractor.state_features == 0

@@ -67,7 +67,8 @@ def test_module_outputs_and_predict(level, sector_head, logits):
     values = mod.compute_values(batch, embeddings=out["embeddings"])
     assert values.shape == (2,)
     torch.testing.assert_close(values, mod.compute_values(batch))
-    policy = rllib.RLlibPolicy(mod, goal_hold=5)
+    assert rllib.RLlibPolicy(mod).motion_hold == (10 if level == "goals" else 1)
+    policy = rllib.RLlibPolicy(mod, hold=5)
     action, _ = policy.predict(obs["robot_0"])
     assert policy.action_space.contains(np.asarray(action, dtype=policy.action_space.dtype))
     assert policy.predict(obs["robot_0"])[0] == pytest.approx(action)  # the mode: repeatable
