@@ -137,6 +137,9 @@ class Args:
     """GAE lambda."""
     ent_coef: float = 0.005
     """Entropy bonus."""
+    motion_commands: Literal["continuous", "arcs"] = "continuous"
+    """``level="motion"``, SB3: the action is the env's ``(v, ω)`` box, or one of the few
+    velocity commands of :data:`agents.motion.ARCS` (ahead, arcs, turns on the spot)."""
     log_std_init: float = 0.0
     """``level="motion"``, SB3: initial log standard deviation of the Gaussian velocity
     command (SB3's ``log_std_init``; 0 is a standard deviation of 1, the whole action range)."""
@@ -230,6 +233,12 @@ class Args:
         if self.central_critic and not (goals and self.sector_head and self.backend == "sb3"):
             raise ValueError("central_critic applies to level='goals' with the sector head on "
                              "backend='sb3' only")
+        if self.motion_commands not in ("continuous", "arcs"):
+            raise ValueError("motion_commands must be one of ['continuous', 'arcs'], got "
+                             f"{self.motion_commands!r}")
+        if self.motion_commands == "arcs" and (goals or self.backend != "sb3"):
+            raise ValueError("motion_commands='arcs' applies to level='motion' on "
+                             "backend='sb3' only")
         if shaping and goals:
             raise ValueError("frontier_shaping applies to level='motion' only (the goal "
                              "level's planner already drives to frontiers)")
@@ -296,9 +305,11 @@ class _EnvFactory:
     def __init__(self, config: dict[str, Any], args: Args) -> None:
         self.config, self.level, self.hold = config, args.level, args.hold
         self.shaping, self.global_state = args.frontier_shaping, args.central_critic
+        self.commands = args.motion_commands
 
     def __call__(self) -> Any:
-        return make_env(self.config, self.level, self.hold, self.shaping, self.global_state)
+        return make_env(self.config, self.level, self.hold, self.shaping, self.global_state,
+                        self.commands)
 
 
 # ------------------------------------------------------------------------------- callbacks
@@ -440,8 +451,9 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
                 tensorboard_log=str(run_dir / "tb"),
                 policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
                                "net_arch": {"pi": [64], "vf": [64]},
-                               **({} if args.level == "goals"
-                                  else {"log_std_init": args.log_std_init}),
+                               **({"log_std_init": args.log_std_init}
+                                  if args.level == "motion" and args.motion_commands
+                                  == "continuous" else {}),
                                **({"mask_empty": args.mask_sectors,
                                    "cost_prior": args.cost_prior} if sectors else {})},
             )
@@ -449,7 +461,7 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
             if args.level == "goals":
                 model.goal_hold = args.hold
             else:
-                model.motion_hold = args.hold
+                model.motion_hold, model.motion_commands = args.hold, args.motion_commands
         callbacks = CallbackList([
             InfoLogger(args.total_timesteps, args.progress, scale),
             Checkpointer(run_dir / "checkpoints", args.checkpoint_every, scale),

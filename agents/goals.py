@@ -325,15 +325,16 @@ LEVELS = ("goals", "motion")
 
 
 def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None = None,
-             frontier_shaping: float = 0.0, global_state: bool = False) -> ParallelEnv:
+             frontier_shaping: float = 0.0, global_state: bool = False,
+             commands: str = "continuous") -> ParallelEnv:
     """One ``two_robot_explore_v0`` ``ParallelEnv`` built from ``config`` (``EnvConfig``
     fields), wrapped in :class:`FrontierGoalEnv` (holding decisions ``hold`` steps) when
     ``level`` is ``"goals"`` (with ``global_state``, observations carry the env's ``state()``
     for a centralised critic), or at the motion level in :class:`agents.motion.MotionEnv` when
-    ``hold > 1`` or ``frontier_shaping > 0`` (commands held ``hold`` steps, progress towards
-    frontiers rewarded); ``hold`` defaults to :data:`DEFAULT_HOLD` at the goal
-    level and 1 at the motion level. A top-level function, so it pickles for worker
-    processes."""
+    ``hold > 1``, ``frontier_shaping > 0`` or ``commands="arcs"`` (commands held ``hold``
+    steps, progress towards frontiers rewarded, a few discrete commands); ``hold`` defaults
+    to :data:`DEFAULT_HOLD` at the goal level and 1 at the motion level. A top-level
+    function, so it pickles for worker processes."""
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     if hold is None:
@@ -345,8 +346,8 @@ def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None 
         return FrontierGoalEnv(env, hold=hold, global_state=global_state)
     if global_state:
         raise ValueError("global_state applies to level='goals' only")
-    if hold == 1 and not frontier_shaping:
+    if hold == 1 and not frontier_shaping and commands == "continuous":
         return env
     from agents.motion import MotionEnv
 
-    return MotionEnv(env, hold=hold, frontier_shaping=frontier_shaping)
+    return MotionEnv(env, hold=hold, frontier_shaping=frontier_shaping, commands=commands)

@@ -33,7 +33,8 @@ class SB3Explorer(Explorer):
 
     A goal-level model holds each decision for its ``goal_hold`` attribute's steps (saved with
     the model by ``train.py``; :data:`agents.goals.DEFAULT_HOLD` otherwise), a motion-level
-    model each velocity command for its ``motion_hold`` steps (1 otherwise), as trained.
+    model each velocity command for its ``motion_hold`` steps (1 otherwise), as trained, reading
+    its action as one of :data:`agents.motion.ARCS` when its ``motion_commands`` is ``"arcs"``.
 
     Raises:
         TypeError: ``policy`` has no ``predict`` method.
@@ -63,6 +64,7 @@ class SB3Explorer(Explorer):
                                  if state is not None else {})
         else:
             self.hold = int(getattr(policy, "motion_hold", 1))
+            self.commands = str(getattr(policy, "motion_commands", "continuous"))
         self._since = self.hold
         self._action: Any = None
 
@@ -99,6 +101,10 @@ class SB3Explorer(Explorer):
             return self.controller.act(observation, info)
         if self._since >= self.hold:
             action, _ = self.policy.predict(dict(observation), deterministic=self.deterministic)
+            if self.commands != "continuous":
+                from agents.motion import command
+
+                action = command(self.commands, np.asarray(action).astype(np.int64))
             self._action = (int(action) if self.action_type == "discrete"
                             else np.asarray(action, dtype=np.float32))
             self._since = 0

@@ -119,6 +119,7 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"level": "motion", "frontier_shaping": -0.5},
          "frontier_shaping must be a finite number >= 0, got -0.5"),
         ({"frontier_shaping": 0.3}, "frontier_shaping applies to level='motion' only"),
+        ({"motion_commands": "arcs"}, "motion_commands='arcs' applies to level='motion'"),
         ({"level": "motion", "central_critic": True},
          "central_critic applies to level='goals' with the sector head on backend='sb3' only"),
     ],
@@ -133,10 +134,12 @@ def test_motion_level_holds_commands_and_shapes(tmp_path):
 
     assert Args(level="motion").hold == 1 and Args().hold == 10
     run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "hold": 4, "frontier_shaping": 0.3,
+                                                   "motion_commands": "arcs",
                                                    "n_steps": 16, "batch_size": 16,
                                                    "checkpoint_every": 0}))
     model = PPO.load(run / "model.zip", device="cpu")
     assert model.motion_hold == 4 and model.num_timesteps * 4 >= TINY["total_timesteps"]
+    assert model.motion_commands == "arcs" and model.action_space.n == 5
     assert "| ppo |" in (run / "eval.md").read_text()
 
 

@@ -123,3 +123,24 @@ def test_sb3_explorer_holds_a_motion_policys_command():
     run_episode(two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": 30}), explorers,
                 seed=1)
     assert policy.calls == 2 * 8  # steps 1, 5, ..., 29 of 30, per robot
+
+
+def test_arcs_are_a_few_velocity_commands():
+    from agents.motion import ARCS
+
+    wrapped = motion_env(hold=2, commands="arcs")
+    plain = two_robot_explore_v0.parallel_env(**SMALL)
+    assert wrapped.action_space("robot_0").n == len(ARCS)
+    wrapped.reset(seed=5)
+    plain.reset(seed=5)
+    for k in [0, 1, 2, 3, 4, 0]:
+        obs, *_ = wrapped.step({"robot_0": k, "robot_1": np.int64(4 - k)})
+        for _ in range(2):
+            ref, *_ = plain.step({"robot_0": ARCS[k], "robot_1": ARCS[4 - k]})
+        np.testing.assert_array_equal(obs["robot_0"]["odometry"], ref["robot_0"]["odometry"])
+    with pytest.raises(ValueError, match=r"action of robot_0 must be an index in \[0, 5\)"):
+        wrapped.step({"robot_0": 5, "robot_1": 0})
+    with pytest.raises(ValueError, match=r"commands must be one of \['continuous', 'arcs'\]"):
+        motion_env(commands="joystick")
+    with pytest.raises(ValueError, match="commands='arcs' needs an env with action_type"):
+        MotionEnv(two_robot_explore_v0.parallel_env(action_type="discrete"), commands="arcs")
