@@ -26,7 +26,9 @@ class SB3Explorer(Explorer):
             another object with its ``predict`` and ``observation_space`` (an
             :class:`agents.rllib.RLlibPolicy`); share it between the two robots (parameter
             sharing, as trained).
-        deterministic: use the policy's mode instead of sampling.
+        deterministic: use the policy's mode; ``False`` samples the action (from an SB3
+            model's distribution with the explorer's own generator, reproducible per
+            seeded episode; other policies through their ``predict``).
         action_type: must match what the model was trained with.
         blackboard: a goal-level policy's planner shares it with the teammate's, so each sees
             the other's goal (:func:`sb3_team` wires one; default: a board of its own).
@@ -89,18 +91,35 @@ class SB3Explorer(Explorer):
             raise FileNotFoundError(f"no saved model at {str(path)!r}")
         return PPO.load(path, device=device)
 
+    def _predict(self, observation: dict[str, Any]) -> Any:
+        """The policy's mode, or a sample drawn with this explorer's own generator (so a
+        seeded episode repeats exactly) from an SB3 policy's action distribution."""
+        sb3 = getattr(self.policy, "policy", None)
+        if self.deterministic or not hasattr(sb3, "get_distribution"):
+            return self.policy.predict(observation, deterministic=self.deterministic)[0]
+        import torch
+
+        with torch.no_grad():
+            dist = sb3.get_distribution(sb3.obs_to_tensor(observation)[0]).distribution
+        if isinstance(dist, torch.distributions.Categorical):
+            p = dist.probs[0].double().numpy()
+            return int(self.rng.choice(len(p), p=p / p.sum()))
+        action = self.rng.normal(dist.mean[0].numpy(), dist.stddev[0].numpy())
+        space = self.policy.action_space
+        return np.clip(action, space.low, space.high).astype(np.float32)
+
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray | int:
         if self.controller is not None:
             if self._since >= self.hold:
                 obs = {**observation, "frontiers": self.controller.frontier_features(info),
                        **self._critic_only}
-                sector, _ = self.policy.predict(obs, deterministic=self.deterministic)
+                sector = self._predict(obs)
                 self.controller.choose_sector(int(sector))
                 self._since = 0
             self._since += 1
             return self.controller.act(observation, info)
         if self._since >= self.hold:
-            action, _ = self.policy.predict(dict(observation), deterministic=self.deterministic)
+            action = self._predict(dict(observation))
             if self.commands != "continuous":
                 from agents.motion import command
 

@@ -16,7 +16,9 @@ episode lasts 150 steps per metre of the longer side (1500–3000) on procedural
 real ones; a T never reached counts as that length + 1 (censored).
 
 **Explorers.** Each run (a ``train.py`` folder with ``model.zip`` or ``rllib/``) with the
-deterministic policy on its own env config (world replaced), and once per world ``Frontier``,
+deterministic policy (``--sample``: sampling its actions, seeded per episode; a discrete
+motion-level policy's most likely command can loop) on its own env config (world replaced),
+and once per world ``Frontier``,
 ``RandomWalk`` and the goal-level rules of :class:`agents.goals.SectorRule` (``--rules``; by
 default ``ahead``: always the frontier in front), plus ``--baselines``.
 
@@ -119,16 +121,18 @@ def _policy(run: str) -> tuple[Any, dict[str, Any]]:
 
 
 def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The team of ``explorer`` (``run:PATH``, ``rule:NAME`` or a scripted name) and the env
-    config it runs with (before the world is set)."""
+    """The team of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same policy sampling its
+    actions —, ``rule:NAME`` or a scripted name) and the env config it runs with (before the
+    world is set)."""
     from agents.goals import SectorRule
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
     from agents.team import make_team
 
-    if explorer.startswith("run:"):
-        policy, config = _policy(explorer[4:])
-        return sb3_team(policy), config
+    if explorer.startswith(("run:", "sample:")):
+        kind, _, run = explorer.partition(":")
+        policy, config = _policy(run)
+        return sb3_team(policy, deterministic=kind == "run"), config
     if explorer.startswith("rule:"):
         board = Blackboard()
         return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(2)}, {}
@@ -164,8 +168,8 @@ def episode(explorer: str, world: World) -> dict[str, Any]:
 def _key(explorer: str, world: World) -> str:
     """Cache key: the explorer (a run with its model file's size and mtime) and the world."""
     tag = explorer
-    if explorer.startswith("run:"):
-        run = Path(explorer[4:])
+    if explorer.startswith(("run:", "sample:")):
+        run = Path(explorer.partition(":")[2])
         model = run / "model.zip" if (run / "model.zip").exists() else run / "rllib"
         st = model.stat()
         tag = f"{explorer}@{st.st_size}:{st.st_mtime_ns}"
@@ -308,6 +312,9 @@ def main() -> None:
                         help="NAME=GLOB: group the run folders GLOB matches under NAME (default: "
                              "one group 'ppo' of all runs); repeat for ablations, e.g. "
                              "--label masked='runs/m*'")
+    parser.add_argument("--sample", action="store_true",
+                        help="the runs' policies sample their actions (seeded per episode) "
+                             "instead of taking the most likely one")
     parser.add_argument("--worlds", type=int, default=20, help="procedural held-out worlds")
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
     parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
@@ -321,6 +328,7 @@ def main() -> None:
     if opts.workers < 1:
         parser.error(f"--workers must be >= 1, got {opts.workers}")
     groups: dict[str, list[str]] = {}
+    kind = "sample" if opts.sample else "run"
     if opts.label:
         import glob
 
@@ -329,12 +337,12 @@ def main() -> None:
             paths = sorted(p for p in glob.glob(pattern) if Path(p).is_dir())
             if not sep or not name or not paths:
                 parser.error(f"--label must be NAME=GLOB matching run folders, got {spec!r}")
-            groups[name] = [f"run:{p}" for p in paths]
+            groups[name] = [f"{kind}:{p}" for p in paths]
     elif opts.runs:
-        groups["ppo"] = [f"run:{p}" for p in opts.runs]
+        groups["ppo"] = [f"{kind}:{p}" for p in opts.runs]
     for members in groups.values():
         for m in members:
-            run = Path(m[4:])
+            run = Path(m.partition(":")[2])
             if not (run / "args.json").is_file():
                 parser.error(f"{run}: not a train.py run folder (no args.json)")
             if not ((run / "model.zip").is_file() or (run / "rllib").is_dir()):

@@ -87,6 +87,25 @@ def test_goal_level_policy_trains_and_drives_the_plain_env(tmp_path):
     assert "| ppo |" in (run / "eval.md").read_text()
 
 
+def test_sampled_actions_repeat_per_seeded_episode(run_dir):
+    from stable_baselines3 import PPO
+
+    from agents.base import run_episode
+    from agents.sb3_explorer import sb3_team
+    from envs import two_robot_explore_v0
+
+    model = PPO.load(run_dir / "model.zip", device="cpu")
+
+    def pose(seed, deterministic=False):
+        env = two_robot_explore_v0.parallel_env(max_cycles=25, world={"size": (8.0, 8.0)})
+        infos = run_episode(env, sb3_team(model, deterministic=deterministic), seed=seed)
+        return np.asarray(infos["infos"]["robot_0"]["odometry"])
+
+    np.testing.assert_array_equal(pose(1), pose(1))
+    assert not np.array_equal(pose(1), pose(2))
+    assert not np.array_equal(pose(1), pose(1, deterministic=True))
+
+
 def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
     generate(GenerateArgs(out=tmp_path, pairs=1, snapshots=1, max_cycles=30,
                           explorer=f"sb3:{run_dir / 'model.zip'}", world_size=(8.0, 8.0),
