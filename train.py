@@ -12,6 +12,10 @@ the env's velocity commands every step. The reward is the env's team reward — 
 true union instead, for ablations).
 
     python train.py --total-timesteps 200000 --n-envs 4 --seed 1
+    python train.py --level motion --motion-commands arcs --hold 4 --frontier-shaping 1.0 \
+        --reward-mode individual --ent-coef 0.01 --no-eval-deterministic \
+        --total-timesteps 1000000                    # velocity commands (agents.motion)
+    python train.py --central-critic --world-size-max 20    # goal level, MAPPO-style critic
     python train.py --backend rllib --num-env-runners 2            # a local Ray cluster
     python train.py --backend rllib --address auto --num-env-runners 8   # joins `ray start`'s
     python train.py --help
@@ -151,6 +155,10 @@ class Args:
     """Fixed-seed evaluation worlds per evaluation."""
     eval_baselines: tuple[str, ...] = ("frontier", "random_walk")
     """Scripted explorers evaluated on the same worlds (once per run)."""
+    eval_deterministic: bool = True
+    """Evaluate the policy's most likely action; ``False`` samples it (seeded per episode:
+    :class:`agents.sb3_explorer.SB3Explorer`) — a discrete motion-level policy's most likely
+    command can loop where sampling does not."""
     eval_max_cycles: int | None = None
     """Env steps per evaluation episode; default ``3 * max_cycles``. Longer than training's
     episodes so that T85 is measured rather than cut off: in 500 steps ``RandomWalk`` never
@@ -421,7 +429,7 @@ def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any
     """Evaluate ``policy`` (an SB3 model or an :class:`agents.rllib.RLlibPolicy`) against
     ``args.eval_baselines`` on the run's fixed worlds (:func:`agents.evaluation.evaluate`):
     writes ``eval.json``, ``eval.md`` and ``eval_coverage.png`` into ``run_dir``."""
-    team = sb3_team(policy)
+    team = sb3_team(policy, deterministic=args.eval_deterministic)
     return evaluation.evaluate(team, run_dir, step, env_config=args.env_config(),
                                seed=args.seed, episodes=args.eval_episodes,
                                max_cycles=args.eval_max_cycles, baselines=args.eval_baselines)
