@@ -1,7 +1,7 @@
 """The motion level's training env: velocity commands held a few steps, and an optional
 shaping reward that pays progress along the path to the nearest frontier.
 
-Learning exploration from velocity commands is slow for two reasons this wrapper addresses:
+Learning exploration from velocity commands is slow for three reasons this wrapper addresses:
 
 * **Horizon.** At 0.1 s a step, crossing a room takes 50–100 decisions, and a Gaussian policy's
   first moves average out to dithering in place. Holding each command ``hold`` steps (action
@@ -16,15 +16,15 @@ Learning exploration from velocity commands is slow for two reasons this wrapper
   ``k · (d_0 − d_T)`` whatever the robot does, so it cannot be farmed. It is undiscounted on
   purpose: with ``γ · Φ(s')`` a robot standing still ``d`` metres from a frontier would earn
   ``k · (1 − γ) · d`` a decision, as much as driving towards it.
-
 * **Exploration noise.** A Gaussian over ``(v, ω)`` centred on 0 drives backwards half the
   time (blind: the sonars face forward) and cancels its own moves. ``commands`` replaces the
   action by a choice among a few velocity commands (:data:`ARCS`: ahead, two arcs, two turns
   on the spot), so that even the untrained policy keeps moving.
 
-The observation and team reward are the env's own (the shaping is added per
-robot, on top). Policies trained on it act on the plain env through ``agents.SB3Explorer``,
-each command held ``motion_hold`` steps as in training.
+The observation and the env's reward are kept (the shaping is added per robot, on top; train
+with ``reward_mode="individual"``: before a merge the team reward pays nothing for robot 1's
+exploration, ``benchmarks/training.md``). Policies trained on it act on the plain env through
+``agents.SB3Explorer``, each command held ``motion_hold`` steps as in training.
 """
 
 from __future__ import annotations
