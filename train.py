@@ -51,7 +51,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm.auto import tqdm
 
 from agents import evaluation
-from agents.goals import make_env
+from agents.goals import default_hold, make_env
+from agents.motion import COMMANDS
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import sb3_team
@@ -182,7 +183,7 @@ class Args:
     def __post_init__(self) -> None:
         goals = self.level == "goals"
         if self.hold is None:
-            self.hold = 10 if goals else 1
+            self.hold = default_hold(self.level)
         if self.n_steps is None:
             self.n_steps = 32 if goals else 128
         if self.batch_size is None:
@@ -241,8 +242,8 @@ class Args:
         if self.central_critic and not (goals and self.sector_head and self.backend == "sb3"):
             raise ValueError("central_critic applies to level='goals' with the sector head on "
                              "backend='sb3' only")
-        if self.motion_commands not in ("continuous", "arcs"):
-            raise ValueError("motion_commands must be one of ['continuous', 'arcs'], got "
+        if self.motion_commands not in COMMANDS:
+            raise ValueError(f"motion_commands must be one of {list(COMMANDS)}, got "
                              f"{self.motion_commands!r}")
         if self.motion_commands == "arcs" and (goals or self.backend != "sb3"):
             raise ValueError("motion_commands='arcs' applies to level='motion' on "
@@ -311,13 +312,12 @@ class _EnvFactory:
     """Builds one training env (:func:`agents.goals.make_env`); picklable for workers."""
 
     def __init__(self, config: dict[str, Any], args: Args) -> None:
-        self.config, self.level, self.hold = config, args.level, args.hold
-        self.shaping, self.global_state = args.frontier_shaping, args.central_critic
-        self.commands = args.motion_commands
+        self.config, self.args = config, args
 
     def __call__(self) -> Any:
-        return make_env(self.config, self.level, self.hold, self.shaping, self.global_state,
-                        self.commands)
+        a = self.args
+        return make_env(self.config, a.level, a.hold, a.frontier_shaping, a.central_critic,
+                        a.motion_commands)
 
 
 # ------------------------------------------------------------------------------- callbacks

@@ -324,6 +324,12 @@ LEVELS = ("goals", "motion")
 """What a policy decides: a frontier sector every ``hold`` steps, or the velocity command."""
 
 
+def default_hold(level: str) -> int:
+    """Env steps a decision is held unless said otherwise: :data:`DEFAULT_HOLD` at the goal
+    level, 1 (every step) at the motion level."""
+    return DEFAULT_HOLD if level == "goals" else 1
+
+
 def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None = None,
              frontier_shaping: float = 0.0, global_state: bool = False,
              commands: str = "continuous") -> ParallelEnv:
@@ -333,12 +339,12 @@ def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None 
     for a centralised critic), or at the motion level in :class:`agents.motion.MotionEnv` when
     ``hold > 1``, ``frontier_shaping > 0`` or ``commands="arcs"`` (commands held ``hold``
     steps, progress towards frontiers rewarded, a few discrete commands); ``hold`` defaults
-    to :data:`DEFAULT_HOLD` at the goal level and 1 at the motion level. A top-level
+    to :func:`default_hold`. A top-level
     function, so it pickles for worker processes."""
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     if hold is None:
-        hold = DEFAULT_HOLD if level == "goals" else 1
+        hold = default_hold(level)
     from envs.two_robot_explore_v0 import parallel_env
 
     env = parallel_env(**config)

@@ -65,8 +65,8 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         missing = [k for k in ("local_map", *VECTOR_KEYS, *GRAPH_KEYS)
                    if k not in observation_space.spaces]
         missing += [k for k in pass_through if k not in observation_space.spaces]
-        if state_features:
-            missing += [k for k in ("state",) if k not in observation_space.spaces]
+        if state_features and "state" not in observation_space.spaces:
+            missing.append("state")
         if missing:
             raise ValueError(f"observation space lacks keys {missing}")
         sp = observation_space.spaces

@@ -46,7 +46,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from torch import nn
 
-from agents.goals import DEFAULT_HOLD, LEVELS, make_env
+from agents.goals import LEVELS, default_hold, make_env
 from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
@@ -319,8 +319,7 @@ class ExploreMetrics(RLlibCallback):
         hold = 1
         if env_runner is not None:
             env_config = env_runner.config.env_config
-            default = DEFAULT_HOLD if env_config.get("level") == "goals" else 1
-            hold = int(env_config.get("hold") or default)
+            hold = int(env_config.get("hold") or default_hold(env_config.get("level")))
         log(("explore", "episode_env_steps"),
             (episode.env_t - 1) * hold + int(info.get("env_steps", hold)))
         if "merge_accepted" in info:
@@ -366,7 +365,7 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     register()
     if hold is None:
-        hold = DEFAULT_HOLD if level == "goals" else 1
+        hold = default_hold(level)
     model_config = {**DEFAULT_MODEL_CONFIG, "sector_head": bool(sector_head and level == "goals"),
                     "mask_empty": bool(mask_sectors), "cost_prior": float(cost_prior)}
     return (
@@ -510,9 +509,9 @@ class RLlibPolicy:
         self.module = module
         self.observation_space = module.observation_space
         self.action_space = module.action_space
-        goals = "frontiers" in getattr(self.observation_space, "spaces", {})
         if hold is None:
-            hold = DEFAULT_HOLD if goals else 1
+            goals = "frontiers" in getattr(self.observation_space, "spaces", {})
+            hold = default_hold("goals" if goals else "motion")
         self.goal_hold = self.motion_hold = int(hold)
 
     @classmethod
