@@ -47,6 +47,7 @@ import torch
 import tyro
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecMonitor
 from tqdm.auto import tqdm
 
@@ -129,6 +130,10 @@ class Args:
     about 300–500 steps, so T85 separates explorers."""
     learning_rate: float = 3e-4
     """Adam learning rate."""
+    lr_schedule: str = "constant"
+    """``constant``, or ``linear``: from ``learning_rate`` down to 0 at ``total_timesteps``
+    (SB3's ``LinearSchedule``; ``--backend sb3`` only). A constant rate let a motion policy
+    fall back after its best point (``benchmarks/training.md``)."""
     n_steps: int | None = None
     """Rollout length (policy decisions) per sub-environment between updates; default 32 at
     the goals level (a decision spans ``hold`` steps), 128 at the motion level."""
@@ -242,6 +247,11 @@ class Args:
         if self.central_critic and not (goals and self.sector_head and self.backend == "sb3"):
             raise ValueError("central_critic applies to level='goals' with the sector head on "
                              "backend='sb3' only")
+        if self.lr_schedule not in ("constant", "linear"):
+            raise ValueError("lr_schedule must be one of ['constant', 'linear'], got "
+                             f"{self.lr_schedule!r}")
+        if self.lr_schedule != "constant" and self.backend != "sb3":
+            raise ValueError(f"lr_schedule={self.lr_schedule!r} applies to backend='sb3' only")
         if self.motion_commands not in COMMANDS:
             raise ValueError(f"motion_commands must be one of {list(COMMANDS)}, got "
                              f"{self.motion_commands!r}")
@@ -452,7 +462,8 @@ def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, 
             sectors = args.level == "goals" and args.sector_head
             model = PPO(
                 SectorPolicy if sectors else "MultiInputPolicy", venv,
-                learning_rate=args.learning_rate,
+                learning_rate=(LinearSchedule(args.learning_rate, 0.0, 1.0)
+                               if args.lr_schedule == "linear" else args.learning_rate),
                 n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
                 gamma=args.gamma ** scale, gae_lambda=args.gae_lambda, ent_coef=args.ent_coef,
                 clip_range=args.clip_range, seed=args.seed, device=args.device, verbose=0,

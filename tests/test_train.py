@@ -139,6 +139,10 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
          "frontier_shaping must be a finite number >= 0, got -0.5"),
         ({"frontier_shaping": 0.3}, "frontier_shaping applies to level='motion' only"),
         ({"motion_commands": "arcs"}, "motion_commands='arcs' applies to level='motion'"),
+        ({"lr_schedule": "cosine"},
+         r"lr_schedule must be one of \['constant', 'linear'\], got 'cosine'"),
+        ({"backend": "rllib", "lr_schedule": "linear"},
+         "lr_schedule='linear' applies to backend='sb3' only"),
         ({"level": "motion", "central_critic": True},
          "central_critic applies to level='goals' with the sector head on backend='sb3' only"),
     ],
@@ -155,9 +159,14 @@ def test_motion_level_holds_commands_and_shapes(tmp_path):
     run = main(Args(runs_dir=tmp_path, seed=2, **{**TINY, "hold": 4, "frontier_shaping": 0.3,
                                                    "motion_commands": "arcs",
                                                    "n_steps": 16, "batch_size": 16,
-                                                   "checkpoint_every": 0}))
+                                                   "checkpoint_every": 0,
+                                                   "lr_schedule": "linear"}))
     model = PPO.load(run / "model.zip", device="cpu")
     assert model.motion_hold == 4 and model.num_timesteps * 4 >= TINY["total_timesteps"]
+    # the rate falls from the start's to 0 with the budget (the last update: none left)
+    assert model.lr_schedule(1.0) == pytest.approx(3e-4)
+    assert model.lr_schedule(0.25) == pytest.approx(0.25 * 3e-4)
+    assert model.policy.optimizer.param_groups[0]["lr"] == 0.0
     assert model.motion_commands == "arcs" and model.action_space.n == 5
     assert "| ppo |" in (run / "eval.md").read_text()
 
