@@ -52,6 +52,8 @@ class Repeatability:
         nodes_a, nodes_b: matchable nodes of each map inside the shared region.
         mutual: region node pairs that are mutually nearest within ``radii[0]``.
         region_m2: area of the shared region (m²).
+        hits: ``(len(radii), 2)`` int, how many of A's and of B's region nodes have a node of
+            the other map within each radius (for figures pooled over many pairs).
     """
 
     radii: tuple[float, ...]
@@ -61,6 +63,7 @@ class Repeatability:
     nodes_b: int
     mutual: int
     region_m2: float
+    hits: np.ndarray
 
     @property
     def nodes(self) -> float:
@@ -168,15 +171,17 @@ def node_repeatability(map_a: TopoMap, map_b: TopoMap, grid_a: Any, grid_b: Any,
     rep = np.full(len(radii), np.nan)
     chance = np.full(len(radii), np.nan)
     mutual = 0
+    hits = np.zeros((len(radii), 2), dtype=np.int64)
     if na and nb:
         da, ia = cKDTree(xb).query(xa)  # A's nearest B
         db, ib = cKDTree(xa).query(xb)  # B's nearest A
         mutual = int(np.sum((ib[ia] == np.arange(na)) & (da <= radii[0])))
         for k, r in enumerate(radii):
-            rep[k] = 0.5 * (np.mean(da <= r) + np.mean(db <= r))
+            hits[k] = np.sum(da <= r), np.sum(db <= r)
+            rep[k] = 0.5 * (hits[k, 0] / na + hits[k, 1] / nb)
             chance[k] = 0.5 * ((1 - math.exp(-nb / area * math.pi * r * r))
                                + (1 - math.exp(-na / area * math.pi * r * r)))
     elif na or nb:
         rep[:] = 0.0
         chance[:] = 0.0
-    return Repeatability(radii, rep, chance, na, nb, mutual, area)
+    return Repeatability(radii, rep, chance, na, nb, mutual, area, hits)
