@@ -130,7 +130,7 @@ class Args:
     about 300–500 steps, so T85 separates explorers."""
     learning_rate: float = 3e-4
     """Adam learning rate."""
-    lr_schedule: str = "constant"
+    lr_schedule: Literal["constant", "linear"] = "constant"
     """``constant``, or ``linear``: from ``learning_rate`` down to 0 at ``total_timesteps``
     (SB3's ``LinearSchedule``; ``--backend sb3`` only). A constant rate let a motion policy
     fall back after its best point (``benchmarks/training.md``)."""
@@ -148,7 +148,7 @@ class Args:
     ent_coef: float = 0.005
     """Entropy bonus."""
     motion_commands: Literal["continuous", "arcs"] = "continuous"
-    """``level="motion"``, SB3: the action is the env's ``(v, ω)`` box, or one of the few
+    """``level="motion"``: the action is the env's ``(v, ω)`` box, or one of the few
     velocity commands of :data:`agents.motion.ARCS` (ahead, arcs, turns on the spot)."""
     log_std_init: float = 0.0
     """``level="motion"``, SB3: initial log standard deviation of the Gaussian velocity
@@ -255,9 +255,8 @@ class Args:
         if self.motion_commands not in COMMANDS:
             raise ValueError(f"motion_commands must be one of {list(COMMANDS)}, got "
                              f"{self.motion_commands!r}")
-        if self.motion_commands == "arcs" and (goals or self.backend != "sb3"):
-            raise ValueError("motion_commands='arcs' applies to level='motion' on "
-                             "backend='sb3' only")
+        if self.motion_commands == "arcs" and goals:
+            raise ValueError("motion_commands='arcs' applies to level='motion' only")
         if shaping and goals:
             raise ValueError("frontier_shaping applies to level='motion' only (the goal "
                              "level's planner already drives to frontiers)")
@@ -523,7 +522,8 @@ def rllib_config(args: Args) -> Any:
 
     return rllib.ppo_config(
         env_config=args.env_config(), level=args.level, hold=args.hold,
-        frontier_shaping=args.frontier_shaping, sector_head=args.sector_head,
+        frontier_shaping=args.frontier_shaping, commands=args.motion_commands,
+        sector_head=args.sector_head,
         mask_sectors=args.mask_sectors,
         cost_prior=args.cost_prior, seed=args.seed,
         num_env_runners=args.num_env_runners,

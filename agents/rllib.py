@@ -47,6 +47,7 @@ from pettingzoo import ParallelEnv
 from torch import nn
 
 from agents.goals import LEVELS, default_hold, make_env
+from agents.motion import COMMANDS
 from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
@@ -155,15 +156,16 @@ class LightInfoEnv(ParallelEnv):
 
 def env_creator(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
     """RLlib's env factory: ``env_config`` holds ``config`` (the env's ``EnvConfig`` fields),
-    ``level``, ``hold`` and ``frontier_shaping`` (:func:`agents.goals.make_env`);
+    ``level``, ``hold``, ``frontier_shaping`` and ``commands`` (:func:`agents.goals.make_env`);
     RLlib's ``EnvContext`` adds the env runner's ``worker_index`` (the :class:`LightInfoEnv`
     stream)."""
-    allowed = ["config", "frontier_shaping", "hold", "level"]
+    allowed = ["commands", "config", "frontier_shaping", "hold", "level"]
     unknown = set(env_config) - set(allowed)
     if unknown:
         raise ValueError(f"env_config has unknown keys {sorted(unknown)}; allowed: {allowed}")
     env = make_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
-                   env_config.get("hold"), env_config.get("frontier_shaping", 0.0))
+                   env_config.get("hold"), env_config.get("frontier_shaping", 0.0),
+                   commands=env_config.get("commands", "continuous"))
     stream = int(getattr(env_config, "worker_index", 0) or 0)
     return ParallelPettingZooEnv(LightInfoEnv(env, stream=stream))
 
@@ -331,7 +333,8 @@ class ExploreMetrics(RLlibCallback):
 
 # ------------------------------------------------------------------------------- config
 def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int | None = None,
-               frontier_shaping: float = 0.0, sector_head: bool = True,
+               frontier_shaping: float = 0.0, commands: str = "continuous",
+               sector_head: bool = True,
                mask_sectors: bool = True, cost_prior: float = 0.0,
                seed: int = 0, num_env_runners: int = 1,
                envs_per_runner: int = 1, train_batch_size: int = 256, minibatch_size: int = 64,
@@ -342,8 +345,9 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
 
     Args:
         env_config: the env's ``EnvConfig`` fields.
-        level, hold, frontier_shaping: :func:`agents.goals.make_env`'s (``gamma`` is per
-            decision: pass ``gamma ** hold`` for a per-step discount).
+        level, hold, frontier_shaping, commands: :func:`agents.goals.make_env`'s (``gamma``
+            is per decision: pass ``gamma ** hold`` for a per-step discount; ``commands="arcs"``
+            at the motion level: a categorical policy over :data:`agents.motion.ARCS`).
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).
         mask_sectors: with the sector scorer, sectors without a reachable frontier cannot be
             chosen (:class:`agents.policy.SectorPolicy`'s ``mask_empty``).
@@ -359,10 +363,14 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         num_gpus: GPUs of the (one, local) learner.
 
     Raises:
-        ValueError: an unknown ``level``.
+        ValueError: an unknown ``level`` or ``commands``; ``commands="arcs"`` at the goal level.
     """
     if level not in LEVELS:
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
+    if commands not in COMMANDS:
+        raise ValueError(f"commands must be one of {list(COMMANDS)}, got {commands!r}")
+    if commands != "continuous" and level != "motion":
+        raise ValueError(f"commands={commands!r} applies to level='motion' only")
     register()
     if hold is None:
         hold = default_hold(level)
@@ -371,7 +379,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
     return (
         PPOConfig()
         .environment(ENV_NAME, env_config={"config": dict(env_config), "level": level,
-                                           "hold": hold, "frontier_shaping": frontier_shaping},
+                                           "hold": hold, "frontier_shaping": frontier_shaping,
+                                           "commands": commands},
                      disable_env_checking=True)
         .multi_agent(policies={POLICY_ID},
                      policy_mapping_fn=_shared_policy)
@@ -500,7 +509,9 @@ class RLlibPolicy:
         hold: env steps each decision is held (``train.py``'s ``hold``); default
             :data:`~agents.goals.DEFAULT_HOLD` for a goal-level module (one that observes
             ``frontiers``), 1 at the motion level. Exposed as ``goal_hold`` / ``motion_hold``,
-            the attributes :class:`~agents.sb3_explorer.SB3Explorer` reads.
+            the attributes :class:`~agents.sb3_explorer.SB3Explorer` reads, with
+            ``motion_commands``: ``"arcs"`` for a motion-level module with a ``Discrete``
+            action space (an index into :data:`agents.motion.ARCS`), else ``"continuous"``.
     """
 
     def __init__(self, module: RLModule, hold: int | None = None) -> None:
@@ -509,10 +520,13 @@ class RLlibPolicy:
         self.module = module
         self.observation_space = module.observation_space
         self.action_space = module.action_space
+        goals = "frontiers" in getattr(self.observation_space, "spaces", {})
         if hold is None:
-            goals = "frontiers" in getattr(self.observation_space, "spaces", {})
             hold = default_hold("goals" if goals else "motion")
         self.goal_hold = self.motion_hold = int(hold)
+        self.motion_commands = ("arcs" if not goals and isinstance(self.action_space,
+                                                                    spaces.Discrete)
+                                else "continuous")
 
     @classmethod
     def load(cls, checkpoint: str | Path) -> RLlibPolicy:

@@ -18,8 +18,9 @@ pytestmark = pytest.mark.rllib
 CONFIG = {"max_cycles": 40, "world": {"size": (8.0, 8.0)}}
 
 
-def module(level: str, sector_head: bool = False, **model_config):
-    env = make_env(CONFIG, level, hold=5)
+def module(level: str, sector_head: bool = False, commands: str = "continuous",
+           **model_config):
+    env = make_env(CONFIG, level, hold=5, commands=commands)
     obs, _ = env.reset(seed=0)
     mod = rllib.TopoExplorerModule(
         observation_space=env.observation_space("robot_0"),
@@ -55,11 +56,13 @@ def test_light_info_env_streams_give_different_worlds_and_repeat():
         rllib.LightInfoEnv(make_env(CONFIG), stream=-1)
 
 
-@pytest.mark.parametrize(("level", "sector_head", "logits"),
-                         [("goals", True, SECTORS), ("goals", False, SECTORS),
-                          ("motion", False, 4)])  # Box(2): mean and log-std
-def test_module_outputs_and_predict(level, sector_head, logits):
-    mod, obs = module(level, sector_head)
+@pytest.mark.parametrize(("level", "sector_head", "commands", "logits"),
+                         [("goals", True, "continuous", SECTORS),
+                          ("goals", False, "continuous", SECTORS),
+                          ("motion", False, "continuous", 4),  # Box(2): mean and log-std
+                          ("motion", False, "arcs", 5)])  # one logit per command
+def test_module_outputs_and_predict(level, sector_head, commands, logits):
+    mod, obs = module(level, sector_head, commands)
     batch = stacked(obs)
     out = mod.forward_train(batch)
     assert out["action_dist_inputs"].shape == (2, logits)
@@ -72,6 +75,23 @@ def test_module_outputs_and_predict(level, sector_head, logits):
     action, _ = policy.predict(obs["robot_0"])
     assert policy.action_space.contains(np.asarray(action, dtype=policy.action_space.dtype))
     assert policy.predict(obs["robot_0"])[0] == pytest.approx(action)  # the mode: repeatable
+    assert policy.motion_commands == commands
+
+
+def test_arcs_reach_the_env_runners_and_drive_through_sb3_explorer():
+    from agents.motion import ARCS
+    from agents.sb3_explorer import SB3Explorer
+
+    config = rllib.ppo_config(env_config=CONFIG, level="motion", hold=4, commands="arcs")
+    env = rllib.env_creator(config.env_config)
+    assert env.action_space["robot_0"].n == len(ARCS)
+    mod, obs = module("motion", commands="arcs")
+    explorer = SB3Explorer(rllib.RLlibPolicy(mod, hold=4))
+    assert explorer.commands == "arcs"
+    with pytest.raises(ValueError, match="commands='arcs' applies to level='motion' only"):
+        rllib.ppo_config(env_config=CONFIG, level="goals", commands="arcs")
+    with pytest.raises(ValueError, match=r"commands must be one of \['continuous', 'arcs'\]"):
+        rllib.ppo_config(env_config=CONFIG, level="motion", commands="wheels")
 
 
 def test_module_rejects_bad_model_config():
