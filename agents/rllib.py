@@ -539,20 +539,39 @@ class RLlibPolicy:
         module = RLModule.from_checkpoint(checkpoint.joinpath(*MODULE_PATH))
         return cls(module, json.loads(meta.read_text())["hold"])
 
-    def predict(self, observation: Mapping[str, Any],
-                deterministic: bool = True) -> tuple[np.ndarray | int, None]:
-        """The action for one robot's observation: the distribution's mode when
-        ``deterministic``, else a sample (torch's generator)."""
+    def _dist_inputs(self, observation: Mapping[str, Any]) -> torch.Tensor:
         obs = {k: torch.as_tensor(np.asarray(observation[k])[None])
                for k in self.observation_space.spaces}
         with torch.no_grad():
-            out = self.module.forward_inference({Columns.OBS: obs})
+            return self.module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
+
+    def _action(self, action: np.ndarray) -> np.ndarray | int:
+        if isinstance(self.action_space, spaces.Discrete):
+            return int(action)
+        return np.clip(action, self.action_space.low, self.action_space.high).astype(
+            self.action_space.dtype)
+
+    def predict(self, observation: Mapping[str, Any],
+                deterministic: bool = True) -> tuple[np.ndarray | int, None]:
+        """The action for one robot's observation: the distribution's mode when
+        ``deterministic``, else a sample (torch's generator; :meth:`sample` takes one)."""
+        with torch.no_grad():
             dist = self.module.get_inference_action_dist_cls().from_logits(
-                out[Columns.ACTION_DIST_INPUTS])
+                self._dist_inputs(observation))
             if deterministic:
                 dist = dist.to_deterministic()
-            action = dist.sample()[0].numpy()
+            return self._action(dist.sample()[0].numpy()), None
+
+    def sample(self, observation: Mapping[str, Any], rng: np.random.Generator
+               ) -> np.ndarray | int:
+        """An action sampled with ``rng`` (categorical logits at ``Discrete``; a diagonal
+        Gaussian of mean and log-std at ``Box``, clipped to the space), so that
+        :class:`~agents.sb3_explorer.SB3Explorer` repeats a seeded sampled episode."""
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        inputs = self._dist_inputs(observation)[0].double().numpy()
         if isinstance(self.action_space, spaces.Discrete):
-            return int(action), None
-        return np.clip(action, self.action_space.low, self.action_space.high).astype(
-            self.action_space.dtype), None
+            p = np.exp(inputs - inputs.max())
+            return int(rng.choice(len(p), p=p / p.sum()))
+        mean, log_std = np.split(inputs, 2)
+        return self._action(rng.normal(mean, np.exp(log_std)))

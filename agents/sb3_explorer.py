@@ -27,8 +27,9 @@ class SB3Explorer(Explorer):
             :class:`agents.rllib.RLlibPolicy`); share it between the two robots (parameter
             sharing, as trained).
         deterministic: use the policy's mode; ``False`` samples the action (from an SB3
-            model's distribution with the explorer's own generator, reproducible per
-            seeded episode; other policies through their ``predict``).
+            model's distribution, or through a policy's ``sample(observation, rng)`` such as
+            :meth:`agents.rllib.RLlibPolicy.sample`, with the explorer's own generator:
+            reproducible per seeded episode; other policies through their ``predict``).
         action_type: must match what the model was trained with.
         blackboard: a goal-level policy's planner shares it with the teammate's, so each sees
             the other's goal (:func:`sb3_team` wires one; default: a board of its own).
@@ -95,6 +96,8 @@ class SB3Explorer(Explorer):
         """The policy's mode, or a sample drawn with this explorer's own generator (so a
         seeded episode repeats exactly) from an SB3 policy's action distribution."""
         sb3 = getattr(self.policy, "policy", None)
+        if not self.deterministic and callable(getattr(self.policy, "sample", None)):
+            return self.policy.sample(observation, self.rng)  # an RLlibPolicy
         if self.deterministic or not hasattr(sb3, "get_distribution"):
             return self.policy.predict(observation, deterministic=self.deterministic)[0]
         import torch

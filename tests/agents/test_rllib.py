@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from gymnasium import spaces as gym_spaces
 
 from agents import rllib  # fails naming the extra when it is missing
 from agents.goals import SECTORS, make_env
@@ -76,9 +77,24 @@ def test_module_outputs_and_predict(level, sector_head, commands, logits):
     assert policy.action_space.contains(np.asarray(action, dtype=policy.action_space.dtype))
     assert policy.predict(obs["robot_0"])[0] == pytest.approx(action)  # the mode: repeatable
     assert policy.motion_commands == commands
+    # sampling with a given generator repeats, and follows the distribution
+    draws = [policy.sample(obs["robot_0"], np.random.default_rng(7)) for _ in range(2)]
+    np.testing.assert_array_equal(draws[0], draws[1])
+    rng = np.random.default_rng(0)
+    many = np.array([policy.sample(obs["robot_0"], rng) for _ in range(400)])
+    assert all(policy.action_space.contains(np.asarray(a, dtype=policy.action_space.dtype))
+               for a in many[:20])
+    if isinstance(policy.action_space, gym_spaces.Discrete):
+        logits = mod.forward_inference(stacked(obs))["action_dist_inputs"][0].double()
+        p = torch.softmax(logits, -1).numpy()
+        freq = np.bincount(many, minlength=len(p)) / len(many)
+        assert np.abs(freq - p).max() < 0.1
+    with pytest.raises(TypeError, match="rng must be a numpy.random.Generator, got int"):
+        policy.sample(obs["robot_0"], 3)
 
 
 def test_arcs_reach_the_env_runners_and_drive_through_sb3_explorer():
+    from agents.base import run_episode
     from agents.motion import ARCS
     from agents.sb3_explorer import SB3Explorer
 
@@ -88,6 +104,17 @@ def test_arcs_reach_the_env_runners_and_drive_through_sb3_explorer():
     mod, obs = module("motion", commands="arcs")
     explorer = SB3Explorer(rllib.RLlibPolicy(mod, hold=4))
     assert explorer.commands == "arcs"
+
+    from envs import two_robot_explore_v0
+
+    def sampled_episode() -> np.ndarray:  # a sampled episode repeats for its seed
+        env = two_robot_explore_v0.parallel_env(max_cycles=24, world={"size": (8.0, 8.0)})
+        policy = rllib.RLlibPolicy(mod, hold=4)
+        team = {a: SB3Explorer(policy, deterministic=False) for a in ("robot_0", "robot_1")}
+        run_episode(env, team, seed=4)
+        return np.array([r.true_pose() for r in env.unwrapped.robots])
+
+    np.testing.assert_array_equal(sampled_episode(), sampled_episode())
     with pytest.raises(ValueError, match="commands='arcs' applies to level='motion' only"):
         rllib.ppo_config(env_config=CONFIG, level="goals", commands="arcs")
     with pytest.raises(ValueError, match=r"commands must be one of \['continuous', 'arcs'\]"):
