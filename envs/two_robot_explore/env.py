@@ -125,9 +125,10 @@ not, a dropped one takes robot 1's cells out) enters the reward.
 Shaping for learning velocity commands lives outside the env, so that every explorer is
 scored on the same reward: ``agents.motion.MotionEnv`` (``train.py --level motion --hold K
 --frontier-shaping k``) holds each command ``K`` steps and adds, per robot, the
-potential-based term ``k · (γᵗ · Φ(s') − Φ(s))`` with ``Φ`` minus the path length to the
+potential-based term ``k · (Φ(s') − Φ(s))`` with ``Φ`` minus the path length to the
 nearest frontier of the robot's own map: it pays progress towards unexplored space and sums
-to the change of ``Φ`` over an episode, so it cannot be farmed.
+to the change of ``Φ`` over an episode, so it cannot be farmed (undiscounted: a discounted
+``γ · Φ(s')`` would pay a robot for standing still).
 
 Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
 ``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
