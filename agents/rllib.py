@@ -49,6 +49,7 @@ from torch import nn
 from agents.goals import LEVELS, default_hold, make_env
 from agents.motion import COMMANDS
 from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
+from agents.sb3_explorer import sample_action
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
               "lz4, ...): pip install 'topomerge[rllib]'")
@@ -555,12 +556,11 @@ class RLlibPolicy:
                 deterministic: bool = True) -> tuple[np.ndarray | int, None]:
         """The action for one robot's observation: the distribution's mode when
         ``deterministic``, else a sample (torch's generator; :meth:`sample` takes one)."""
-        with torch.no_grad():
-            dist = self.module.get_inference_action_dist_cls().from_logits(
-                self._dist_inputs(observation))
-            if deterministic:
-                dist = dist.to_deterministic()
-            return self._action(dist.sample()[0].numpy()), None
+        dist = self.module.get_inference_action_dist_cls().from_logits(
+            self._dist_inputs(observation))
+        if deterministic:
+            dist = dist.to_deterministic()
+        return self._action(dist.sample()[0].numpy()), None
 
     def sample(self, observation: Mapping[str, Any], rng: np.random.Generator
                ) -> np.ndarray | int:
@@ -569,9 +569,10 @@ class RLlibPolicy:
         :class:`~agents.sb3_explorer.SB3Explorer` repeats a seeded sampled episode."""
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        inputs = self._dist_inputs(observation)[0].double().numpy()
+        inputs = self._dist_inputs(observation).double()
         if isinstance(self.action_space, spaces.Discrete):
-            p = np.exp(inputs - inputs.max())
-            return int(rng.choice(len(p), p=p / p.sum()))
-        mean, log_std = np.split(inputs, 2)
-        return self._action(rng.normal(mean, np.exp(log_std)))
+            dist = torch.distributions.Categorical(logits=inputs)
+        else:
+            mean, log_std = inputs.chunk(2, dim=-1)
+            dist = torch.distributions.Normal(mean, log_std.exp())
+        return sample_action(dist, rng, self.action_space)

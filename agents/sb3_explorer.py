@@ -94,22 +94,18 @@ class SB3Explorer(Explorer):
 
     def _predict(self, observation: dict[str, Any]) -> Any:
         """The policy's mode, or a sample drawn with this explorer's own generator (so a
-        seeded episode repeats exactly) from an SB3 policy's action distribution."""
-        sb3 = getattr(self.policy, "policy", None)
+        seeded episode repeats exactly): from an SB3 policy's action distribution, or through
+        a policy's ``sample(observation, rng)`` (:meth:`agents.rllib.RLlibPolicy.sample`)."""
         if not self.deterministic and callable(getattr(self.policy, "sample", None)):
-            return self.policy.sample(observation, self.rng)  # an RLlibPolicy
+            return self.policy.sample(observation, self.rng)
+        sb3 = getattr(self.policy, "policy", None)
         if self.deterministic or not hasattr(sb3, "get_distribution"):
             return self.policy.predict(observation, deterministic=self.deterministic)[0]
         import torch
 
         with torch.no_grad():
             dist = sb3.get_distribution(sb3.obs_to_tensor(observation)[0]).distribution
-        if isinstance(dist, torch.distributions.Categorical):
-            p = dist.probs[0].double().numpy()
-            return int(self.rng.choice(len(p), p=p / p.sum()))
-        action = self.rng.normal(dist.mean[0].numpy(), dist.stddev[0].numpy())
-        space = self.policy.action_space
-        return np.clip(action, space.low, space.high).astype(np.float32)
+        return sample_action(dist, self.rng, self.policy.action_space)
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray | int:
         if self.controller is not None:
@@ -132,6 +128,20 @@ class SB3Explorer(Explorer):
             self._since = 0
         self._since += 1
         return self._action
+
+
+def sample_action(dist: Any, rng: np.random.Generator, space: Any) -> int | np.ndarray:
+    """One action drawn with ``rng`` from a torch distribution over a batch of one: a
+    ``Categorical`` gives an index, anything else its ``mean`` and ``stddev`` a diagonal
+    Gaussian draw clipped to the ``Box`` ``space`` (in its dtype). Drawing with a numpy
+    generator rather than torch's global one is what makes a sampled episode repeat."""
+    import torch
+
+    if isinstance(dist, torch.distributions.Categorical):
+        p = dist.probs[0].double().numpy()
+        return int(rng.choice(len(p), p=p / p.sum()))
+    action = rng.normal(dist.mean[0].double().numpy(), dist.stddev[0].double().numpy())
+    return np.clip(action, space.low, space.high).astype(space.dtype)
 
 
 def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "continuous"
