@@ -25,9 +25,11 @@ A run writes ``runs/<env>__<seed>__<time>/``: ``tb/`` (TensorBoard: reward, true
 coverage, merge acceptance and errors, episode length, agent-steps/s), ``checkpoints/`` (atomic,
 resumable with ``--resume RUN_DIR``), ``eval.json`` / ``eval.md`` / ``eval_coverage.png``
 (periodic evaluation of the policy against ``Frontier`` and ``RandomWalk`` on fixed seeds,
-:mod:`agents.evaluation`) and the final policy: ``model.zip`` (SB3, usable as
+:mod:`agents.evaluation`), the final policy: ``model.zip`` (SB3, usable as
 ``--explorer sb3:RUN_DIR/model.zip``) or ``rllib/`` (an RLlib algorithm checkpoint,
-:meth:`agents.rllib.RLlibPolicy.load`).
+:meth:`agents.rllib.RLlibPolicy.load`), and the best policy those evaluations saw
+(``best_model.zip`` or ``rllib_best/``, with its step and scores in ``best.json``; as SB3's
+``EvalCallback`` keeps one): a run can peak before its end.
 
 Readable like CleanRL's ``ppo.py``: ``Args`` below, ``main(args)``, importable for tests.
 """
@@ -37,8 +39,11 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import time
-from dataclasses import asdict, dataclass, field
+import typing
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal
 
@@ -53,11 +58,11 @@ from tqdm.auto import tqdm
 
 from agents import evaluation
 from agents.goals import default_hold, make_env
-from agents.motion import COMMANDS
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import sb3_team
 from topo.fileio import atomic_write, atomic_write_json
+from topo.validation import check_real
 
 ENV_ID = "two_robot_explore_v0"
 
@@ -186,6 +191,12 @@ class Args:
     """Extra env config (EnvConfig fields) for training and evaluation."""
 
     def __post_init__(self) -> None:
+        hints = typing.get_type_hints(Args)
+        for f in fields(self):  # tyro checks the command line, this code's calls
+            choices = typing.get_args(hints[f.name])
+            if typing.get_origin(hints[f.name]) is Literal and getattr(self, f.name) not in choices:
+                raise ValueError(f"{f.name} must be one of {list(choices)}, got "
+                                 f"{getattr(self, f.name)!r}")
         goals = self.level == "goals"
         if self.hold is None:
             self.hold = default_hold(self.level)
@@ -198,8 +209,6 @@ class Args:
         envs = self.n_envs if isinstance(self.n_envs, int) else 1
         if self.n_workers is None:
             self.n_workers = max(1, min(os.cpu_count() or 1, envs))
-        if self.backend not in ("sb3", "rllib"):
-            raise ValueError(f"backend must be one of ['sb3', 'rllib'], got {self.backend!r}")
         if self.backend == "rllib":
             if self.num_env_runners is None:
                 self.num_env_runners = max(1, min(os.cpu_count() or 1, envs))
@@ -227,8 +236,6 @@ class Args:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
-        if self.level not in ("goals", "motion"):
-            raise ValueError(f"level must be one of ['goals', 'motion'], got {self.level!r}")
         if self.world_size_max is not None:
             top = self.world_size_max
             if isinstance(top, bool) or not isinstance(top, (int, float)) or not (
@@ -237,33 +244,19 @@ class Args:
                                  f"= {max(self.world_size)}, got {top!r}")
             if self.backend != "sb3":
                 raise ValueError("world_size_max applies to backend='sb3' only")
-        if self.reward_mode not in ("shared", "oracle", "individual"):
-            raise ValueError("reward_mode must be one of ['shared', 'oracle', 'individual'], "
-                             f"got {self.reward_mode!r}")
-        shaping = self.frontier_shaping
-        if isinstance(shaping, bool) or not isinstance(shaping, (int, float)) or not (
-                math.isfinite(shaping) and shaping >= 0):
-            raise ValueError(f"frontier_shaping must be a finite number >= 0, got {shaping!r}")
+        shaping = self.frontier_shaping = check_real(self.frontier_shaping, "frontier_shaping",
+                                                     low=0.0, low_inclusive=True)
+        self.cost_prior = check_real(self.cost_prior, "cost_prior", low=0.0, low_inclusive=True)
         if self.central_critic and not (goals and self.sector_head and self.backend == "sb3"):
             raise ValueError("central_critic applies to level='goals' with the sector head on "
                              "backend='sb3' only")
-        if self.lr_schedule not in ("constant", "linear"):
-            raise ValueError("lr_schedule must be one of ['constant', 'linear'], got "
-                             f"{self.lr_schedule!r}")
         if self.lr_schedule != "constant" and self.backend != "sb3":
             raise ValueError(f"lr_schedule={self.lr_schedule!r} applies to backend='sb3' only")
-        if self.motion_commands not in COMMANDS:
-            raise ValueError(f"motion_commands must be one of {list(COMMANDS)}, got "
-                             f"{self.motion_commands!r}")
         if self.motion_commands == "arcs" and goals:
             raise ValueError("motion_commands='arcs' applies to level='motion' only")
         if shaping and goals:
             raise ValueError("frontier_shaping applies to level='motion' only (the goal "
                              "level's planner already drives to frontiers)")
-        prior = self.cost_prior
-        if isinstance(prior, bool) or not isinstance(prior, (int, float)) or not (
-                math.isfinite(prior) and prior >= 0):
-            raise ValueError(f"cost_prior must be a finite number >= 0, got {prior!r}")
         for name in ("learning_rate", "gamma", "gae_lambda", "clip_range"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and 0 < value <= 1):
@@ -284,11 +277,6 @@ class Args:
     def envs_per_runner(self) -> int:
         """``--backend rllib``: envs each env runner steps (``n_envs`` split evenly)."""
         return math.ceil(self.n_envs / max(1, self.num_env_runners or 0))
-
-    @property
-    def steps_per_decision(self) -> int:
-        """Env steps per policy decision: ``hold``."""
-        return self.hold
 
     def train_env_configs(self) -> list[dict[str, Any]]:
         """One env config per training env: :meth:`env_config`, or with ``world_size_max``
@@ -418,22 +406,49 @@ class Checkpointer(_Periodic):
 
 
 class Evaluator(_Periodic):
-    """Every ``every`` agent-steps, runs the current policy on the fixed evaluation worlds and
-    writes the comparison with the scripted baselines (see :func:`evaluate`)."""
+    """Every ``every`` agent-steps, runs the current policy on the fixed evaluation worlds,
+    writes the comparison with the scripted baselines (see :func:`evaluate`) and keeps the
+    best policy so far (:func:`keep_best`)."""
 
     def __init__(self, args: Args, run_dir: Path, every: int) -> None:
-        super().__init__(every, args.steps_per_decision)
+        super().__init__(every, args.hold)
         self.args, self.run_dir = args, run_dir
 
     def fire(self, steps: int) -> None:
         report = evaluate(self.model, self.args, self.run_dir, steps)
-        for row in report["rows"]:
-            if row["explorer"] == "ppo":
-                for key in ("T50", "T85", "final_coverage"):
-                    self.logger.record(f"eval/{key}", row[key])
+        row = _policy_row(report)
+        for key in ("T50", "T85", "final_coverage"):
+            self.logger.record(f"eval/{key}", row[key])
+        keep_best(report, self.run_dir,
+                  lambda: save_model_atomic(self.model, self.run_dir / BEST_SB3))
 
 
 # ------------------------------------------------------------------------------- evaluation
+BEST_SB3, BEST_RLLIB, BEST_FILE = "best_model.zip", "rllib_best", "best.json"
+"""The best evaluated policy (SB3 / RLlib) and its record, in the run folder."""
+
+
+def _policy_row(report: dict[str, Any]) -> dict[str, Any]:
+    return next(r for r in report["rows"] if r["explorer"] == "ppo")
+
+
+def keep_best(report: dict[str, Any], run_dir: Path, save: Callable[[], object]) -> bool:
+    """If ``report``'s policy row (:func:`evaluate`) ranks above the one in ``best.json``
+    (:func:`agents.evaluation.rank_key`: lower mean T85, then higher final coverage), call
+    ``save()`` (which writes the best policy) and then record the row in ``best.json``;
+    returns whether it did. A resumed run keeps comparing with its earlier best."""
+    row, path = _policy_row(report), run_dir / BEST_FILE
+    if path.exists():
+        best = json.loads(path.read_text())
+        if evaluation.rank_key(best) <= evaluation.rank_key(row):
+            return False
+    save()
+    atomic_write_json(path, {"step": int(report["step"]),
+                             **{k: row[k] for k in ("T50", "T85", "T95", "final_coverage",
+                                                    "reached_T85")}})
+    return True
+
+
 def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any]:
     """Evaluate ``policy`` (an SB3 model or an :class:`agents.rllib.RLlibPolicy`) against
     ``args.eval_baselines`` on the run's fixed worlds (:func:`agents.evaluation.evaluate`):
@@ -448,7 +463,7 @@ def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any
 def train_sb3(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[PPO, int]:
     """Train (or resume from ``checkpoint``) with Stable-Baselines3; save ``model.zip``.
     Returns the model and the agent-steps trained."""
-    scale = args.steps_per_decision
+    scale = args.hold
     venv = ParallelVecEnv([_EnvFactory(config, args)
                            for config in args.train_env_configs()], n_workers=args.n_workers)
     venv = VecMonitor(venv)
@@ -529,7 +544,7 @@ def rllib_config(args: Args) -> Any:
         num_env_runners=args.num_env_runners,
         envs_per_runner=args.envs_per_runner, train_batch_size=args.n_steps * args.n_envs,
         minibatch_size=args.batch_size, num_epochs=args.n_epochs, lr=args.learning_rate,
-        gamma=args.gamma ** args.steps_per_decision, gae_lambda=args.gae_lambda,
+        gamma=args.gamma ** args.hold, gae_lambda=args.gae_lambda,
         entropy_coeff=args.ent_coef, clip_param=args.clip_range,
         num_gpus=0 if args.device == "cpu" else int(torch.cuda.is_available()))
 
@@ -543,7 +558,7 @@ def train_rllib(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[Any
 
     from agents import rllib  # needs the rllib extra
 
-    scale = args.steps_per_decision
+    scale = args.hold
     started = _start_ray(args)
     algo = None
     writer = SummaryWriter(str(_tb_folder(run_dir / "tb", "rllib_ppo", checkpoint is not None)))
@@ -576,7 +591,10 @@ def train_rllib(args: Args, run_dir: Path, checkpoint: Path | None) -> tuple[Any
                 next_checkpoint = _after(steps, args.checkpoint_every)
             if steps >= next_eval and steps < args.total_timesteps:
                 policy = rllib.RLlibPolicy(algo.get_module(rllib.POLICY_ID), args.hold)
-                _log_eval(writer, evaluate(policy, args, run_dir, steps), steps)
+                report = evaluate(policy, args, run_dir, steps)
+                _log_eval(writer, report, steps)
+                keep_best(report, run_dir, lambda: rllib.save_checkpoint(
+                    algo, run_dir / BEST_RLLIB, args.level, args.hold))
                 next_eval = _after(steps, args.eval_every)
         bar.close()
         rllib.save_checkpoint(algo, run_dir / "rllib", args.level, args.hold)
@@ -605,10 +623,22 @@ def _after(steps: int, every: int) -> float:
 
 
 def _log_eval(writer: Any, report: dict[str, Any], steps: int) -> None:
-    for row in report["rows"]:
-        if row["explorer"] == "ppo":
-            for key in ("T50", "T85", "final_coverage"):
-                writer.add_scalar(f"eval/{key}", row[key], steps)
+    row = _policy_row(report)
+    for key in ("T50", "T85", "final_coverage"):
+        writer.add_scalar(f"eval/{key}", row[key], steps)
+
+
+def _copy_tree_atomic(src: Path, dst: Path) -> None:
+    """Copy the folder ``src`` to ``dst`` through a temporary folder beside it, replacing
+    ``dst``."""
+    tmp = dst.parent / f".tmp-{dst.name}-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(src, tmp)
+    old = dst.parent / f".old-{dst.name}-{os.getpid()}"
+    if dst.exists():
+        os.replace(dst, old)
+    os.replace(tmp, dst)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 # ------------------------------------------------------------------------------- main
@@ -644,15 +674,24 @@ def main(args: Args) -> Path:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.runs_dir) / (args.run_name or f"{ENV_ID}__{args.seed}__{stamp}")
         checkpoint = None
+        # an overwritten run folder's best policy is another run's
+        (run_dir / BEST_FILE).unlink(missing_ok=True)
     run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_json(run_dir / "args.json", json.loads(json.dumps(asdict(args), default=str)))
 
     train = train_rllib if args.backend == "rllib" else train_sb3
     policy, steps = train(args, run_dir, checkpoint)
-    evaluate(policy, args, run_dir, steps)
-    final = "model.zip" if args.backend == "sb3" else "rllib"
+    report = evaluate(policy, args, run_dir, steps)
+    if args.backend == "sb3":
+        final, best = "model.zip", BEST_SB3
+        keep_best(report, run_dir, lambda: save_model_atomic(policy, run_dir / best))
+    else:
+        final, best = "rllib", BEST_RLLIB
+        keep_best(report, run_dir, lambda: _copy_tree_atomic(run_dir / final, run_dir / best))
     print((run_dir / "eval.md").read_text())
-    print(f"run folder: {run_dir}  (policy: {run_dir / final})")
+    record = json.loads((run_dir / BEST_FILE).read_text())
+    print(f"run folder: {run_dir}  (policy: {run_dir / final}; best evaluated: "
+          f"{run_dir / best}, step {record['step']})")
     return run_dir
 
 

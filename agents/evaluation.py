@@ -82,6 +82,13 @@ def summarise(name: str, episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any
     return row
 
 
+def rank_key(row: Mapping[str, Any]) -> tuple[float, float]:
+    """Sort key of a summary row (:func:`summarise`), lower is better: the mean T85, then the
+    final coverage, higher first. Early in training most episodes never reach 85 % and their
+    T85s all count as the episode length, so the coverage they end at decides."""
+    return float(row["T85"]), -float(row["final_coverage"])
+
+
 def _jsonable(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{**e, "coverage": np.asarray(e["coverage"]).tolist()} for e in episodes]
 

@@ -131,11 +131,12 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
         return torch.cat(parts, dim=1)
 
 
-class _SectorLatent(nn.Module):
+class SectorLatent(nn.Module):
     """SB3 ``mlp_extractor`` for :class:`SectorPolicy`: the actor's latent is an MLP of the
     context followed by the raw per-sector rows (the features' last ``n_raw`` columns); the
     critic sees the context and the ``n_state`` global-state columns before the rows (a
-    centralised critic), which the actor never reads."""
+    centralised critic), which the actor never reads. The RLlib backend's module
+    (:class:`agents.rllib.TopoExplorerModule`) is built from the same two blocks."""
 
     def __init__(self, features_dim: int, n_raw: int, pi: int, vf: int,
                  n_state: int = 0) -> None:
@@ -163,7 +164,7 @@ MASKED_LOGIT = -1e8
 ``MaskableCategorical``)."""
 
 
-class _SectorScorer(nn.Module):
+class SectorScorer(nn.Module):
     """The action head of :class:`SectorPolicy`: logit of sector ``k`` =
     ``MLP([context, frontiers[k], one_hot(k)]) − cost_prior · gap_k``, the same MLP for every
     sector, ``gap_k`` the metres by which sector ``k``'s frontier is dearer than the cheapest
@@ -262,13 +263,13 @@ class SectorPolicy(MultiInputActorCriticPolicy):
 
     def _build_mlp_extractor(self) -> None:
         pi, vf = self._widths
-        self.mlp_extractor = _SectorLatent(self.features_dim, self._sectors * self._row, pi, vf,
+        self.mlp_extractor = SectorLatent(self.features_dim, self._sectors * self._row, pi, vf,
                                            self._n_state)
 
     def _build(self, lr_schedule) -> None:
         super()._build(lr_schedule)
         pi = self._widths[0]
-        self.action_net = _SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty,
+        self.action_net = SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty,
                                         self._cost_prior)
         if self.ortho_init:
             self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))

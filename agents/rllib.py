@@ -48,7 +48,7 @@ from torch import nn
 
 from agents.goals import LEVELS, default_hold, make_env
 from agents.motion import COMMANDS
-from agents.policy import TopoExplorerExtractor, _SectorLatent, _SectorScorer
+from agents.policy import SectorLatent, SectorScorer, TopoExplorerExtractor
 from agents.sb3_explorer import sample_action
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
@@ -247,8 +247,8 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
         self.log_std: nn.Parameter | None = None
         if self.sector_head:
             sectors, row = frontiers.shape
-            self.latent = _SectorLatent(n, sectors * row, pi, vf)
-            self.actor = _SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]),
+            self.latent = SectorLatent(n, sectors * row, pi, vf)
+            self.actor = SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]),
                                        cfg["cost_prior"], name="model_config cost_prior")
         else:
             self.latent = _Latent(n, pi, vf)

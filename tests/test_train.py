@@ -30,7 +30,8 @@ def run_dir(tmp_path_factory):
 
 def test_tiny_training_writes_a_run(run_dir):
     assert run_dir.name.startswith("two_robot_explore_v0__3__")
-    for name in ("model.zip", "eval.json", "eval.md", "eval_coverage.png", "args.json"):
+    for name in ("model.zip", "eval.json", "eval.md", "eval_coverage.png", "args.json",
+                 "best_model.zip", "best.json"):
         assert (run_dir / name).is_file(), name
     assert sorted(p.name for p in (run_dir / "checkpoints").glob("step_*.zip"))
     assert list((run_dir / "tb").rglob("events.out.tfevents.*"))
@@ -44,6 +45,43 @@ def test_evaluation_runs_longer_episodes_than_training(run_dir):
     assert report["max_cycles"] == 3 * TINY["max_cycles"]
     (walk,) = json.loads((run_dir / "eval_baselines.json").read_text())["explorers"].values()
     assert len(walk[0]["coverage"]) > TINY["max_cycles"]  # ran past the training horizon
+
+
+def _report(step, t85, final):
+    return {"step": step, "rows": [
+        {"explorer": "frontier", "T50": 1.0, "T85": 2.0, "T95": 3.0, "final_coverage": 1.0,
+         "reached_T85": 1.0},
+        {"explorer": "ppo", "T50": 1.0, "T85": t85, "T95": 3.0, "final_coverage": final,
+         "reached_T85": 0.5}]}
+
+
+def test_keep_best_keeps_lower_t85_then_higher_coverage(tmp_path):
+    import json
+
+    from train import keep_best
+
+    saved = []
+    for step, t85, final in [(1, 121, 0.5), (2, 121, 0.4), (3, 121, 0.6), (4, 90, 0.3),
+                             (5, 95, 0.9), (6, 90, 0.3)]:
+        keep_best(_report(step, t85, final), tmp_path, lambda s=step: saved.append(s))
+    assert saved == [1, 3, 4]  # ties keep the earlier policy
+    best = json.loads((tmp_path / "best.json").read_text())
+    assert (best["step"], best["T85"], best["final_coverage"]) == (4, 90, 0.3)
+
+
+def test_periodic_evaluations_keep_the_best_policy(tmp_path):
+    import json
+
+    from stable_baselines3 import PPO
+
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "best.json").write_text(json.dumps({"step": 9, "T85": 0, "final_coverage": 1}))
+    run = main(Args(runs_dir=tmp_path, run_name="r", seed=6, **{**TINY, "eval_every": 128}))
+    best = json.loads((run / "best.json").read_text())
+    assert best["step"] in (128, 256)  # the stale record of an overwritten run is gone
+    # the saved policy is the one evaluated at the recorded step (hold 1: a decision a step)
+    assert PPO.load(run / "best_model.zip", device="cpu").num_timesteps == best["step"]
 
 
 def test_same_seed_same_policy(run_dir, tmp_path):
@@ -134,9 +172,11 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
         ({"world_size_max": 8.0}, r"world_size_max must be a side in metres >= max\(world_size\) "
                                   r"= 10.0, got 8.0"),
         ({"backend": "rllib", "world_size_max": 20.0}, "world_size_max applies to backend='sb3'"),
-        ({"cost_prior": -1.0}, "cost_prior must be a finite number >= 0, got -1.0"),
+        ({"cost_prior": -1.0}, "cost_prior must be >= 0.0, got -1.0"),
         ({"level": "motion", "frontier_shaping": -0.5},
-         "frontier_shaping must be a finite number >= 0, got -0.5"),
+         "frontier_shaping must be >= 0.0, got -0.5"),
+        ({"motion_commands": "joystick"},
+         r"motion_commands must be one of \['continuous', 'arcs'\], got 'joystick'"),
         ({"frontier_shaping": 0.3}, "frontier_shaping applies to level='motion' only"),
         ({"motion_commands": "arcs"}, "motion_commands='arcs' applies to level='motion'"),
         ({"lr_schedule": "cosine"},
@@ -150,6 +190,19 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Args(**kwargs)
+
+
+def test_non_numbers_are_type_errors():
+    with pytest.raises(TypeError, match="frontier_shaping must be a real number"):
+        Args(level="motion", frontier_shaping="1")
+
+
+def test_motion_commands_choices_are_the_envs():
+    import typing
+
+    from agents.motion import COMMANDS
+
+    assert typing.get_args(typing.get_type_hints(Args)["motion_commands"]) == COMMANDS
 
 
 def test_motion_level_holds_commands_and_shapes(tmp_path):

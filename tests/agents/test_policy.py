@@ -81,10 +81,10 @@ def goal_space() -> spaces.Dict:
 def test_sector_scorer_is_one_network_for_every_sector():
     """Swapping two sectors' rows swaps their logits once the direction input is silenced: the
     same weights score every sector."""
-    from agents.policy import _SectorScorer
+    from agents.policy import SectorScorer
 
     torch.manual_seed(0)
-    scorer = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
+    scorer = SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
     with torch.no_grad():
         scorer.net[0].weight[:, -8:] = 0.0  # the direction one-hot
     latent = torch.rand(4, 16 + 8 * 3)
@@ -97,10 +97,10 @@ def test_sector_scorer_is_one_network_for_every_sector():
 
 
 def test_sector_mask_leaves_only_sectors_with_a_frontier():
-    from agents.policy import MASKED_LOGIT, _SectorScorer
+    from agents.policy import MASKED_LOGIT, SectorScorer
 
     torch.manual_seed(0)
-    scorer = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32, mask_empty=True)
+    scorer = SectorScorer(context_dim=16, sectors=8, row=3, hidden=32, mask_empty=True)
     latent = torch.rand(3, 16 + 8 * 3)
     rows = latent[:, 16:].view(3, 8, 3)
     rows[..., 0] = 0.0
@@ -112,7 +112,7 @@ def test_sector_mask_leaves_only_sectors_with_a_frontier():
     assert (probs[0, [0, 2, 3, 4, 5, 7]] == 0).all() and probs[0, [1, 6]].sum() == 1
     assert probs[1, 3] == 1 and (logits[1, [0, 1, 2, 4, 5, 6, 7]] == MASKED_LOGIT).all()
     assert (logits[2] > MASKED_LOGIT).all()
-    unmasked = _SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
+    unmasked = SectorScorer(context_dim=16, sectors=8, row=3, hidden=32)
     unmasked.load_state_dict(scorer.state_dict())
     assert (unmasked(latent) > MASKED_LOGIT).all()
 
@@ -154,14 +154,14 @@ def test_cost_prior_starts_the_policy_as_a_soft_frontier():
     torch.testing.assert_close(ratio, torch.full((4,), math.e ** 2), rtol=0.1, atol=0)
     with pytest.raises(ValueError, match="cost_prior must be >= 0"):
         SectorPolicy(space, spaces.Discrete(8), lambda _: 3e-4, cost_prior=-1.0)
-    from agents.policy import _SectorScorer
+    from agents.policy import SectorScorer
 
     with pytest.raises(ValueError, match="model_config cost_prior must be >= 0"):
-        _SectorScorer(16, 8, len(FRONTIER_FEATURES), 32, cost_prior=-1.0,
+        SectorScorer(16, 8, len(FRONTIER_FEATURES), 32, cost_prior=-1.0,
                       name="model_config cost_prior")
     with pytest.raises(ValueError, match=r"cost_prior needs the 6 frontiers columns of "
                                          r"agents.goals.FRONTIER_FEATURES, got 3"):
-        _SectorScorer(16, 8, 3, 32, cost_prior=1.0)
+        SectorScorer(16, 8, 3, 32, cost_prior=1.0)
 
 
 def test_central_critic_reads_the_global_state_and_the_actor_does_not():

@@ -153,6 +153,9 @@ def test_one_ppo_iteration_on_a_ray_env_runner_then_resume(tmp_path):
     assert "| ppo |" in (run / "eval.md").read_text()
     assert json.loads((run / "eval.json").read_text())["step"] == 320
     assert [p.name for p in (run / "checkpoints").iterdir()] == ["step_000000320"]
+    # the only evaluation was the final one: the best policy is a copy of the final one
+    assert json.loads((run / "best.json").read_text())["step"] == 320
+    assert (run / "rllib_best" / rllib.POLICY_FILE).is_file()
 
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
