@@ -15,7 +15,9 @@ of ``../shared/maps`` (3 ROS maps and DungeonMaps 1; ``--skip-real`` leaves them
 episode lasts 150 steps per metre of the longer side (1500–3000) on procedural worlds, 2000 on
 real ones; a T never reached counts as that length + 1 (censored).
 
-**Explorers.** Each run (a ``train.py`` folder with ``model.zip`` or ``rllib/``) with the
+**Explorers.** Each run (a ``train.py`` folder with ``model.zip`` or ``rllib/``; ``--best``: the
+best policy its periodic evaluations saw, ``best_model.zip`` or ``rllib_best/``, chosen on the
+run's own evaluation worlds, never these) with the
 deterministic policy (``--sample``: sampling its actions, seeded per episode; a discrete
 motion-level policy's most likely command can loop) on its own env config (world replaced),
 and once per world ``Frontier``,
@@ -95,9 +97,26 @@ def heldout_worlds(n: int, real: bool = True) -> list[World]:
 
 
 # ------------------------------------------------------------------------------- episodes
+POLICY_KINDS = ("run:", "sample:", "best-run:", "best-sample:")
+"""Prefixes of a trained policy's explorer name (:func:`_team`)."""
+
+
+def _policy_path(run: str | Path, best: bool) -> Path:
+    """A run's final policy (``model.zip`` or ``rllib/``), or with ``best`` the best one its
+    evaluations saw (``train.BEST_SB3`` / ``train.BEST_RLLIB``); raises SystemExit if missing."""
+    from train import BEST_RLLIB, BEST_SB3
+
+    names = (BEST_SB3, BEST_RLLIB) if best else ("model.zip", "rllib")
+    for name in names:
+        if (Path(run) / name).exists():
+            return Path(run) / name
+    raise SystemExit(f"{run}: no {' or '.join(names)} (not a finished train.py run"
+                     f"{' with periodic evaluations' if best else ''})")
+
+
 @functools.lru_cache(maxsize=8)
-def _policy(run: str) -> tuple[Any, dict[str, Any]]:
-    """A run's policy and its env config (loaded once per process)."""
+def _policy(run: str, best: bool = False) -> tuple[Any, dict[str, Any]]:
+    """A run's policy (:func:`_policy_path`) and its env config (loaded once per process)."""
     import train
 
     run_dir = Path(run)
@@ -107,32 +126,32 @@ def _policy(run: str) -> tuple[Any, dict[str, Any]]:
     for key in ("world_size", "eval_baselines"):
         kwargs[key] = tuple(kwargs[key])
     args = train.Args(**kwargs)
-    if (run_dir / "model.zip").is_file():
+    path = _policy_path(run_dir, best)
+    if path.is_file():
         from agents.sb3_explorer import SB3Explorer
 
-        policy = SB3Explorer.load_policy(run_dir / "model.zip")
-    elif (run_dir / "rllib").is_dir():
+        policy = SB3Explorer.load_policy(path)
+    else:
         from agents.rllib import RLlibPolicy
 
-        policy = RLlibPolicy.load(run_dir / "rllib")
-    else:
-        raise SystemExit(f"{run}: no model.zip or rllib/ (not a finished train.py run)")
+        policy = RLlibPolicy.load(path)
     return policy, args.env_config()
 
 
 def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The team of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same policy sampling its
-    actions —, ``rule:NAME`` or a scripted name) and the env config it runs with (before the
-    world is set)."""
+    actions —, ``best-run:PATH`` / ``best-sample:PATH`` — the run's best policy —,
+    ``rule:NAME`` or a scripted name) and the env config it runs with (before the world is
+    set)."""
     from agents.goals import SectorRule
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
     from agents.team import make_team
 
-    if explorer.startswith(("run:", "sample:")):
+    if explorer.startswith(POLICY_KINDS):
         kind, _, run = explorer.partition(":")
-        policy, config = _policy(run)
-        return sb3_team(policy, deterministic=kind == "run"), config
+        policy, config = _policy(run, kind.startswith("best-"))
+        return sb3_team(policy, deterministic=kind.endswith("run")), config
     if explorer.startswith("rule:"):
         board = Blackboard()
         return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(2)}, {}
@@ -168,10 +187,9 @@ def episode(explorer: str, world: World) -> dict[str, Any]:
 def _key(explorer: str, world: World) -> str:
     """Cache key: the explorer (a run with its model file's size and mtime) and the world."""
     tag = explorer
-    if explorer.startswith(("run:", "sample:")):
-        run = Path(explorer.partition(":")[2])
-        model = run / "model.zip" if (run / "model.zip").exists() else run / "rllib"
-        st = model.stat()
+    if explorer.startswith(POLICY_KINDS):
+        kind, _, run = explorer.partition(":")
+        st = _policy_path(run, kind.startswith("best-")).stat()
         tag = f"{explorer}@{st.st_size}:{st.st_mtime_ns}"
     return json.dumps([tag, world.id, world.config, world.seed, world.max_cycles],
                       sort_keys=True)
@@ -315,6 +333,9 @@ def main() -> None:
     parser.add_argument("--sample", action="store_true",
                         help="the runs' policies sample their actions (seeded per episode) "
                              "instead of taking the most likely one")
+    parser.add_argument("--best", action="store_true",
+                        help="each run's best evaluated policy (best_model.zip / rllib_best/, "
+                             "chosen on the run's own evaluation worlds) instead of its final one")
     parser.add_argument("--worlds", type=int, default=20, help="procedural held-out worlds")
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
     parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
@@ -328,7 +349,7 @@ def main() -> None:
     if opts.workers < 1:
         parser.error(f"--workers must be >= 1, got {opts.workers}")
     groups: dict[str, list[str]] = {}
-    kind = "sample" if opts.sample else "run"
+    kind = ("best-" if opts.best else "") + ("sample" if opts.sample else "run")
     if opts.label:
         import glob
 
@@ -345,8 +366,10 @@ def main() -> None:
             run = Path(m.partition(":")[2])
             if not (run / "args.json").is_file():
                 parser.error(f"{run}: not a train.py run folder (no args.json)")
-            if not ((run / "model.zip").is_file() or (run / "rllib").is_dir()):
-                parser.error(f"{run}: no model.zip or rllib/ yet (an unfinished run)")
+            try:
+                _policy_path(run, opts.best)
+            except SystemExit as missing:
+                parser.error(str(missing))
     scripted = ["frontier", *opts.baselines, *(f"rule:{r}" for r in opts.rules)]
     groups = {**groups, **{s: [s] for s in scripted if s != "frontier"},
               "frontier": ["frontier"]}

@@ -43,3 +43,15 @@ def test_heldout_worlds_are_fixed_and_in_range():
         assert 10 <= sx <= 20 and 10 <= sy <= 20
         assert w.max_cycles == int(150 * max(sx, sy))
     assert te.heldout_worlds(3, real=False) == a[:3]
+
+
+def test_policy_path_picks_the_final_or_the_best_policy(tmp_path):
+    (tmp_path / "model.zip").write_bytes(b"final")
+    assert te._policy_path(tmp_path, best=False) == tmp_path / "model.zip"
+    with pytest.raises(SystemExit, match="no best_model.zip or rllib_best"):
+        te._policy_path(tmp_path, best=True)
+    (tmp_path / "rllib_best").mkdir()
+    assert te._policy_path(tmp_path, best=True) == tmp_path / "rllib_best"
+    # the best policy is another explorer, cached apart from the final one
+    world = te.heldout_worlds(1, real=False)[0]
+    assert te._key(f"run:{tmp_path}", world) != te._key(f"best-run:{tmp_path}", world)
