@@ -8,13 +8,15 @@ measured in vision (Mikolajczyk et al. 2005), against the level chance alone wou
    A's frame by the truth, also cover, eroded by ``erode`` metres (so that a node on the edge
    of one robot's knowledge is not counted).
 2. **Repeatability at r** — of A's nodes inside the region, the share that has a B node (moved
-   by the truth) within ``r``; the same from B's side (B's nodes moved into A's frame, inside the
-   region, against A's nodes); the pair's figure is the mean of the two sides.
+   by the truth) within ``r``, wherever that B node lies (a node just outside the eroded region
+   is still a node B placed there); the same from B's side (B's nodes moved into A's frame,
+   inside the region, against all of A's nodes); the pair's figure is the mean of the two sides
+   (of the one side that has region nodes, when only one has).
 3. **Chance level at r** — the repeatability of nodes placed at random in the same region at
    the other map's node density ``ρ``: ``1 − exp(−ρ π r²)``, the same mean of two sides. A map
    denser in nodes scores higher by chance alone, so the two are read together.
-4. **Mutual matches** — pairs of region nodes that are each other's nearest neighbour within
-   the first radius: a rigid fit on nodes needs at least 3.
+4. **Mutual matches** — pairs of nodes, at least one of them in the region, that are each
+   other's nearest neighbour within the first radius: a rigid fit on nodes needs at least 3.
 
 Only the nodes a merge matches take part: with ``include_frontier=False`` (the default) nodes
 flagged :attr:`topo.TopoMap.frontier` (they touch the unknown and move as the map grows) are
@@ -47,10 +49,12 @@ class Repeatability:
     Attributes:
         radii: the radii (metres) the figures below are given at, in order.
         repeatability: ``(len(radii),)`` mean of A's and B's share of region nodes with a node
-            of the other map within each radius; NaN when neither map has a node in the region.
+            of the other map within each radius (one side's share when the other has no region
+            node); NaN when neither map has a node in the region.
         chance: ``(len(radii),)`` the same for nodes placed at random at the same densities.
         nodes_a, nodes_b: matchable nodes of each map inside the shared region.
-        mutual: region node pairs that are mutually nearest within ``radii[0]``.
+        mutual: node pairs, at least one node in the region, that are mutually nearest
+            within ``radii[0]``.
         region_m2: area of the shared region (m²).
         hits: ``(len(radii), 2)`` int, how many of A's and of B's region nodes have a node of
             the other map within each radius (for figures pooled over many pairs).
@@ -165,23 +169,24 @@ def node_repeatability(map_a: TopoMap, map_b: TopoMap, grid_a: Any, grid_b: Any,
     area = float(region.sum()) * res_a * res_a
     xa = _matchable(map_a, include_frontier)
     xb = truth.apply(_matchable(map_b, include_frontier)) if len(map_b.xy) else np.empty((0, 2))
-    xa = xa[_in_region(xa, region, org_a, res_a)] if len(xa) else xa
-    xb = xb[_in_region(xb, region, org_a, res_a)] if len(xb) else xb
-    na, nb = len(xa), len(xb)
+    in_a = _in_region(xa, region, org_a, res_a)
+    in_b = _in_region(xb, region, org_a, res_a)
+    na, nb = int(in_a.sum()), int(in_b.sum())
     rep = np.full(len(radii), np.nan)
     chance = np.full(len(radii), np.nan)
     mutual = 0
     hits = np.zeros((len(radii), 2), dtype=np.int64)
-    if na and nb:
-        da, ia = cKDTree(xb).query(xa)  # A's nearest B
-        db, ib = cKDTree(xa).query(xb)  # B's nearest A
-        mutual = int(np.sum((ib[ia] == np.arange(na)) & (da <= radii[0])))
+    if na or nb:
+        # every node's nearest in the other map (inf when that map has none)
+        da, ia = cKDTree(xb).query(xa) if len(xb) else (np.full(len(xa), np.inf), None)
+        db, ib = cKDTree(xa).query(xb) if len(xa) else (np.full(len(xb), np.inf), None)
+        if ia is not None and ib is not None:
+            mutual = int(np.sum((ib[ia] == np.arange(len(xa))) & (da <= radii[0])
+                                & (in_a | in_b[ia])))
+        sides = [(n, other) for n, other in ((na, nb), (nb, na)) if n]
         for k, r in enumerate(radii):
-            hits[k] = np.sum(da <= r), np.sum(db <= r)
-            rep[k] = 0.5 * (hits[k, 0] / na + hits[k, 1] / nb)
-            chance[k] = 0.5 * ((1 - math.exp(-nb / area * math.pi * r * r))
-                               + (1 - math.exp(-na / area * math.pi * r * r)))
-    elif na or nb:
-        rep[:] = 0.0
-        chance[:] = 0.0
+            hits[k] = np.sum(da[in_a] <= r), np.sum(db[in_b] <= r)
+            rep[k] = np.mean([h / n for h, n in zip(hits[k], (na, nb), strict=True) if n])
+            chance[k] = np.mean([1 - math.exp(-other / area * math.pi * r * r)
+                                 for _, other in sides])
     return Repeatability(radii, rep, chance, na, nb, mutual, area, hits)

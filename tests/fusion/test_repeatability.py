@@ -43,10 +43,20 @@ def test_radii_separate_near_and_far_nodes():
                              Rigid2D())
     assert rep.repeatability[0] == 0.0 and rep.repeatability[1] == 1.0
     assert rep.mutual == 0
-    # a node of the other map outside the shared region does not count
+    # a node of the other map just outside the shared region (x ≥ 4.7 m) is still its node
+    # there: it repeats A's, though only A's side has a region node to count
     edge = node_repeatability(topomap(NODES[3:4]), topomap(NODES[3:4] + [0.7, 0.0]), grid(),
                               grid(), Rigid2D())
-    assert edge.nodes_b == 0 and edge.repeatability[1] == 0.0
+    assert (edge.nodes_a, edge.nodes_b) == (1, 0)
+    np.testing.assert_array_equal(edge.repeatability, [0.0, 1.0])
+    np.testing.assert_array_equal(edge.hits, [[0, 0], [1, 0]])
+    pair = node_repeatability(topomap([[4.5, 4.5]]), topomap([[4.8, 4.5]]), grid(), grid(),
+                              Rigid2D())
+    assert pair.mutual == 1 and pair.nodes_b == 0  # one node of the pair in the region
+    # nodes outside the region on both sides count for nothing
+    out = node_repeatability(topomap([[4.8, 4.8]]), topomap([[4.8, 4.8]]), grid(), grid(),
+                             Rigid2D())
+    assert out.nodes == 0 and out.mutual == 0 and np.isnan(out.repeatability).all()
 
 
 @settings(max_examples=25, deadline=None)
