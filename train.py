@@ -41,11 +41,10 @@ import math
 import os
 import shutil
 import time
-import typing
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 import numpy as np
 import torch
@@ -191,12 +190,11 @@ class Args:
     """Extra env config (EnvConfig fields) for training and evaluation."""
 
     def __post_init__(self) -> None:
-        hints = typing.get_type_hints(Args)
+        hints = get_type_hints(Args)
         for f in fields(self):  # tyro checks the command line, this code's calls
-            choices = typing.get_args(hints[f.name])
-            if typing.get_origin(hints[f.name]) is Literal and getattr(self, f.name) not in choices:
-                raise ValueError(f"{f.name} must be one of {list(choices)}, got "
-                                 f"{getattr(self, f.name)!r}")
+            value, choices = getattr(self, f.name), get_args(hints[f.name])
+            if get_origin(hints[f.name]) is Literal and value not in choices:
+                raise ValueError(f"{f.name} must be one of {list(choices)}, got {value!r}")
         goals = self.level == "goals"
         if self.hold is None:
             self.hold = default_hold(self.level)
