@@ -264,13 +264,13 @@ class SectorPolicy(MultiInputActorCriticPolicy):
     def _build_mlp_extractor(self) -> None:
         pi, vf = self._widths
         self.mlp_extractor = SectorLatent(self.features_dim, self._sectors * self._row, pi, vf,
-                                           self._n_state)
+                                          self._n_state)
 
     def _build(self, lr_schedule) -> None:
         super()._build(lr_schedule)
         pi = self._widths[0]
         self.action_net = SectorScorer(pi, self._sectors, self._row, pi, self._mask_empty,
-                                        self._cost_prior)
+                                       self._cost_prior)
         if self.ortho_init:
             self.action_net.apply(functools.partial(self.init_weights, gain=np.sqrt(2)))
             self.init_weights(self.action_net.net[-1], gain=0.01)

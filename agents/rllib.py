@@ -249,7 +249,7 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
             sectors, row = frontiers.shape
             self.latent = SectorLatent(n, sectors * row, pi, vf)
             self.actor = SectorScorer(pi, sectors, row, pi, bool(cfg["mask_empty"]),
-                                       cfg["cost_prior"], name="model_config cost_prior")
+                                      cfg["cost_prior"], name="model_config cost_prior")
         else:
             self.latent = _Latent(n, pi, vf)
             if isinstance(act_space, spaces.Discrete):
