@@ -60,7 +60,7 @@ from agents.goals import default_hold, make_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import sb3_team
-from topo.fileio import atomic_write, atomic_write_json
+from topo.fileio import atomic_write, atomic_write_dir, atomic_write_json
 from topo.validation import check_real
 
 ENV_ID = "two_robot_explore_v0"
@@ -626,19 +626,6 @@ def _log_eval(writer: Any, report: dict[str, Any], steps: int) -> None:
         writer.add_scalar(f"eval/{key}", row[key], steps)
 
 
-def _copy_tree_atomic(src: Path, dst: Path) -> None:
-    """Copy the folder ``src`` to ``dst`` through a temporary folder beside it, replacing
-    ``dst``."""
-    tmp = dst.parent / f".tmp-{dst.name}-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    shutil.copytree(src, tmp)
-    old = dst.parent / f".old-{dst.name}-{os.getpid()}"
-    if dst.exists():
-        os.replace(dst, old)
-    os.replace(tmp, dst)
-    shutil.rmtree(old, ignore_errors=True)
-
-
 # ------------------------------------------------------------------------------- main
 def _resume_checkpoint(resume: Path, backend: str) -> tuple[Path, Path]:
     """The run folder and the checkpoint to resume from: ``resume`` itself when it is a
@@ -685,7 +672,9 @@ def main(args: Args) -> Path:
         keep_best(report, run_dir, lambda: save_model_atomic(policy, run_dir / best))
     else:
         final, best = "rllib", BEST_RLLIB
-        keep_best(report, run_dir, lambda: _copy_tree_atomic(run_dir / final, run_dir / best))
+        keep_best(report, run_dir, lambda: atomic_write_dir(
+            run_dir / best,
+            lambda tmp: shutil.copytree(run_dir / final, tmp, dirs_exist_ok=True)))
     print((run_dir / "eval.md").read_text())
     record = json.loads((run_dir / BEST_FILE).read_text())
     print(f"run folder: {run_dir}  (policy: {run_dir / final}; best evaluated: "

@@ -33,9 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -50,6 +47,7 @@ from agents.goals import LEVELS, default_hold, make_env
 from agents.motion import COMMANDS
 from agents.policy import SectorLatent, SectorScorer, TopoExplorerExtractor
 from agents.sb3_explorer import sample_action
+from topo.fileio import atomic_write_dir
 
 EXTRA_HINT = ("agents.rllib needs the 'rllib' extra (RLlib's dependencies: dm-tree, pyarrow, "
               "lz4, ...): pip install 'topomerge[rllib]'")
@@ -481,24 +479,14 @@ class IterationTimes:
 # ------------------------------------------------------------------------------- checkpoints
 def save_checkpoint(algo: Any, path: str | Path, level: str, hold: int) -> Path:
     """``algo.save_to_path`` into a temporary folder beside ``path``, add :data:`POLICY_FILE`,
-    then move it to ``path`` (replacing an older checkpoint there). Returns ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=path.parent))
-    try:
+    then move it to ``path`` (replacing an older checkpoint there;
+    :func:`topo.fileio.atomic_write_dir`). Returns ``path``."""
+
+    def write(tmp: Path) -> None:
         algo.save_to_path(str(tmp))
         (tmp / POLICY_FILE).write_text(json.dumps({"level": level, "hold": int(hold)}) + "\n")
-        old = None
-        if path.exists():
-            old = path.parent / f".old-{path.name}-{os.getpid()}"
-            os.replace(path, old)
-        os.replace(tmp, path)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return path
+
+    return atomic_write_dir(path, write)
 
 
 class RLlibPolicy:

@@ -1,12 +1,14 @@
 """File writing shared by every package: atomic writes (write to a temporary file in the target's
 folder, flush and fsync it, then rename it into place — a file exists whole or not at all), JSON
-written that way, and an exclusive lock file (one writer of a folder at a time)."""
+and whole folders written that way, and an exclusive lock file (one writer of a folder at a
+time)."""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import os
+import shutil
 import socket
 import tempfile
 import time
@@ -48,6 +50,30 @@ def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> 
     ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
     text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
     return atomic_write_bytes(path, text.encode())
+
+
+def atomic_write_dir(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """Create ``path``'s parent, call ``write(folder)`` on an empty temporary folder beside
+    ``path`` and move it to ``path``, replacing a folder there (moved aside first, then
+    removed); on any error the temporary folder is removed and ``path`` is left as it was.
+    Returns the path. (Two renames: a reader can find no folder for an instant, never half
+    of one.)"""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=TEMP_PREFIX, dir=path.parent))
+    try:
+        write(tmp)
+        old = None
+        if path.exists():
+            old = path.parent / f"{TEMP_PREFIX}old-{path.name}-{os.getpid()}"
+            os.replace(path, old)
+        os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return path
 
 
 class LockHeld(RuntimeError):

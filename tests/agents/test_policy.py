@@ -158,7 +158,7 @@ def test_cost_prior_starts_the_policy_as_a_soft_frontier():
 
     with pytest.raises(ValueError, match="model_config cost_prior must be >= 0"):
         SectorScorer(16, 8, len(FRONTIER_FEATURES), 32, cost_prior=-1.0,
-                      name="model_config cost_prior")
+                     name="model_config cost_prior")
     with pytest.raises(ValueError, match=r"cost_prior needs the 6 frontiers columns of "
                                          r"agents.goals.FRONTIER_FEATURES, got 3"):
         SectorScorer(16, 8, 3, 32, cost_prior=1.0)

@@ -1,0 +1,33 @@
+"""topo.fileio.atomic_write_dir: a folder appears whole, replaces the old one, or not at all."""
+
+import pytest
+
+from topo.fileio import TEMP_PREFIX, atomic_write_dir
+
+
+def test_a_folder_is_written_and_replaces_the_old_one(tmp_path):
+    target = tmp_path / "sub" / "ckpt"
+
+    def write(folder, text):
+        (folder / "a.txt").write_text(text)
+        (folder / "inner").mkdir()
+
+    assert atomic_write_dir(target, lambda f: write(f, "one")) == target
+    assert (target / "a.txt").read_text() == "one" and (target / "inner").is_dir()
+    atomic_write_dir(target, lambda f: write(f, "two"))
+    assert (target / "a.txt").read_text() == "two"
+    assert [p.name for p in target.parent.iterdir()] == ["ckpt"]  # no temporaries left
+
+
+def test_a_failed_write_leaves_the_old_folder_and_no_temporary(tmp_path):
+    target = tmp_path / "ckpt"
+    atomic_write_dir(target, lambda f: (f / "a.txt").write_text("old"))
+
+    def fail(folder):
+        (folder / "a.txt").write_text("half")
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError, match="disk full"):
+        atomic_write_dir(target, fail)
+    assert (target / "a.txt").read_text() == "old"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(TEMP_PREFIX)]
