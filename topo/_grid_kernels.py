@@ -81,8 +81,11 @@ def _first_known(iy, ix, ever, union, reachable, fresh):
 
 @njit(cache=True, nogil=True)
 def sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges, angles, max_range, beta,
-                 half, l_free, l_occ, clamp, threshold, ever, union, reachable, fresh):
+                 half, l_free, l_occ, clamp, threshold, usable, ever, union, reachable, fresh):
     """Apply the sonar-cone inverse model of one scan in place; returns cells changed.
+
+    A reading beyond ``usable`` (``inf`` for none) is taken as no echo within it: it frees the
+    cone up to ``usable`` and marks nothing.
 
     Each row of a cone's bounding box is visited only over :func:`_span`'s columns, widened
     by one cell each side (the cone test below, unchanged, still decides every cell: the span
@@ -113,9 +116,9 @@ def sonar_update(log_odds, states, ox, oy, res, x, y, theta, ranges, angles, max
         uy = math.sin(axis)
         e1x, e1y = ux * cos_beta + uy * sin_beta, uy * cos_beta - ux * sin_beta
         e2x, e2y = ux * cos_beta - uy * sin_beta, uy * cos_beta + ux * sin_beta
-        echo = r < max_range
-        reach_free = r - half if echo else max_range
-        reach = r + half if echo else max_range
+        echo = r < max_range and r <= usable
+        reach_free = r - half if echo else min(max_range, usable)
+        reach = r + half if echo else reach_free
         lo_x, hi_x, lo_y, hi_y = _bounds(x, x, y, y, x, y, reach, axis, beta)
         c0 = max(int(math.floor((lo_x - ox) / res)), 0)
         c1 = min(int(math.floor((hi_x - ox) / res)), w - 1)

@@ -11,8 +11,13 @@ width ``β``, range ``r``): every cell whose centre lies within the cone (bearin
 the axis) and closer than ``r − w/2`` gains ``l_free`` (more free); the arc ``|d − r| ≤ w/2``
 gains ``l_occupied`` (more occupied), with ``w`` = ``hit_width`` (one cell by default); cells
 beyond stay as they were. A reading ``r ≥ max_range`` is "no echo" and only frees, up to
-``max_range``. Log-odds are clamped to ``±clamp``; a cell is free below ``−threshold``, occupied
-above ``+threshold``, unknown between (:class:`CellState`, the one encoding table).
+``max_range``. With a ``usable_range`` (gmapping's ``maxUrange``), a reading beyond it counts
+as no echo within it: it frees the cone up to ``usable_range`` and marks nothing. Why: an echo
+lost to specular reflection makes a cone read long, through the wall it missed, and a far
+echo's arc is wide (15° at 4 m: 1 m) and sweeps across doorways; near readings, taken again
+as the robot moves, carry the map. Log-odds are clamped to ``±clamp``; a cell is free below
+``−threshold``, occupied above ``+threshold``, unknown between (:class:`CellState`, the one
+encoding table).
 
 Speed: one compiled loop (numba) visits, per sonar, only the cells of each row of its cone
 sector's bounding box that the sector's edges and arc can reach (plus one each side), and
@@ -70,6 +75,9 @@ class SensorModel:
     threshold: float = 0.35
     hit_width: float | None = None
     """Thickness of the occupied arc in metres; ``None`` = one cell."""
+    usable_range: float | None = None
+    """Readings beyond this (metres) only free the cone up to it (module docstring);
+    ``None`` uses every reading to its full range."""
 
     def __post_init__(self) -> None:
         check_real(self.l_free, "l_free", high=0.0, high_inclusive=False)
@@ -78,6 +86,13 @@ class SensorModel:
         check_real(self.threshold, "threshold", low=0.0, high=self.clamp, high_inclusive=False)
         if self.hit_width is not None:
             check_real(self.hit_width, "hit_width", low=0.0)
+        if self.usable_range is not None:
+            check_real(self.usable_range, "usable_range", low=0.0)
+
+    @property
+    def usable(self) -> float:
+        """:attr:`usable_range`, ``inf`` for ``None`` (the kernel's argument)."""
+        return math.inf if self.usable_range is None else float(self.usable_range)
 
 
 class OccupancyGrid:
@@ -181,7 +196,7 @@ class OccupancyGrid:
         sonar_update(self.log_odds, self._states, self.origin[0], self.origin[1],
                      self.resolution, pose[0], pose[1], pose[2], ranges, angles, max_range,
                      beta, (m.hit_width or self.resolution) / 2.0, m.l_free, m.l_occupied,
-                     m.clamp, m.threshold, ever, NO_MASK, NO_MASK, fresh)
+                     m.clamp, m.threshold, m.usable, ever, NO_MASK, NO_MASK, fresh)
 
     def freeze(self) -> None:
         """Make :attr:`log_odds` and the states read-only (a snapshot that must not change);
@@ -327,7 +342,7 @@ def sweep_scan(ever: np.ndarray, origin: tuple[float, float], resolution: float,
     sonar_update(_NO_LOG_ODDS, _NO_STATES, origin[0], origin[1], resolution, pose[0], pose[1],
                  pose[2], ranges, sensor_angles, max_range, cone_half_width,
                  (model.hit_width or resolution) / 2.0, model.l_free, model.l_occupied,
-                 model.clamp, model.threshold, ever, union, reachable, fresh)
+                 model.clamp, model.threshold, model.usable, ever, union, reachable, fresh)
     return fresh
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from topo.grid import SensorModel
 from topo.validation import check_int, check_real, config_from
 
 REWARD_MODES = ("shared", "oracle", "individual")
@@ -252,6 +253,11 @@ class MappingConfig:
 
     Attributes:
         grid_resolution: cell size of each robot's occupancy grid, metres.
+        usable_range: sonar readings longer than this (metres, from the robot's centre) only
+            free the cone up to it and mark no wall (``topo.SensorModel.usable_range``;
+            ``None`` uses every reading in full). Far readings are where a lost echo reads
+            through a wall and a wide arc closes a doorway; 2.5 m made two robots' maps of the
+            same rooms agree 11 points more often (``benchmarks/fusion.md``).
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
         topo: settings of the extraction (``topo.ExtractConfig``, or a dict of its fields;
             ``None`` for its defaults).
@@ -277,6 +283,7 @@ class MappingConfig:
     """
 
     grid_resolution: float = 0.1
+    usable_range: float | None = 2.5
     topo_every: int = 25
     topo_growth: float = 0.02
     topo: Any = None
@@ -293,6 +300,9 @@ class MappingConfig:
         _set(self, "grid_resolution", check_real(self.grid_resolution,
                                                  "mapping.grid_resolution", low=0.02,
                                                  low_inclusive=True, high=0.5))
+        if self.usable_range is not None:
+            _set(self, "usable_range", check_real(self.usable_range, "mapping.usable_range",
+                                                  low=0.0))
         _set(self, "topo_every", check_int(self.topo_every, "mapping.topo_every", low=0))
         _set(self, "topo", _extract_config(self.topo))
         _set(self, "merge_every", check_int(self.merge_every, "mapping.merge_every", low=0))
@@ -322,6 +332,11 @@ class MappingConfig:
         _set(self, "max_nodes", check_int(self.max_nodes, "mapping.max_nodes", low=1))
         if self.max_nodes > 256:
             raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
+
+    @property
+    def sensor_model(self) -> SensorModel:
+        """The robots' inverse sensor model: ``topo.SensorModel`` with :attr:`usable_range`."""
+        return SensorModel(usable_range=self.usable_range)
 
 
 @dataclass(frozen=True, slots=True)

@@ -73,7 +73,11 @@ rooms (3–6 m), corridors, doors and loops, with furniture; a new building ever
 file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` m/pixel) or
 HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
 of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
-``mapping.grid_resolution``) covers a square of half-side ``R`` around its start; its
+``mapping.grid_resolution``) covers a square of half-side ``R`` around its start and folds
+each scan in with a sonar-cone inverse model (free up to the echo, a wall along its arc); a
+reading longer than ``mapping.usable_range`` (2.5 m) only frees the cone up to that range and
+draws no wall, since far readings are where a lost echo reads through a wall and a 15° arc
+(1 m wide at 4 m) closes a doorway. The true coverage (Infos, note d) uses the same model. Its
 topological map (``topo.extract_topomap``, settings ``mapping.topo``) is re-extracted from the
 grid every ``mapping.topo_every`` steps once the map has grown by ``mapping.topo_growth`` (2 %)
 since the last extraction (and the structural merge of two unchanged maps is skipped):
@@ -270,6 +274,7 @@ are a ``ValueError``.
 | ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout |
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
+| ``mapping.usable_range`` | float or None | 2.5 | m; longer readings only free (see Maps) |
 | ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
 | ``mapping.topo_growth`` | float | 0.02 | map growth before a re-extraction (see Maps) |
 | ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
@@ -298,7 +303,9 @@ robots; other keys are ignored with a warning.
   infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact copies by replay,
   the sonar cast by the env's own ray caster with the same readings; the topological maps
   re-extracted (places, gateways, dead ends, clearance and frontier flags), so
-  ``graph_nodes`` has 9 features and merges, hence rewards, differ.)
+  ``graph_nodes`` has 9 features and merges, hence rewards, differ; sonar readings beyond
+  ``mapping.usable_range`` no longer draw walls or free space past it, so maps, coverage and
+  rewards differ.)
 """
 
 from __future__ import annotations
@@ -626,9 +633,10 @@ class TwoRobotExploreEnv(ParallelEnv):
             reach = float(np.max(np.hypot(*(corners - s[:2]).T)))
             radius = min(reach + cfg.sonar.max_range + 1.0, self.frame_radius)
             self.maps.append(RobotMap((-radius, -radius, radius, radius),
-                                      cfg.mapping.grid_resolution))
+                                      cfg.mapping.grid_resolution, cfg.mapping.sensor_model))
         self.shared = SharedMap(self.maps[0].geometry)
-        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable)
+        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable,
+                                     cfg.mapping.sensor_model)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self._merging = MergeLoop(cfg.mapping)
         self._extracted_at = [0, 0]  # known cells of each map at its last extraction

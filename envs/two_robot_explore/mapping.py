@@ -37,7 +37,7 @@ from envs.two_robot_explore._map_kernels import (
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
-from topo.grid import IMAGE_VALUES, OccupancyGrid, sweep_scan
+from topo.grid import IMAGE_VALUES, OccupancyGrid, SensorModel, sweep_scan
 
 LOCAL_MAP_VALUES = IMAGE_VALUES
 """``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
@@ -120,6 +120,7 @@ class RobotMap:
     Args:
         extent: ``(xmin, ymin, xmax, ymax)`` of the grid, metres.
         resolution: metres per cell.
+        model: the grid's inverse sensor model (``None``: ``topo.SensorModel()``).
 
     Attributes:
         grid: the ``topo.OccupancyGrid``.
@@ -133,8 +134,9 @@ class RobotMap:
 
     __slots__ = ("grid", "geometry", "states", "ever", "n_ever", "bbox", "topomap")
 
-    def __init__(self, extent: tuple[float, float, float, float], resolution: float) -> None:
-        self.grid = OccupancyGrid(resolution=resolution, extent=extent)
+    def __init__(self, extent: tuple[float, float, float, float], resolution: float,
+                 model: SensorModel | None = None) -> None:
+        self.grid = OccupancyGrid(resolution=resolution, extent=extent, model=model)
         self.geometry = geometry_of(self.grid)
         self.states = self.grid.states()
         self.ever = np.zeros(self.geometry.shape, dtype=bool)
@@ -298,7 +300,7 @@ class OracleCoverage:
     makes a cell known with a single update, so this is exactly the "ever known" mask of a
     world-frame grid folding the same scans, without keeping the grid. A dropped echo makes a
     robot believe it sees through a wall; the sweep stops at the wall. Odometry errors do not
-    enter either.
+    enter either. ``model`` is the robots' sensor model (``None``: ``topo.SensorModel()``).
 
     Attributes:
         swept: per robot, ``(H, W)`` bool world cells it has swept; ``n_swept``: their counts.
@@ -311,8 +313,9 @@ class OracleCoverage:
                  "covered", "count", "_model")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float,
-                 reachable: np.ndarray) -> None:
-        grid = OccupancyGrid(resolution=resolution, extent=extent)  # the robots' geometry, model
+                 reachable: np.ndarray, model: SensorModel | None = None) -> None:
+        # the robots' cell size and sensor model
+        grid = OccupancyGrid(resolution=resolution, extent=extent, model=model)
         self.geometry = geometry_of(grid)
         if self.geometry.shape != reachable.shape:
             raise ValueError(f"reachable must have the grid's shape {self.geometry.shape}, got "

@@ -1,6 +1,6 @@
 """The env's output, pinned: running seeds 0 and 4 under a fixed action sequence must give the
 recorded digests of every observation, reward, termination, truncation, info and both robots'
-topological maps. Seed 0 accepts no merge in these steps; seed 4 merges at step 1099 (the grid
+topological maps. Seed 0 accepts no merge in these steps; seed 6 merges at step 2000 (the grid
 alignment supplies it), so the code that runs on fused maps is covered too.
 
 A change that moves any of these numbers fails here. If the change is meant (new dynamics,
@@ -19,10 +19,10 @@ import pytest
 
 from envs import two_robot_explore_v0
 
-STEPS = 1200
+STEPS = 2100
 EXPECTED = {
-    0: ("792cfed240603f8b", "8c0221db67a59a53"),
-    4: ("798351966db11c3c", "6a8310c3d65f5590"),
+    0: ("681b3d1efe544db0", "b5f8cc5b197bc664"),
+    6: ("1568daccb336b077", "d122d103f361fb18"),
 }
 """``seed: (observation digest, infos digest)`` after :data:`STEPS` steps."""
 
@@ -45,7 +45,7 @@ def fingerprint(seed: int, steps: int = STEPS) -> tuple[str, str]:
     steps from ``default_rng(seed)``): of the observations, rewards, terminations, truncations
     and topological maps, and of the infos (their scalars and arrays, floats to 10 significant
     digits) apart, so that a change of the infos alone shows in the second only."""
-    par = two_robot_explore_v0.parallel_env(max_cycles=2000)
+    par = two_robot_explore_v0.parallel_env(max_cycles=3000)
     par.reset(seed=seed)
     rng = np.random.default_rng(seed)
     h, hi = hashlib.sha256(), hashlib.sha256()

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from motion import Motion
 
-from topo.grid import CellState, OccupancyGrid
+from topo.grid import CellState, OccupancyGrid, SensorModel
 
 BETA = math.radians(7.5)
 
@@ -38,6 +38,31 @@ def test_max_range_beam_only_frees():
     cy, cx = g.world_to_cell([0.02, 0.03])[0]
     col = g.states()[cy:, cx]
     assert (col[5:48] == CellState.FREE).all() and (col[52:] == CellState.UNKNOWN).all()
+
+
+def test_readings_beyond_the_usable_range_only_free_up_to_it():
+    """An echo at 3 m with a 2 m usable range: free to 2 m, no wall, unknown beyond; an echo
+    within the usable range is drawn as without one."""
+    g = OccupancyGrid(0.1, (-5, -5, 5, 5), SensorModel(usable_range=2.0))
+    row = beam_row(g, r=3.0)
+    d = (np.arange(len(row)) + 0.5) * 0.1
+    assert not g.occupied_mask().any()
+    assert (row[(d > 0.3) & (d < 1.9)] == CellState.FREE).all()
+    assert (row[d > 2.1] == CellState.UNKNOWN).all()
+    near = OccupancyGrid(0.1, (-5, -5, 5, 5), SensorModel(usable_range=2.0))
+    full = OccupancyGrid(0.1, (-5, -5, 5, 5))
+    np.testing.assert_array_equal(beam_row(near, r=1.5), beam_row(full, r=1.5))
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"l_free": 0.4}, ValueError, "l_free must be < 0.0, got 0.4"),
+    ({"threshold": 4.0}, ValueError, "threshold must be < 4.0, got 4.0"),
+    ({"usable_range": 0}, ValueError, "usable_range must be > 0.0, got 0.0"),
+    ({"usable_range": "far"}, TypeError, "usable_range must be a real number, got str"),
+])
+def test_bad_sensor_models_name_the_field(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        SensorModel(**kwargs)
 
 
 def test_repeated_evidence_saturates_and_flips():
@@ -187,11 +212,12 @@ def reference_update(g: OccupancyGrid, pose, ranges, angles, max_range, beta) ->
     ys = g.origin[1] + (np.arange(h) + 0.5) * g.resolution
     dx, dy = xs[None, :] - pose[0], ys[:, None] - pose[1]
     dist = np.sqrt(dx * dx + dy * dy)
+    usable = m.usable_range or math.inf
     for r, a in zip(ranges, angles, strict=True):
         ax = pose[2] + a
         inside = np.cos(ax) * dx + np.sin(ax) * dy >= np.cos(beta) * dist
-        echo = r < max_range
-        free = inside & (dist < (r - half if echo else max_range))
+        echo = r < max_range and r <= usable
+        free = inside & (dist < (r - half if echo else min(max_range, usable)))
         hit = inside & ~free & echo & (np.abs(dist - r) <= half)
         delta = np.where(free, m.l_free, np.where(hit, m.l_occupied, 0.0))
         touched = free | hit
@@ -203,14 +229,15 @@ def reference_update(g: OccupancyGrid, pose, ranges, angles, max_range, beta) ->
 @given(st.floats(-2.5, 2.5), st.floats(-2.5, 2.5), st.floats(-4.0, 4.0),
        st.lists(st.tuples(st.floats(0.0, 6.0), st.floats(-np.pi, np.pi)), min_size=1,
                 max_size=8),
-       st.floats(0.01, np.pi / 2))
-def test_compiled_update_matches_the_slow_reference(x, y, theta, beams, beta):
-    """Same model whatever the pose, ranges (including no-echo ones), cone width (up to the
-    90° the model allows: the compiled loop skips the cells outside the cone's edges), and
-    cells off the grid (the grid is smaller than the sonar's reach)."""
+       st.floats(0.01, np.pi / 2), st.one_of(st.none(), st.floats(0.1, 6.0)))
+def test_compiled_update_matches_the_slow_reference(x, y, theta, beams, beta, usable):
+    """Same model whatever the pose, ranges (including no-echo ones and ones beyond the usable
+    range), cone width (up to the 90° the model allows: the compiled loop skips the cells
+    outside the cone's edges), and cells off the grid (the grid is smaller than the sonar's
+    reach)."""
     ranges = [r for r, _ in beams]
     angles = [a for _, a in beams]
-    fast = OccupancyGrid(0.1, (-3.0, -2.0, 3.0, 2.5))
+    fast = OccupancyGrid(0.1, (-3.0, -2.0, 3.0, 2.5), SensorModel(usable_range=usable))
     slow = fast.copy()
     for _ in range(2):  # twice: the second scan starts from non-zero log-odds
         fast.update((x, y, theta), ranges, angles, 5.0, beta)
