@@ -29,8 +29,8 @@ more evidence — every wall cell — so this method aligns them directly:
    from a logistic model fitted on tuning map pairs (:mod:`fusion.calibration`, model
    ``"grid"``, refitted by ``benchmarks/calibrate_merge.py``). It is **accepted** when the
    confidence reaches ``accept_threshold`` and enough area overlaps (``min_overlap_m2``, a
-   hard gate): symmetric buildings, whose rivals score as well, get a low confidence and are
-   rejected rather than merged wrongly.
+   hard gate): symmetric buildings, whose rivals score as well, get a low confidence (at most
+   1/2 for a tie, :data:`TIE_MARGIN`) and are rejected rather than merged wrongly.
 
 :func:`fusion.hybrid.hybrid_merge` puts the structural merge first and this alignment second
 (what the environment runs); :func:`fusion.hybrid.recheck` re-runs both for maps already
@@ -176,6 +176,11 @@ FEATURES = ("log_score", "log_margin", "log_overlap", "wall_agreement", "conflic
 """Names of :meth:`GridMergeResult.features`, the inputs of the ``"grid"`` calibration."""
 MAX_MARGIN = 20.0
 """Margins are capped here before their log is taken (no rival at all is ``inf``)."""
+TIE_MARGIN = 1.05
+"""A clearly different alignment scoring within this factor of the best ties with it: at
+most one of the two is right, so the confidence is at most 1/2 whatever the model says (a
+perfectly symmetric room lies beyond the tuning data; there such ties were right 3 % of the
+time, 2026-12-05)."""
 
 
 def grid_features(score: float, margin: float, overlap_m2: float, agreement: float,
@@ -496,6 +501,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                              ev.free_conflict, ev.wall_hits, rival_agreement,
                              native_agreement, native_conflict)
     confidence = grid_calibrator()(features)
+    if margin < TIE_MARGIN:
+        confidence = min(confidence, 0.5)
     reasons = []
     if ev.overlap_m2 < cfg.min_overlap_m2:
         reasons.append(f"overlap {ev.overlap_m2:.1f} m² < min_overlap_m2={cfg.min_overlap_m2}")
