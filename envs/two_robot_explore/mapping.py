@@ -296,9 +296,10 @@ class OracleCoverage:
 
     Each robot's scans are swept, from its **true** pose and with its **true** ranges (nearest
     real echo per cone, no noise, no dropout), into a world-frame mask: the cells the robots'
-    inverse sensor model would update (free up to the echo, the band at the echo). That model
-    makes a cell known with a single update, so this is exactly the "ever known" mask of a
-    world-frame grid folding the same scans, without keeping the grid. A dropped echo makes a
+    inverse sensor model would update (free up to the echo or the usable range, the band at an
+    echo within it). That model makes a cell known with a single update, so this is exactly
+    the "ever known" mask of a world-frame grid folding the same scans, without keeping the
+    grid. A dropped echo makes a
     robot believe it sees through a wall; the sweep stops at the wall. Odometry errors do not
     enter either. ``model`` is the robots' sensor model (``None``: ``topo.SensorModel()``).
 
