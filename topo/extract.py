@@ -8,8 +8,9 @@ depends on the unknown is flagged:
 1. **Working grid** — the map is cropped to its known cells and pooled to ``resolution``
    (a cell is occupied if any fine cell is, free if at least half are).
 2. **Free space** — known free, holes smaller than ``min_hole_area`` filled (sonar speckle),
-   opened by a disc of ``open_radius`` within ``open_near_unknown`` of the unknown (the thin
-   wedges a sonar cone leaves beyond a wall it missed), components smaller than
+   optionally opened by a disc of ``open_radius`` within ``open_near_unknown`` of the unknown
+   (the thin wedges a sonar cone leaves beyond a wall it missed; off by default: the env's
+   usable sonar range leaves few, and opening cost repeatability), components smaller than
    ``min_component_area`` dropped (``skimage.morphology``, ``scipy.ndimage``).
 3. **Clearance** — the distance from each free cell to the nearest *occupied* cell
    (``scipy.ndimage.distance_transform_edt``), smoothed by a Gaussian of ``smoothing``. The
@@ -89,7 +90,7 @@ class ExtractConfig:
             extraction of a robot's map a few milliseconds.
         min_hole_area: holes in free space smaller than this are filled.
         open_radius: free space within ``open_near_unknown`` of the unknown is opened by a disc
-            of this radius (about the robot's); 0 turns the opening off.
+            of this radius (about the robot's); 0 (the default) turns the opening off.
         open_near_unknown: see ``open_radius`` (a square of this half-side).
         min_component_area: free components smaller than this are dropped.
         smoothing: standard deviation of the Gaussian applied to the clearance; 0 = none.
@@ -111,10 +112,10 @@ class ExtractConfig:
 
     resolution: float = 0.2
     min_hole_area: float = 0.5
-    open_radius: float = 0.25
+    open_radius: float = 0.0
     open_near_unknown: float = 0.6
     min_component_area: float = 1.0
-    smoothing: float = 0.3
+    smoothing: float = 0.25
     persistence: float = 0.3
     summit_tolerance: float = 0.05
     min_clearance: float = 0.5
