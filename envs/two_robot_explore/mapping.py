@@ -299,9 +299,9 @@ class OracleCoverage:
     inverse sensor model would update (free up to the echo or the usable range, the band at an
     echo within it). That model makes a cell known with a single update, so this is exactly
     the "ever known" mask of a world-frame grid folding the same scans, without keeping the
-    grid. A dropped echo makes a
-    robot believe it sees through a wall; the sweep stops at the wall. Odometry errors do not
-    enter either. ``model`` is the robots' sensor model (``None``: ``topo.SensorModel()``).
+    grid. A dropped echo makes a robot believe it sees through a wall; the sweep stops at the
+    wall. Odometry errors do not enter either. ``model`` is the robots' sensor model (``None``:
+    ``topo.SensorModel()``).
 
     Attributes:
         swept: per robot, ``(H, W)`` bool world cells it has swept; ``n_swept``: their counts.
