@@ -61,15 +61,17 @@ def atomic_write_dir(path: str | Path, write: Callable[[Path], object]) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=TEMP_PREFIX, dir=path.parent))
+    old = None
     try:
         write(tmp)
-        old = None
         if path.exists():
             old = path.parent / f"{TEMP_PREFIX}old-{path.name}-{os.getpid()}"
             os.replace(path, old)
         os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and not path.exists():
+            os.replace(old, path)  # moved aside, not replaced: put it back
         raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)

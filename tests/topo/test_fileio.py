@@ -1,7 +1,10 @@
 """topo.fileio.atomic_write_dir: a folder appears whole, replaces the old one, or not at all."""
 
+import os
+
 import pytest
 
+from topo import fileio
 from topo.fileio import TEMP_PREFIX, atomic_write_dir
 
 
@@ -31,3 +34,22 @@ def test_a_failed_write_leaves_the_old_folder_and_no_temporary(tmp_path):
         atomic_write_dir(target, fail)
     assert (target / "a.txt").read_text() == "old"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(TEMP_PREFIX)]
+
+
+def test_a_failed_move_into_place_puts_the_old_folder_back(tmp_path, monkeypatch):
+    """The old folder is moved aside before the new one moves in; if that second rename fails
+    the old one returns to its place."""
+    target = tmp_path / "ckpt"
+    atomic_write_dir(target, lambda f: (f / "a.txt").write_text("old"))
+    real = os.replace
+
+    def replace(src, dst):
+        if str(src).startswith(str(tmp_path / TEMP_PREFIX)) and "old-" not in str(src):
+            raise OSError("rename failed")
+        return real(src, dst)
+
+    monkeypatch.setattr(fileio.os, "replace", replace)
+    with pytest.raises(OSError, match="rename failed"):
+        atomic_write_dir(target, lambda f: (f / "a.txt").write_text("new"))
+    assert (target / "a.txt").read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["ckpt"]
