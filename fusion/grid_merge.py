@@ -178,9 +178,9 @@ MAX_MARGIN = 20.0
 """Margins are capped here before their log is taken (no rival at all is ``inf``)."""
 TIE_MARGIN = 1.05
 """A clearly different alignment scoring within this factor of the best ties with it: at
-most one of the two is right, so the confidence is at most 1/2 whatever the model says (a
-perfectly symmetric room lies beyond the tuning data; there such ties were right 3 % of the
-time, 2026-12-05)."""
+most one of the two is right, so the confidence is at most 1/2 whatever the model says
+(the fitted model can read more into a perfect tie, e.g. a symmetric room, than its tuning
+data held; ``benchmarks/fusion.md``)."""
 
 
 def grid_features(score: float, margin: float, overlap_m2: float, agreement: float,

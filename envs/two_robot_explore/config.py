@@ -256,9 +256,8 @@ class MappingConfig:
         usable_range: sonar readings longer than this (metres, from the robot's centre) only
             free the cone up to it and mark no wall (``topo.SensorModel.usable_range``;
             ``None`` uses every reading in full). Far readings are where a lost echo reads
-            through a wall and a wide arc closes a doorway; 2.5 m made two robots' nodes of
-            the same rooms coincide within 0.5 m 11 points more often on the tuning pairs
-            (``benchmarks/fusion.md``).
+            through a wall and a wide arc closes a doorway (the choice of 2.5 m:
+            ``benchmarks/fusion.md``).
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
         topo: settings of the extraction (``topo.ExtractConfig``, or a dict of its fields;
             ``None`` for its defaults).

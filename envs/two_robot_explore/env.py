@@ -629,14 +629,14 @@ class TwoRobotExploreEnv(ParallelEnv):
         x0, y0, x1, y1 = world.extent
         corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
         self.maps = []
+        model = cfg.mapping.sensor_model
         for s in starts:
             reach = float(np.max(np.hypot(*(corners - s[:2]).T)))
             radius = min(reach + cfg.sonar.max_range + 1.0, self.frame_radius)
             self.maps.append(RobotMap((-radius, -radius, radius, radius),
-                                      cfg.mapping.grid_resolution, cfg.mapping.sensor_model))
+                                      cfg.mapping.grid_resolution, model))
         self.shared = SharedMap(self.maps[0].geometry)
-        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable,
-                                     cfg.mapping.sensor_model)
+        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self._merging = MergeLoop(cfg.mapping)
         self._extracted_at = [0, 0]  # known cells of each map at its last extraction
