@@ -235,16 +235,35 @@ def _centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
     return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
 
 
-class _Evidence(NamedTuple):
+class GridAgreement(NamedTuple):
+    """How B's cells moved by a transform land on A's (:func:`grid_agreement`), at
+    :attr:`GridMergeConfig.resolution`.
+
+    Attributes:
+        overlap_m2: area of B's free space landing on A's known cells.
+        wall_agreement: fraction of B's wall cells landing on A's known cells that meet an A
+            wall (within one cell).
+        conflict: fraction of them landing in A's free space, away from A's walls.
+        free_conflict: fraction of B's free cells landing on A's known cells that land on an
+            A wall.
+        wall_hits: how many of B's wall cells land on A's known cells.
+    """
+
     overlap_m2: float
     wall_agreement: float
     conflict: float
     free_conflict: float
     wall_hits: int
 
+    @property
+    def support(self) -> float:
+        """B's wall cells on A's walls minus those in A's free space: the net count of walls
+        that support the transform, comparable between two transforms of the same grids."""
+        return self.wall_hits * (self.wall_agreement - self.conflict)
+
 
 def _consistency(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall, pts_free,
-                 n_free_b) -> _Evidence:
+                 n_free_b) -> GridAgreement:
     """How B's wall and free cells moved by ``transform`` land on A's pooled layers."""
     h, w = wall_a.shape
 
@@ -263,7 +282,7 @@ def _consistency(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall
     free_conflict = float(wall_a[ifm[:, 1], ifm[:, 0]].mean()) if len(ifm) else 0.0
     step_free = max(1, int(math.ceil(n_free_b / max(len(pts_free), 1))))
     overlap = float(len(ifm)) * step_free * res * res
-    return _Evidence(overlap, agree, conflict, free_conflict, len(hits))
+    return GridAgreement(overlap, agree, conflict, free_conflict, len(hits))
 
 
 def _consistency_reasons(overlap: float, agree: float, conflict: float,
@@ -279,22 +298,41 @@ def _consistency_reasons(overlap: float, agree: float, conflict: float,
     return reasons
 
 
-def check_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
-                     config: GridMergeConfig | None = None) -> str | None:
-    """``None`` if the grids agree with ``transform`` (enough overlap, B's walls on A's walls,
-    few on A's free space), else why not — the check :func:`hybrid_merge` puts on a structural
-    merge before trusting it."""
+def grid_agreement(grid_a: Any, grid_b: Any, transform: Rigid2D,
+                   config: GridMergeConfig | None = None) -> GridAgreement | None:
+    """How grid B's wall and free cells moved by ``transform`` (B → A) land on grid A's, both
+    pooled to ``config.resolution`` (:class:`GridAgreement`); ``None`` if a grid has no known
+    cells. The evidence :func:`check_with_grids` judges, and what
+    :func:`fusion.hybrid.hybrid_merge` compares between a new transform and the one in use.
+
+    Raises:
+        TypeError: ``transform`` is not a :class:`fusion.Rigid2D`.
+    """
+    if not isinstance(transform, Rigid2D):
+        raise TypeError(f"transform must be a fusion.Rigid2D, got {type(transform).__name__}")
     cfg = config or GridMergeConfig()
     pa, pb = _pooled(grid_a, cfg.resolution), _pooled(grid_b, cfg.resolution)
     if pa is None or pb is None:
-        return "a grid has no known cells"
+        return None
     wall_a, free_a, origin_a = pa
     wall_b, free_b, origin_b = pb
     near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
-    numbers = _consistency(wall_a, free_a, near_wall_a, origin_a, cfg.resolution, transform,
-                           _centres(wall_b, origin_b, cfg.resolution),
-                           _centres(free_b, origin_b, cfg.resolution), int(free_b.sum()))
-    return "; ".join(_consistency_reasons(*numbers[:3], cfg)) or None
+    return _consistency(wall_a, free_a, near_wall_a, origin_a, cfg.resolution, transform,
+                        _centres(wall_b, origin_b, cfg.resolution),
+                        _centres(free_b, origin_b, cfg.resolution), int(free_b.sum()))
+
+
+def check_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
+                     config: GridMergeConfig | None = None) -> str | None:
+    """``None`` if the grids agree with ``transform`` (enough overlap, B's walls on A's walls,
+    few on A's free space: :func:`grid_agreement` against ``min_overlap_m2``,
+    ``min_wall_agreement``, ``max_conflict``), else why not — the check :func:`hybrid_merge`
+    puts on a structural merge before trusting it."""
+    cfg = config or GridMergeConfig()
+    agreement = grid_agreement(grid_a, grid_b, transform, cfg)
+    if agreement is None:
+        return "a grid has no known cells"
+    return "; ".join(_consistency_reasons(*agreement[:3], cfg)) or None
 
 
 def refine_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
@@ -491,7 +529,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
 
     ev = _consistency(wall_a, free_a, near_wall_a, origin_a, res, estimate, pts_wall, pts_free,
                       int(free_b.sum()))
-    rv = _Evidence(0.0, 0.0, 1.0, 1.0, 0)
+    rv = GridAgreement(0.0, 0.0, 1.0, 1.0, 0)
     if rival_t is not None:
         rv = _consistency(wall_a, free_a, near_wall_a, origin_a, res, rival_t, pts_wall,
                           pts_free, int(free_b.sum()))
@@ -645,5 +683,5 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
     return estimate, near, deep
 
 
-__all__ = ["FEATURES", "GridMergeConfig", "GridMergeResult", "check_with_grids", "distinct",
-           "grid_features", "merge_grids", "refine_with_grids"]
+__all__ = ["FEATURES", "GridAgreement", "GridMergeConfig", "GridMergeResult", "check_with_grids",
+           "distinct", "grid_agreement", "grid_features", "merge_grids", "refine_with_grids"]

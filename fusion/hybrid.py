@@ -8,7 +8,9 @@ searches when it finds nothing. Every result carries ``confidence``, the probabi
 transform is right (< 2°, < 0.3 m); one threshold, ``accept_threshold``
 (:class:`fusion.grid_merge.GridMergeConfig`), decides for both, with the hard gates (the grid
 alignment's ``min_overlap_m2``; for a structural merge, its matches and the grids' check), so a
-rejected result may still report a confidence above the threshold.
+rejected result may still report a confidence above the threshold. Given the transform in
+use, a result clearly different from it replaces it only if the grids support it at least as
+well (``in_use``).
 """
 
 from __future__ import annotations
@@ -49,8 +51,8 @@ class HybridResult(MergeResult):
 
 
 def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
-                 try_grids: bool = True, config: gm.GridMergeConfig | None = None
-                 ) -> HybridResult:
+                 try_grids: bool = True, config: gm.GridMergeConfig | None = None,
+                 in_use: Rigid2D | None = None) -> HybridResult:
     """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``, at
     ``config.accept_threshold``): kept if it is accepted and the grids agree with it
     (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate), then refined on the grids'
@@ -60,8 +62,19 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     topological maps at nodes within :data:`HYBRID_EPS`. A rejection keeps the grids' best
     alignment (no matches, ``merged`` = ``map_a``; ``evidence`` stays the structural merge's),
     or without grids the structural one, with the reasons; ``score`` is the log-odds of
-    ``confidence`` for a grid alignment, the structural score otherwise."""
-    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config)
+    ``confidence`` for a grid alignment, the structural score otherwise.
+
+    With ``in_use``, the transform the caller uses now, an accepted result clearly different
+    from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
+    support ``in_use`` better (:attr:`fusion.grid_merge.GridAgreement.support` more than
+    :data:`fusion.grid_merge.TIE_MARGIN` times the new one's): a confident merge of a
+    look-alike part of the building must not replace an alignment of the whole maps.
+
+    Raises:
+        TypeError: ``in_use`` is neither ``None`` nor a :class:`fusion.Rigid2D`.
+    """
+    _check_in_use(in_use, allow_none=True)
+    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config, in_use)
 
 
 def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
@@ -72,27 +85,48 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
     at B's wall centroid) — the evidence no longer supports it though nothing is confident
     enough to replace it — ``(result, why)``, ``why`` also appended to the result's reason.
 
-    An accepted result (the same alignment refined, or a distinct one) is for the caller to
-    use instead. This is how a merge accepted early on small, self-similar maps (a building's
-    180°-turned or shifted copy of a room row) gets undone once the maps have grown.
+    An accepted result (the same alignment refined, or a distinct one the grids support at
+    least as well: :func:`hybrid_merge`'s ``in_use``) is for the caller to use instead; the
+    grids' best alignment refutes ``in_use`` only if they do not support ``in_use`` better.
+    This is how a merge accepted early on small, self-similar maps (a building's 180°-turned
+    or shifted copy of a room row) gets undone once the maps have grown.
 
     Raises:
         TypeError: ``in_use`` is not a :class:`fusion.Rigid2D`.
     """
-    if not isinstance(in_use, Rigid2D):
-        raise TypeError(f"in_use must be a fusion.Rigid2D (the transform in use), got "
-                        f"{type(in_use).__name__}")
+    _check_in_use(in_use, allow_none=False)
     cfg = config or gm.GridMergeConfig()
-    result = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg)
+    result = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg, in_use)
     grid = result.grid
     if result.accepted or grid is None or grid.centre is None:
         return result, None
-    if not gm.distinct(grid.transform, in_use, grid.centre, cfg):
+    if (not gm.distinct(grid.transform, in_use, grid.centre, cfg)
+            or _keeps(grid_a, grid_b, grid.transform, in_use, cfg) is not None):
         return result, None
     why = (f"the grids refute the transform in use: their best alignment is "
            f"{math.degrees(grid.transform.rotation_error(in_use)):.0f}° / "
            f"{grid.transform.translation_error(in_use, at=grid.centre):.1f} m from it")
     return dataclasses.replace(result, reason=f"{result.reason}; {why}"), why
+
+
+def _check_in_use(in_use: Any, allow_none: bool) -> None:
+    if in_use is None and allow_none:
+        return
+    if not isinstance(in_use, Rigid2D):
+        raise TypeError(f"in_use must be a fusion.Rigid2D (the transform in use)"
+                        f"{' or None' if allow_none else ''}, got {type(in_use).__name__}")
+
+
+def _keeps(grid_a: Any, grid_b: Any, new: Rigid2D, in_use: Rigid2D,
+           cfg: gm.GridMergeConfig) -> str | None:
+    """Why ``in_use`` stays rather than ``new`` replacing it (the grids support it clearly
+    better), ``None`` if ``new`` may replace it."""
+    now = gm.grid_agreement(grid_a, grid_b, in_use, cfg)
+    then = gm.grid_agreement(grid_a, grid_b, new, cfg)
+    if now is None or then is None or now.support <= gm.TIE_MARGIN * then.support:
+        return None
+    return (f"the grids support the transform in use better ({now.support:.0f} net wall cells "
+            f"against {then.support:.0f})")
 
 
 def _log_odds(p: float) -> float:
@@ -101,9 +135,18 @@ def _log_odds(p: float) -> float:
 
 
 def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
-            config: gm.GridMergeConfig | None) -> HybridResult:
+            config: gm.GridMergeConfig | None, in_use: Rigid2D | None = None) -> HybridResult:
     t0 = time.perf_counter()
     cfg = config or gm.GridMergeConfig()
+
+    def kept(transform: Rigid2D) -> str | None:  # why in_use stays instead of transform
+        if in_use is None:
+            return None
+        centre = map_b.xy.mean(axis=0) if map_b.n_nodes else np.zeros(2)
+        if not gm.distinct(transform, in_use, centre, cfg):
+            return None
+        return _keeps(grid_a, grid_b, transform, in_use, cfg)
+
     topo = merge_maps(map_a, map_b, method="auto",
                       config={"accept_threshold": cfg.accept_threshold})
     fields = {f.name: getattr(topo, f.name) for f in dataclasses.fields(MergeResult)}
@@ -112,21 +155,25 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
         why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
         if why is None:  # and the walls place it to the cells' precision
             refined = gm.refine_with_grids(grid_a, grid_b, topo.transform, cfg)
-            merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
-            return HybridResult(**{**fields, "transform": refined, "merged": merged,
-                                   "method": "hybrid", "time_s": time.perf_counter() - t0},
-                                supplied_by="structural")
+            why = kept(refined)
+            if why is None:
+                merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
+                return HybridResult(**{**fields, "transform": refined, "merged": merged,
+                                       "method": "hybrid", "time_s": time.perf_counter() - t0},
+                                    supplied_by="structural")
+            fields.update(transform=refined)
         fields.update(accepted=False, merged=map_a,
                       reason=f"structural merge refuted by the grids: {why}")
     if not try_grids:
         return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0})
     grid = gm.merge_grids(grid_a, grid_b, cfg)
-    if not grid.accepted:
+    why = grid.reason if not grid.accepted else kept(grid.transform)
+    if why is not None:
         return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,
                                "matches": np.empty((0, 2), dtype=np.int64), "merged": map_a,
                                "score": _log_odds(grid.confidence), "method": "hybrid",
                                "time_s": time.perf_counter() - t0,
-                               "reason": f"topology: {fields['reason']}; grids: {grid.reason}",
+                               "reason": f"topology: {fields['reason']}; grids: {why}",
                                "confidence": grid.confidence}, grid=grid)
     moved = grid.transform.apply(map_b.xy)
     matches = np.empty((0, 2), dtype=np.int64)

@@ -6,7 +6,9 @@ Every ``mapping.merge_every`` steps the two topological maps are merged (``run_m
 ``grid_merge_growth``) the occupancy grids are aligned too, and the transform in use is
 checked against them. A merge of the same two maps as the last one is skipped (it would give
 the same answer). An accepted transform that differs from the one in use replaces it and the
-shared map is rebuilt; one the grids refute is dropped (the shared map is robot 0's alone).
+shared map is rebuilt (with ``"hybrid"``, one clearly different is not accepted when the grids
+support the one in use better); one the grids refute is dropped (the shared map is robot 0's
+alone).
 """
 
 from __future__ import annotations
@@ -60,12 +62,12 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
               grid_b: OccupancyGrid | None = None, try_grids: bool = False,
               in_use: Rigid2D | None = None, accept_threshold: float | None = None
               ) -> tuple[Any, str | None]:
-    """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"``
-    (the grids are aligned only when ``try_grids``; with ``in_use``, the transform the env
-    uses now, ``fusion.hybrid.recheck``; accepted when the confidence reaches
-    ``accept_threshold``, ``None``: the library's default), else ``fusion.merge_maps(map_a,
-    map_b, method=method)``. Returns the result and why the grids refute ``in_use``
-    (``None``: they do not, or were not asked)."""
+    """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"`` (the
+    grids are aligned only when ``try_grids``; ``in_use`` is the transform the env uses now,
+    and with the grids ``fusion.hybrid.recheck`` re-examines it; accepted when the confidence
+    reaches ``accept_threshold``, ``None``: the library's default), else
+    ``fusion.merge_maps(map_a, map_b, method=method)``. Returns the result and why the grids
+    refute ``in_use`` (``None``: they do not, or were not asked)."""
     if method == "hybrid":
         from fusion.grid_merge import GridMergeConfig
         from fusion.hybrid import hybrid_merge, recheck
@@ -75,7 +77,7 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
         if try_grids and in_use is not None:
             return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
         return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
-                            config=config), None
+                            config=config, in_use=in_use), None
     from fusion.merge import merge_maps
 
     return merge_maps(map_a, map_b, method=method), None

@@ -216,7 +216,8 @@ def test_rejected_grid_alignment_waits_for_the_maps_to_grow(monkeypatch, growth,
 
 def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     """Once merged, the grid alignment keeps running: its accepted alignment replaces the
-    transform in use, and a rejected one far from it drops it (robot 0's map alone again)."""
+    transform in use, and a rejected one far from it that the grids support better drops it
+    (robot 0's map alone again)."""
     import fusion.grid_merge as gm
     from fusion import Rigid2D
 
@@ -227,13 +228,14 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     calls = []
 
     def scripted(grid_a, grid_b, config=None):
-        # 1st: the truth, accepted; 2nd: the truth turned 2°, accepted; then: far off, rejected
+        # 1st: a wrong transform, accepted; 2nd: it turned 2°, accepted; then: the truth,
+        # rejected (the grids support it better than the wrong one in use)
         res = real(grid_a, grid_b, config)
         n = len(calls)
         calls.append(n)
-        turn = Rigid2D.from_degrees([0.0, 2.0][n] if n < 2 else 90.0, (0.0, 0.0) if n < 2
-                                    else (5.0, 0.0))
-        return dataclasses.replace(res, transform=turn @ par.true_merge, accepted=n < 2,
+        wrong = Rigid2D.from_degrees(90.0, (5.0, 0.0)) @ par.true_merge
+        transform = [wrong, Rigid2D.from_degrees(2.0) @ wrong][n] if n < 2 else par.true_merge
+        return dataclasses.replace(res, transform=transform, accepted=n < 2,
                                    reason=None if n < 2 else "test", centre=(0.0, 0.0))
 
     monkeypatch.setattr(gm, "merge_grids", scripted)
@@ -245,9 +247,9 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
                      par.merge_state()))
     assert len(calls) == 4, "the grid alignment did not keep running after the merge"
     in_use = {n: t for n, t, *_ in seen}
-    assert in_use[1].allclose(par.true_merge)
-    assert math.degrees(in_use[2].rotation_error(par.true_merge)) == pytest.approx(2.0)
-    # the third alignment is rejected and 90° / 5 m away: the merge is dropped
+    assert math.degrees(in_use[1].rotation_error(par.true_merge)) == pytest.approx(90.0)
+    assert math.degrees(in_use[2].rotation_error(in_use[1])) == pytest.approx(2.0)
+    # the third alignment is rejected and 92° / 8 m away: the merge is dropped
     assert in_use[3] is None and par.shared.transform is None
     info, reward, state = next((i, r, m) for n, _, i, r, m in seen if n == 3)
     assert info["merge_drops"] == 1 and not info["merge_accepted"]
@@ -256,7 +258,7 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     assert "the grids refute the transform in use" in state.last.reason
     assert state.transform is None and state.drops == 1 and state.method == "none"
     merged = next(i for n, _, i, _, _ in seen if n == 2)
-    assert merged["merge_errors_valid"] and merged["merge_rotation_error_deg"] == pytest.approx(2.0)
+    assert merged["merge_errors_valid"] and merged["merge_rotation_error_deg"] == pytest.approx(92.0)
     assert MERGE_METHODS[merged["merge_method"]] == "hybrid"
     assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
     assert par._observe_one(0, par._poses_across())["teammate"][4] == 0.0

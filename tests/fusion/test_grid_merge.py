@@ -13,6 +13,7 @@ from fusion import Rigid2D
 from fusion.grid_merge import (
     GridMergeConfig,
     check_with_grids,
+    grid_agreement,
     merge_grids,
     refine_with_grids,
 )
@@ -161,6 +162,46 @@ def test_recheck_refutes_a_transform_the_grids_no_longer_support():
     assert refuted is not None and refuted.startswith("the grids refute the transform in use")
     assert refuted in res.reason
     assert recheck(TINY, TINY, g, g, merge_grids(g, g).transform)[1] is None
+
+
+def test_grid_agreement_supports_the_truth_over_a_wrong_transform():
+    a, b, truth = overlapping_views(60.0)
+    right = grid_agreement(a, b, truth)
+    wrong = grid_agreement(a, b, Rigid2D.from_degrees(90.0) @ truth)
+    assert right.wall_agreement > 0.8 and right.conflict < 0.1
+    assert right.support == pytest.approx(right.wall_hits * (right.wall_agreement
+                                                             - right.conflict))
+    assert right.support > 5 * max(wrong.support, 1.0)
+    empty = GridSnapshot(np.zeros((10, 10), np.int8), RES, (0.0, 0.0))
+    assert grid_agreement(a, empty, truth) is None
+    with pytest.raises(TypeError, match="transform must be a fusion.Rigid2D, got ndarray"):
+        grid_agreement(a, b, np.eye(3))
+
+
+def test_a_confident_look_alike_does_not_replace_a_better_supported_transform(monkeypatch):
+    """An accepted alignment clearly different from the transform in use (a look-alike part of
+    the building) is rejected when the grids support the one in use better, and does not
+    refute it; with nothing in use, or a worse-supported one, it is taken."""
+    import dataclasses
+
+    import fusion.grid_merge as gm
+
+    a, b, truth = overlapping_views(90.0)
+    look_alike = Rigid2D.from_degrees(90.0, (3.0, 0.0)) @ truth
+    real = gm.merge_grids
+    monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
+        real(ga, gb, config), transform=look_alike, accepted=True, confidence=0.99))
+    assert hybrid_merge(TINY, TINY, a, b).accepted  # nothing in use: taken
+    res = hybrid_merge(TINY, TINY, a, b, in_use=truth)
+    assert not res.accepted
+    assert "the grids support the transform in use better" in res.reason
+    res, refuted = recheck(TINY, TINY, a, b, truth)
+    assert not res.accepted and refuted is None
+    res, refuted = recheck(TINY, TINY, a, b, Rigid2D.from_degrees(180.0, (6.0, -3.0)) @ truth)
+    assert res.accepted and res.transform is not None and refuted is None
+    with pytest.raises(TypeError, match=r"in_use must be a fusion.Rigid2D \(the transform in "
+                                        r"use\) or None, got ndarray"):
+        hybrid_merge(TINY, TINY, a, b, in_use=np.eye(3))
 
 
 def test_recheck_needs_a_transform_in_use():
