@@ -340,14 +340,27 @@ def refine_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
     """``transform`` (B → A) refined on the grids' own wall cells: gated ICP-SVD of B's occupied
     cells onto A's, as :func:`merge_grids` finishes its own alignments (when
     ``native_refine``; else ``transform`` unchanged). A structural merge places B by a few
-    nodes 0.1–0.3 m off each; the walls fix it to the cells' precision."""
+    nodes 0.1–0.3 m off each, sometimes a few degrees: the walls fix it to the cells'
+    precision. A correction larger than :func:`merge_grids` allows its own estimates
+    (``step_deg``, two ``resolution`` cells) is kept only if it stays the same alignment
+    (within ``distinct_deg`` / ``distinct_m``) and B's wall cells meet A's walls at least as
+    well at the grids' own cells (:attr:`GridMergeResult.native_agreement` minus
+    ``native_conflict``)."""
     if not isinstance(transform, Rigid2D):
         raise TypeError(f"transform must be a fusion.Rigid2D, got {type(transform).__name__}")
     cfg = config or GridMergeConfig()
     walls_b, _ = _native_walls(grid_b)
     if not cfg.native_refine or len(walls_b) < 3:
         return transform
-    return _native(grid_a, grid_b, transform, walls_b.mean(axis=0), cfg)[0]
+    centre = walls_b.mean(axis=0)
+    refined, near, deep = _native(grid_a, grid_b, transform, centre, cfg,
+                                  bound=(cfg.distinct_deg, cfg.distinct_m))
+    if (math.degrees(refined.rotation_error(transform)) <= cfg.step_deg
+            and refined.translation_error(transform, at=centre) <= 2 * cfg.resolution):
+        return refined
+    _, near_0, deep_0 = _native(grid_a, grid_b, transform, centre,
+                                dataclasses.replace(cfg, native_refine=False))
+    return refined if near - deep >= near_0 - deep_0 else transform
 
 
 class _Correlator:
@@ -565,16 +578,18 @@ def grid_calibrator() -> Any:
 
 def _refined(walls_a: np.ndarray, walls_b: np.ndarray, estimate: Rigid2D, res: float,
              gate: float, centre: np.ndarray, cfg: GridMergeConfig,
-             max_iter: int = 30) -> Rigid2D:
+             max_iter: int = 30, bound: tuple[float, float] | None = None) -> Rigid2D:
     """``estimate`` refined by gated, trimmed ICP-SVD of B's wall points onto A's, kept only if
-    it stays within ``step_deg`` and two ``res`` of ``estimate`` (else ``estimate``)."""
+    it stays within ``bound`` (degrees, metres at ``centre``; by default ``step_deg`` and two
+    ``res``) of ``estimate`` (else ``estimate``)."""
     if len(walls_a) < 3 or len(walls_b) < 3:
         return estimate
+    max_deg, max_m = bound or (cfg.step_deg, 2 * res)
     icp = icp_svd(walls_a, walls_b, tau=None, rel_tol=1e-6, max_iter=max_iter, init=estimate,
                   max_distance=gate, trim=0.8)
     if icp.degenerate is None and (
-            icp.transform.rotation_error(estimate) < math.radians(cfg.step_deg)
-            and icp.transform.translation_error(estimate, at=centre) < 2 * res):
+            icp.transform.rotation_error(estimate) < math.radians(max_deg)
+            and icp.transform.translation_error(estimate, at=centre) < max_m):
         return icp.transform
     return estimate
 
@@ -645,7 +660,8 @@ def _native_walls(grid: Any) -> tuple[np.ndarray, float]:
 
 
 def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
-            cfg: GridMergeConfig) -> tuple[Rigid2D, float, float]:
+            cfg: GridMergeConfig, bound: tuple[float, float] | None = None
+            ) -> tuple[Rigid2D, float, float]:
     """At the grids' own cells: ``estimate`` refined (when ``native_refine`` and the cells are
     finer than ``resolution``: real maps of 0.03–0.05 m cells carry walls far sharper than the
     search's pooled cells), and how B's wall cells that land on A's known cells lie: the
@@ -664,9 +680,9 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
         sub = walls_b[:: int(math.ceil(len(walls_b) / MAX_NATIVE_ICP_POINTS))]
         # the pooled estimate is within about one pooled cell; then a tighter gate
         estimate = _refined(walls_a, sub, estimate, cfg.resolution, cfg.resolution, centre,
-                            cfg, max_iter=15)
+                            cfg, max_iter=15, bound=bound)
         estimate = _refined(walls_a, sub, estimate, cfg.resolution, 2.5 * fine, centre, cfg,
-                            max_iter=15)
+                            max_iter=15, bound=bound)
     states_a = _states(grid_a)
     ij = np.floor((estimate.apply(walls_b) - np.asarray(grid_a.origin)) / fine_a).astype(int)
     h, w = states_a.shape

@@ -352,9 +352,10 @@ def test_hybrid_results_carry_the_grid_confidence_and_obey_the_threshold():
 
 
 def test_refine_with_grids_pulls_a_nearby_transform_onto_the_walls():
-    """A transform 1.5° and 0.15 m off the truth, refined on two views of one room's walls
-    (B's resampled by nearest cell, so a few cells alias), lands within 0.6° and 0.1 m of it;
-    without ``native_refine`` it is returned unchanged."""
+    """A transform 1.5° and 0.15 m off the truth (or 4° or 6°: more than the grid search's
+    step), refined on two views of one room's walls (B's resampled by nearest cell, so a few
+    cells alias), lands within 0.6° and 0.1 m of it; without ``native_refine`` it is returned
+    unchanged."""
     a, b, truth = _pair_of_room_views()
     start = truth @ Rigid2D.from_degrees(1.5, (0.1, -0.1))
     refined = refine_with_grids(a, b, start)
@@ -362,6 +363,11 @@ def test_refine_with_grids_pulls_a_nearby_transform_onto_the_walls():
     assert math.degrees(refined.rotation_error(truth)) < 0.6
     assert refined.translation_error(truth, at=centre) < 0.1
     assert refine_with_grids(a, b, start, GridMergeConfig(native_refine=False)) is start
+    # a structural merge can be degrees off: more than merge_grids' own step, still refined
+    for deg in (4.0, 6.0):
+        refined = refine_with_grids(a, b, truth @ Rigid2D.from_degrees(deg, (0.1, -0.1)))
+        assert math.degrees(refined.rotation_error(truth)) < 0.6
+        assert refined.translation_error(truth, at=centre) < 0.1
     with pytest.raises(TypeError, match="transform must be a fusion.Rigid2D, got tuple"):
         refine_with_grids(a, b, (0, 0, 0))
 
