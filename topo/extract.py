@@ -32,10 +32,15 @@ depends on the unknown is flagged:
    their **pass** (the highest point of the common boundary). A pass narrower than
    ``gateway_clearance`` and lower than ``gateway_ratio`` of the lower place is a doorway or a
    narrow passage (a critical point in the sense of Thrun 1998) and becomes a **gateway**
-   node; the path runs place → gateway → place. A gateway within ``merge_radius`` of one of
-   its places is not a node of its own. Polylines follow the shortest route inside each basin
-   from the pass to the place (a breadth-first tree per basin, compiled with the merge tree;
-   ties go to the higher clearance, so routes keep to the middle of the free space).
+   node; the path runs place → gateway → place. The same rule makes a gateway of the saddle
+   where a maximum at least ``min_clearance`` wide that does not persist joined a place's
+   basin: the doorway to a room seen too little to be a place of its own is a node all the
+   same, so that a robot that saw the room and one that only looked in put a gateway at the
+   same door (the path runs place → gateway). A gateway within ``merge_radius`` of its place
+   (or of another gateway) is not a node of its own. Polylines follow the shortest route
+   inside each basin from the pass to the place (a breadth-first tree per basin, compiled with
+   the merge tree; ties go to the higher clearance, so routes keep to the middle of the free
+   space).
 6. **Dead ends** — an end of the free space's skeleton (``skimage.morphology.skeletonize``)
    at least ``dead_end_clearance`` wide from which the route to its place runs on for
    ``dead_end_length`` without widening by more than ``dead_end_clearance``, at least
@@ -498,6 +503,21 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
                 cells.append((y, x))
                 kinds.append(int(NodeKind.GATEWAY))
         links.append((p, q, gate, ((y, x), other)))
+    # doorways to rooms seen too little to be places of their own: where a wide maximum that
+    # does not persist joined a place's basin, the same rule as for a pass between two places
+    doors: list[tuple[int, int]] = []  # (place, gateway)
+    for s, m in zip(saddle[weak].tolist(), dying[weak].tolist(), strict=True):
+        y, x = divmod(s, w)
+        p = int(basins[y, x])
+        if p < 0 or flat_c[m] < cfg.min_clearance or clearance[y, x] > cfg.gateway_clearance \
+                or field[y, x] > cfg.gateway_ratio * min(flat_f[m], flat_f[places[p]]):
+            continue
+        if any(math.dist((y, x), cells[k]) * res <= cfg.merge_radius
+               for k in (p, *range(len(places), len(cells)))):
+            continue  # at its place, or a gateway already there
+        doors.append((p, len(cells)))
+        cells.append((y, x))
+        kinds.append(int(NodeKind.GATEWAY))
     # polylines: from each side of the pass along the basin's routes to its place
     parent, depth = basin_paths(basins, field, places)
     edges: list[tuple[int, int]] = []
@@ -514,6 +534,9 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
             edges += [(p, gate), (gate, q)]
             polys += [np.concatenate([a, g]) if tuple(a[-1]) != cells[gate] else a,
                       np.concatenate([g, b]) if tuple(b[0]) != cells[gate] else b]
+    for p, gate in doors:
+        edges.append((p, gate))
+        polys.append(_route(parent, w, cells[gate])[::-1])
     for p, (y, x) in _ends(domain, basins, parent, depth, clearance, places, res, cfg):
         edges.append((p, len(cells)))
         polys.append(_route(parent, w, (y, x))[::-1])

@@ -31,7 +31,8 @@ class NodeKind(enum.IntEnum):
     DEAD_END = 1
     CORNER = 2
     GATEWAY = 3
-    """A doorway or narrow passage between two places (:func:`topo.extract_topomap`)."""
+    """A doorway or narrow passage between two places, or from a place into a room seen too
+    little to be a place of its own (:func:`topo.extract_topomap`)."""
 
     @property
     def label(self) -> str:

@@ -83,7 +83,8 @@ grid every ``mapping.topo_every`` steps once the map has grown by ``mapping.topo
 since the last extraction (and the structural merge of two unchanged maps is skipped):
 **places** at the maxima of the clearance from the
 walls the sonars have seen (room centres, corridor crossings and bends), **gateways** at the
-narrow passes between them (doorways), **dead ends** at corridor ends, and the paths between
+narrow passes between them and into rooms seen too little to be places (doorways), **dead
+ends** at corridor ends, and the paths between
 them; a node that touches the unknown is flagged (its ``frontier`` feature) and the structural
 merge leaves it out, since it moves as the map grows. Two robots that know the same rooms put
 the same places there, whatever else each has seen (``benchmarks/topo_repeatability.py``).

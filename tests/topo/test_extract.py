@@ -101,6 +101,23 @@ def test_two_rooms_and_a_door():
     check_paths(m, mask)
 
 
+@pytest.mark.parametrize("depth", [0.6, 0.8, 1.0, 2.0, 4.0])
+def test_a_door_is_a_gateway_however_little_of_the_next_room_is_seen(depth):
+    """A robot that has looked ``depth`` metres into the right room (the rest unknown) puts a
+    gateway in the door, where one that saw the whole room does, even when what it saw of
+    that room is too little to be a place of its own (0.6–0.8 m: its clearance maximum does
+    not persist); the gateway hangs off the left room's place."""
+    mask = two_rooms()
+    states = np.full(mask.shape, OCCUPIED, dtype=np.int8)
+    states[mask] = FREE
+    states[:, 60 + round(depth / RES):] = UNKNOWN
+    m = extract_topomap(states, RES)
+    door = near(m, (5.5, 3.0), 0.3)
+    assert m.kinds[door] == NodeKind.GATEWAY
+    left = near(m, (3.0, 3.0), 0.3)
+    assert sorted([left, door]) in sorted(map(sorted, m.edges.tolist()))
+
+
 def test_a_wide_opening_is_a_path_without_a_gateway():
     """A 3 m opening between the rooms is no doorway: the places are joined directly."""
     m = extract_topomap(two_rooms(door=30), RES)
