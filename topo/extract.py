@@ -492,11 +492,17 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     cells = [divmod(int(m), w) for m in places.tolist()]
     centres = _summits(field, basins, places, cfg.summit_tolerance)
     kinds = [-1] * len(cells)  # places' kinds come from their degree below
+
+    def narrow(y: int, x: int, top: float) -> bool:
+        """The gateway rule (step 5): a saddle narrower than ``gateway_clearance`` and lower
+        than ``gateway_ratio`` of the lower side's maximum ``top``."""
+        return bool(clearance[y, x] <= cfg.gateway_clearance
+                    and field[y, x] <= cfg.gateway_ratio * top)
+
     links: list[tuple[int, int, int | None, tuple[int, int]]] = []  # (p, q, gateway, pass)
     for (p, q), ((y, x), other) in sorted(_passes(basins, field).items()):
-        top = min(flat_f[places[p]], flat_f[places[q]])
         gate = None
-        if clearance[y, x] <= cfg.gateway_clearance and field[y, x] <= cfg.gateway_ratio * top:
+        if narrow(y, x, min(flat_f[places[p]], flat_f[places[q]])):
             near = min(math.dist((y, x), cells[p]), math.dist((y, x), cells[q])) * res
             if near > cfg.merge_radius:
                 gate = len(cells)
@@ -509,8 +515,8 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     for s, m in zip(saddle[weak].tolist(), dying[weak].tolist(), strict=True):
         y, x = divmod(s, w)
         p = int(basins[y, x])
-        if p < 0 or flat_c[m] < cfg.min_clearance or clearance[y, x] > cfg.gateway_clearance \
-                or field[y, x] > cfg.gateway_ratio * min(flat_f[m], flat_f[places[p]]):
+        if p < 0 or flat_c[m] < cfg.min_clearance \
+                or not narrow(y, x, min(flat_f[m], flat_f[places[p]])):
             continue
         if any(math.dist((y, x), cells[k]) * res <= cfg.merge_radius
                for k in (p, *range(len(places), len(cells)))):
