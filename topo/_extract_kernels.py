@@ -169,16 +169,18 @@ def basin_paths(basins: np.ndarray, field: np.ndarray, sources: np.ndarray
 
 
 @numba.njit(cache=True)
-def route(parent: np.ndarray, start: int) -> np.ndarray:
-    """The flat pixels from ``start`` along ``parent`` (:func:`basin_paths`) to its source."""
+def route(parent: np.ndarray, width: int, start: int) -> np.ndarray:
+    """``(K, 2)`` cells ``(row, col)`` from flat pixel ``start`` along ``parent``
+    (:func:`basin_paths`, a grid ``width`` wide) to its source."""
     n = 1
     p = start
     while parent[p] != p:
         p = parent[p]
         n += 1
-    out = np.empty(n, np.int64)
+    out = np.empty((n, 2), np.int64)
     p = start
     for i in range(n):
-        out[i] = p
+        out[i, 0] = p // width
+        out[i, 1] = p - out[i, 0] * width
         p = parent[p]
     return out

@@ -305,8 +305,7 @@ def _passes(basins: np.ndarray, field: np.ndarray
 def _route(parent: np.ndarray, width: int, start: tuple[int, int]) -> np.ndarray:
     """``(K, 2)`` cells ``(row, col)`` from ``start`` along ``parent``
     (:func:`topo._extract_kernels.basin_paths`) to its basin's place."""
-    chain = route(parent, start[0] * width + start[1])
-    return np.stack(np.divmod(chain, width), axis=1)
+    return route(parent, width, start[0] * width + start[1])
 
 
 def _summits(field: np.ndarray, basins: np.ndarray, places: np.ndarray, tolerance: float
@@ -340,10 +339,11 @@ def _ends(domain: np.ndarray, basins: np.ndarray, parent: np.ndarray, depth: np.
     first, one per ``2 · clearance + dead_end_length`` (the two spurs of a corridor's square
     end are one end). Returns ``(place, cell)`` pairs."""
     skeleton = skeletonize(domain)
-    neighbours = ndimage.convolve(skeleton.astype(np.uint8), np.ones((3, 3), np.uint8),
-                                  mode="constant")
-    ys, xs = np.nonzero(skeleton & (neighbours == 2) & (clearance >= cfg.dead_end_clearance)
-                        & (basins >= 0))
+    ys, xs = np.nonzero(skeleton & (clearance >= cfg.dead_end_clearance) & (basins >= 0))
+    padded = np.zeros((skeleton.shape[0] + 2, skeleton.shape[1] + 2), dtype=np.uint8)
+    padded[1:-1, 1:-1] = skeleton  # an end has one skeleton neighbour (counted where needed)
+    count = sum(padded[ys + 1 + dy, xs + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+    ys, xs = ys[count == 2], xs[count == 2]
     w = basins.shape[1]
     flat_c = clearance.ravel()
     steps = int(math.ceil(cfg.dead_end_length / res))
@@ -442,7 +442,9 @@ def extract_topomap(grid: Any, resolution: float | None = None,
     r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
     f = max(1, int(round(config.resolution / res)))
     # one working cell of unknown around the known cells: what lies beyond them is unknown
-    work = np.pad(_pool(states[r0:r1, c0:c1], f), 1, constant_values=_UNKNOWN)
+    pooled = _pool(states[r0:r1, c0:c1], f)
+    work = np.full((pooled.shape[0] + 2, pooled.shape[1] + 2), _UNKNOWN, dtype=np.int8)
+    work[1:-1, 1:-1] = pooled
     wres = res * f
     worigin = np.array([ox + c0 * res - wres, oy + r0 * res - wres])
     return _extract(work, wres, worigin, config)
