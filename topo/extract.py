@@ -297,7 +297,7 @@ def _passes(basins: np.ndarray, field: np.ndarray
     low, high = np.concatenate(lows), np.concatenate(highs)
     order = np.lexsort((high, low, -value, key))  # per pair: highest value, then lowest cells
     key, low, high = key[order], low[order], high[order]
-    first = np.r_[True, key[1:] != key[:-1]]
+    first = np.concatenate(([True], key[1:] != key[:-1]))
     return {divmod(int(k), h * w): (divmod(int(lo), w), divmod(int(hi), w))
             for k, lo, hi in zip(key[first], low[first], high[first], strict=True)}
 
