@@ -2,7 +2,7 @@
 
     python benchmarks/topo_repeatability.py [--split test] [--pairs data/env_pairs]
         [--methods auto,hybrid,grid] [--stored-maps | --true-views] [--plan-ceiling]
-        [--erode 0.3] [--json out.json]
+        [--keep-repeats] [--erode 0.3] [--json out.json]
 
 On the env-pair set (``make env-pairs``; ``benchmarks/env_pairs.py``), for every pair: both
 robots' topological maps are extracted again from the stored occupancy grids with the current
@@ -22,6 +22,10 @@ ceiling of the extraction when only what each robot has seen differs), then
 * **merges** (``fusion.evaluate.evaluate``) per overlap bin: success (accepted, < 2°, < 0.3 m)
   and wrong accepts (accepted and not a success) over all pairs, no-overlap pairs included.
 
+A pair whose grids and transform repeat one measured before in the split (the Frontier and
+CoordinatedFrontier sets of one seed share their early snapshots: the teams act alike until
+their first merge) is left out unless ``--keep-repeats`` is given.
+
 Tables per dataset folder and for the whole split. ``--split tune`` is what the defaults were
 chosen on; report ``test``.
 """
@@ -30,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import sys
 from pathlib import Path
@@ -43,7 +48,7 @@ from agents.dataset import env_kwargs  # noqa: E402
 from envs.two_robot_explore_v0 import parallel_env  # noqa: E402
 from fusion.eval_results import EvalPair  # noqa: E402
 from fusion.evaluate import evaluate  # noqa: E402
-from fusion.pairs import GridSnapshot, load_pairs, read_manifest  # noqa: E402
+from fusion.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
 from fusion.repeatability import node_repeatability, shared_region  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402
 from topo.grid import CellState  # noqa: E402
@@ -108,14 +113,33 @@ def _plan_nodes(pair, raw, erode: float, plans: dict) -> int:
     return int(region[cells[ok, 0], cells[ok, 1]].sum())
 
 
+def _key(pair) -> str:
+    """What makes two pairs the same pair: both grids and the true transform."""
+    h = hashlib.sha1()
+    for g in (pair.grid_a, pair.grid_b):
+        h.update(np.ascontiguousarray(g.states).tobytes())
+        h.update(np.asarray([*g.origin, g.resolution], dtype=np.float64).tobytes())
+    h.update(np.asarray(pair.transform.matrix(), dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
 def measure(folder: Path, methods: list[str], stored: bool, true_views: bool = False,
-            erode: float = 0.3, plan_ceiling: bool = False) -> list[dict]:
+            erode: float = 0.3, plan_ceiling: bool = False,
+            seen: set[str] | None = None) -> list[dict]:
     """One row per pair of the dataset ``folder``: repeatability and each method's result
-    (and, with ``plan_ceiling``, the whole floor plan's node count in the shared region)."""
+    (and, with ``plan_ceiling``, the whole floor plan's node count in the shared region).
+    Pairs whose key is in ``seen`` (the same grids and transform as a pair measured before:
+    the Frontier and CoordinatedFrontier sets of one seed share their early snapshots) are
+    left out; the keys of those measured are added to it."""
     rows, eval_pairs, plans = [], [], {}
     episodes = _episodes(folder) if true_views or plan_ceiling else \
         ((pair, None) for pair in load_pairs(folder))
     for pair, raw in episodes:
+        if seen is not None:
+            key = _key(pair)
+            if key in seen:
+                continue
+            seen.add(key)
         plan_nodes = _plan_nodes(pair, raw, erode, plans) if plan_ceiling else None
         if true_views:
             pair = _true_views(pair, raw)
@@ -213,6 +237,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="also count the pairs whose world's whole floor plan, extracted "
                              "the same way, has >= 3 nodes in the shared region (re-creates "
                              "each episode)")
+    parser.add_argument("--keep-repeats", action="store_true",
+                        help="count a pair again when another dataset of the split holds the "
+                             "same grids (the default leaves repeats out)")
     parser.add_argument("--erode", type=float, default=0.3,
                         help="shrink the shared region by this (m; the issue's 0.3): where a node "
                              "lies from the edge of either robot's knowledge")
@@ -225,17 +252,21 @@ def main(argv: list[str] | None = None) -> None:
     if not folders:
         parser.error(f"no datasets under {args.pairs / args.split}: run `make env-pairs`")
     methods = [m for m in args.methods.split(",") if m]
-    rows = []
+    rows: list[dict] = []
+    seen: set[str] | None = None if args.keep_repeats else set()
+    n_pairs = 0
     for folder in folders:
+        n_pairs += len(pair_files(folder))
         rows += measure(folder, methods, args.stored_maps, args.true_views, args.erode,
-                        args.plan_ceiling)
+                        args.plan_ceiling, seen)
     groups = {"procedural": [r for r in rows if not r["set"].startswith("real_")],
               "real maps": [r for r in rows if r["set"].startswith("real_")],
               "all": rows}
     maps = ("stored maps" if args.stored_maps else "maps extracted again from true views"
             if args.true_views else "maps extracted again")
+    repeats = "" if args.keep_repeats else f", {n_pairs - len(rows)} repeats left out"
     print(f"# {args.split} split, {len(rows)} pairs from {len(folders)} datasets ({maps}; "
-          f"shared region eroded by {args.erode} m)")
+          f"shared region eroded by {args.erode} m{repeats})")
     for name, sel in groups.items():
         if not sel:
             continue
