@@ -8,7 +8,8 @@ Two splits, so that what is tuned on is never what is reported:
   - ``frontier`` and ``coordinated_frontier``: 60 pairs each (20 episodes × 3 snapshots) in
     procedural 20 × 20 m buildings, 1500 steps (``tune`` also ``frontier_seed2`` and
     ``coordinated_frontier_seed3``: 120 pairs each from seeds 2 and 3, for fitting the merges'
-    calibrated confidences);
+    calibrated confidences; ``test`` also ``frontier_seed4`` and ``coordinated_frontier_seed5``,
+    60 pairs each: worlds of their own, as the two sets of the split's seed share theirs);
   - ``real_<map>``: 6 pairs (2 episodes × 3 snapshots) on each real map of ``../shared/maps``
     (DungeonMaps at 0.1 m/pixel, ROS maps at their own resolution), split between the two.
 
@@ -36,6 +37,10 @@ REAL_MAPS = {
              "ros/depot.yaml", "ros/turtlebot3_world.yaml"],
 }
 PROCEDURAL = ("frontier", "coordinated_frontier")
+EXTRA_SEEDS = {"tune": (("2", "3"), "120"), "test": (("4", "5"), "60")}
+"""Per split: the seeds of one more set per explorer, and its pair count. The two explorers'
+sets of the split's own seed share worlds and their early snapshots (the teams act alike until
+their first merge); these do not."""
 
 
 def jobs(out: Path, split: str) -> list[list[str]]:
@@ -44,12 +49,12 @@ def jobs(out: Path, split: str) -> list[list[str]]:
     common = ["--snapshots", "3", "--max-cycles", "1500", "--seed", seed, "--no-progress"]
     out_jobs = [["generate", "--explorer", explorer, "--pairs", "60", "--world-size", "20", "20",
                  "--out", str(out / split / explorer), *common] for explorer in PROCEDURAL]
-    if split == "tune":
-        for explorer, extra_seed in zip(PROCEDURAL, ("2", "3"), strict=True):
-            out_jobs.append(["generate", "--explorer", explorer, "--pairs", "120",
-                             "--world-size", "20", "20", "--out",
-                             str(out / split / f"{explorer}_seed{extra_seed}"),
-                             *common[:4], "--seed", extra_seed, "--no-progress"])
+    seeds, pairs = EXTRA_SEEDS[split]
+    for explorer, extra_seed in zip(PROCEDURAL, seeds, strict=True):
+        out_jobs.append(["generate", "--explorer", explorer, "--pairs", pairs,
+                         "--world-size", "20", "20", "--out",
+                         str(out / split / f"{explorer}_seed{extra_seed}"),
+                         *common[:4], "--seed", extra_seed, "--no-progress"])
     for name in REAL_MAPS[split]:
         path = MAPS / name
         if not path.is_file():

@@ -30,9 +30,10 @@ merge built from the maps' structure:
    The score is the calibrated log-odds that the alignment is right (:data:`CONFIDENCE_WEIGHTS`).
 5. **Refinement** of the best candidate with the paper's ICP-SVD (:func:`fusion.icp_svd`), gated
    at ``eps`` and trimmed (TrICP) to the estimated overlap, then least-squares SVD fits on mutually
-   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences — and on
-   B's path points lying on A's paths (long corridors fix the rotation better than the few nodes
-   of a small overlap).
+   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences — and,
+   for maps whose paths are straight node-to-node segments, on B's path points lying on A's
+   paths (long corridors fix the rotation better than the few nodes of a small overlap; two
+   robots' polylines of the same corridor run apart and would pull it off).
 6. **Accept/reject** (:func:`decide`): enough matches, not collinear, log-odds at least
    ``min_score``, and a margin of ``min_margin`` over the best *distinct* runner-up (a symmetric
    map has several equally good alignments: rejected as ambiguous).

@@ -121,7 +121,9 @@ a chord strays from its pixels by a few centimetres, well inside :data:`PATH_TOL
 
 
 PATH_FIT_WEIGHT = 10.0
-"""Weight of a metre of B's paths lying on A's against a matched node in the final fit."""
+"""Weight of a metre of B's paths lying on A's against a matched node in the final fit, for
+maps whose paths are straight node-to-node segments; maps with polylines (extracted ones) fit
+on their nodes alone (:attr:`Prepared.polylines`)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -145,6 +147,7 @@ class Prepared:
     field_origin: tuple[float, float]
     compat: np.ndarray  # [code, code] of the pair's codes (MATCH_COMPATIBLE, renumbered)
     loose: int  # the code of an undescribed dead end (makes no conflicts), -1 if unused
+    polylines: bool  # paths are polylines (routes through free space), not node-to-node
 
 
 def prepare_pair(map_a: TopoMap, map_b: TopoMap, cfg: MergeConfig
@@ -172,7 +175,7 @@ def _prepare(m: TopoMap, cfg: MergeConfig, codes: np.ndarray, compat: np.ndarray
                       cfg.eps, PATH_REACH, PATH_CELL))
     return Prepared(xy, codes.astype(np.int64), edges, near, i, j, length, both_i, both_j,
                     both_len, margin, _branches(len(xy), *slots), pieces, pts, w, field,
-                    (x0, y0), compat, loose)
+                    (x0, y0), compat, loose, m.paths is not None and len(m.paths) > 0)
 
 
 def path_segments(m: TopoMap) -> np.ndarray:

@@ -15,10 +15,15 @@ from fusion.merge.prepare import PATH_CELL, PATH_FIT_WEIGHT, PATH_TOL, Prepared
 def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
                   t: np.ndarray) -> tuple[float, np.ndarray]:
     """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
-    B's path points that lie within :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``)
-    paired with their nearest A path point, :data:`PATH_FIT_WEIGHT` per metre of path."""
+    — when neither map's paths are polylines — B's path points that lie within
+    :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``) paired with their nearest A path
+    point, :data:`PATH_FIT_WEIGHT` per metre of path. Two robots' polylines between the same
+    places are routes through each one's own free space and run apart by a few decimetres:
+    paired point by point they pull the rotation off (on env map pairs the fit without them
+    is within 2° far more often, ``benchmarks/fusion.md``)."""
+    weight = 0.0 if pa.polylines or pb.polylines else PATH_FIT_WEIGHT
     P, Q, w = RK.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
-                            PATH_FIT_WEIGHT, theta, t[0], t[1], PATH_TOL, pa.field,
+                            weight, theta, t[0], t[1], PATH_TOL, pa.field,
                             *pa.field_origin, PATH_CELL)
     return rigid_fit(P, Q, w)
 
@@ -27,8 +32,9 @@ def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Ev
     """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then least-squares
     fits on mutually nearest nodes of any kinds within ``fit_eps`` (what the oracle does with
     the true matches; a node at the edge of explored space may have another kind in each
-    map) and on B's path points lying on A's paths (:func:`least_squares`: long corridors fix
-    the rotation far better than the 3–6 nodes a small overlap shares)."""
+    map) and, for maps without polylines, on B's path points lying on A's paths
+    (:func:`least_squares`: long corridors fix the rotation far better than the 3–6 nodes a
+    small overlap shares)."""
     best = start
     if start.evidence.inliers >= 2:
         trim = min(1.0, max(start.evidence.inliers / len(pb.xy), 2.0 / len(pb.xy)))

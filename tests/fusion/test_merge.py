@@ -472,25 +472,48 @@ def test_sparse_pool_finds_a_pair_sharing_three_nodes():
     assert rot > 5.0 or move > 1.0
 
 
-def test_final_fit_uses_the_paths(monkeypatch):
-    """The final least-squares fit pairs B's path points with A's paths: B's nodes off by noise
-    but its polylines where the corridors are pull the fit onto the truth (identity here) closer
-    than the nodes alone."""
+def test_final_fit_reads_path_points_only_for_maps_without_polylines(monkeypatch):
+    """The final least-squares fit pairs B's path points with A's paths when both maps' paths
+    are node-to-node segments; maps with polylines (routes through each robot's own free
+    space, which run apart between the same places) fit on their nodes alone, so a route
+    hugging one side of a corridor does not turn an exact node match."""
+    import dataclasses
+
     import fusion.merge.refine as refine
+    from fusion.icp import rigid_fit
     from fusion.merge.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = _corridors()
-    rng = np.random.default_rng(4)
-    xy = a.xy + rng.normal(0.0, 0.15, a.xy.shape)
-    exact = [np.array([a.xy[u], a.xy[v]]) for u, v in a.edges]
-    pa, pb = prepare_pair(a, TopoMap.from_arrays(xy, a.edges, paths=exact), cfg)
     matches = np.column_stack([np.arange(a.n_nodes), np.arange(a.n_nodes)])
+    # segments: the path points take part (the fit moves when their weight is switched off)
+    rng = np.random.default_rng(4)
+    noisy = TopoMap.from_arrays(a.xy + rng.normal(0.0, 0.15, a.xy.shape), a.edges)
+    pa, pb = prepare_pair(a, noisy, cfg)
+    assert not (pa.polylines or pb.polylines)
     theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
     monkeypatch.setattr(refine, "PATH_FIT_WEIGHT", 0.0)
     theta0, t0 = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
-    assert abs(theta) < 0.5 * abs(theta0)
-    assert np.linalg.norm(t) < np.linalg.norm(t0)
+    assert abs(theta - theta0) > 1e-4 or np.linalg.norm(t - t0) > 1e-4
+    monkeypatch.undo()
+    # polylines: B's nodes where A's are, its routes up the branches 0.3 m to the side
+    straight = [np.array([a.xy[u], a.xy[v]]) for u, v in a.edges]
+    side = np.array([0.3, 0.0])
+    routes = [np.array([a.xy[u], (a.xy[u] + a.xy[v]) / 2 + side, a.xy[v]])
+              if a.xy[u, 0] == a.xy[v, 0] else np.array([a.xy[u], a.xy[v]])
+              for u, v in a.edges]  # the three branches bow 0.3 m to the right
+    pa, pb = prepare_pair(TopoMap.from_arrays(a.xy, a.edges, paths=straight),
+                          TopoMap.from_arrays(a.xy, a.edges, paths=routes), cfg)
+    assert pa.polylines and pb.polylines
+    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    node_theta, node_t = rigid_fit(a.xy, a.xy, np.ones(a.n_nodes))
+    assert theta == pytest.approx(node_theta, abs=1e-12) and abs(theta) < 1e-9
+    assert np.allclose(t, node_t) and np.allclose(t, 0.0, atol=1e-9)
+    # the same routes read as if they were segments would pull the fit off the nodes
+    theta_s, _ = refine.least_squares(dataclasses.replace(pa, polylines=False),
+                                      dataclasses.replace(pb, polylines=False), matches, 0.0,
+                                      np.zeros(2))
+    assert abs(theta_s) > 1e-3
 
 
 def test_pixel_fine_polylines_are_read_as_chords():
