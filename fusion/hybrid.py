@@ -9,8 +9,8 @@ transform is right (< 2°, < 0.3 m); one threshold, ``accept_threshold``
 (:class:`fusion.grid_merge.GridMergeConfig`), decides for both, with the hard gates (the grid
 alignment's ``min_overlap_m2``; for a structural merge, its matches and the grids' check), so a
 rejected result may still report a confidence above the threshold. Given the transform in
-use, a result clearly different from it replaces it only if the grids support it at least as
-well (``in_use``).
+use, a result clearly different from it replaces it unless the grids support the one in use
+clearly better (``in_use``, :data:`IN_USE_MARGIN`).
 """
 
 from __future__ import annotations
@@ -31,6 +31,14 @@ from fusion.rigid import Rigid2D
 HYBRID_EPS = 0.6
 """Node fusion radius (m) when a grid alignment builds the merged topological map: sonar
 topological maps of the same place put their nodes ~0.5 m apart."""
+
+IN_USE_MARGIN = 1.5
+"""A confident result clearly different from the transform in use replaces it unless the grids
+support the one in use more than this many times better
+(:attr:`fusion.grid_merge.GridAgreement.support`).
+Support grows with the area two maps overlap, so in a building of repeated rooms a look-alike
+placed over more of the other map can out-support the truth while their true overlap is small;
+only a clear difference overrules the merge's own evidence (``benchmarks/fusion.md``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,9 +74,9 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
 
     With ``in_use``, the transform the caller uses now, an accepted result clearly different
     from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
-    support ``in_use`` better (:attr:`fusion.grid_merge.GridAgreement.support` more than
-    :data:`fusion.grid_merge.TIE_MARGIN` times the new one's): a confident merge of a
-    look-alike part of the building must not replace an alignment of the whole maps.
+    support ``in_use`` clearly better (:attr:`fusion.grid_merge.GridAgreement.support` more
+    than :data:`IN_USE_MARGIN` times the new one's): a confident merge of a look-alike part of
+    the building must not replace an alignment of the whole maps.
 
     Raises:
         TypeError: ``in_use`` is neither ``None`` nor a :class:`fusion.Rigid2D`.
@@ -85,9 +93,10 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
     at B's wall centroid) — the evidence no longer supports it though nothing is confident
     enough to replace it — ``(result, why)``, ``why`` also appended to the result's reason.
 
-    An accepted result (the same alignment refined, or a distinct one the grids support at
-    least as well: :func:`hybrid_merge`'s ``in_use``) is for the caller to use instead; the
-    grids' best alignment refutes ``in_use`` only if they do not support ``in_use`` better.
+    An accepted result (the same alignment refined, or a distinct one the grids do not support
+    ``in_use`` clearly better than: :func:`hybrid_merge`'s ``in_use``) is for the caller to use
+    instead; the grids' best alignment refutes ``in_use`` only if they do not support
+    ``in_use`` clearly better.
     This is how a merge accepted early on small, self-similar maps (a building's 180°-turned
     or shifted copy of a room row) gets undone once the maps have grown.
 
@@ -123,7 +132,7 @@ def _keeps(grid_a: Any, grid_b: Any, new: Rigid2D, in_use: Rigid2D,
     better), ``None`` if ``new`` may replace it."""
     now = gm.grid_agreement(grid_a, grid_b, in_use, cfg)
     then = gm.grid_agreement(grid_a, grid_b, new, cfg)
-    if now is None or then is None or now.support <= gm.TIE_MARGIN * then.support:
+    if now is None or then is None or now.support <= IN_USE_MARGIN * then.support:
         return None
     return (f"the grids support the transform in use better ({now.support:.0f} net wall cells "
             f"against {then.support:.0f})")

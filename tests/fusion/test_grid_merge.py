@@ -204,6 +204,34 @@ def test_a_confident_look_alike_does_not_replace_a_better_supported_transform(mo
         hybrid_merge(TINY, TINY, a, b, in_use=np.eye(3))
 
 
+def test_the_transform_in_use_stays_only_when_clearly_better_supported(monkeypatch):
+    """In a building of repeated rooms a look-alike in use can out-support a confident right
+    alignment a little (support grows with the overlap); it stays only when the grids support
+    it more than IN_USE_MARGIN times better than the new one."""
+    import dataclasses
+
+    import fusion.grid_merge as gm
+    import fusion.hybrid as hy
+
+    a, b, truth = overlapping_views(90.0)
+    in_use = Rigid2D.from_degrees(90.0, (3.0, 0.0)) @ truth
+    real = gm.merge_grids
+    monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
+        real(ga, gb, config), transform=truth, accepted=True, confidence=0.99))
+    real_agreement = gm.grid_agreement
+    for ratio, replaced in ((1.2, True), (0.9 * hy.IN_USE_MARGIN, True),
+                            (1.1 * hy.IN_USE_MARGIN, False), (3.0, False)):
+        def agreement(ga, gb, transform, config=None, ratio=ratio):
+            out = real_agreement(ga, gb, truth, config)  # the new one's, scaled for in_use
+            if transform is in_use:
+                return out._replace(wall_hits=int(round(out.wall_hits * ratio)))
+            return out
+        monkeypatch.setattr(gm, "grid_agreement", agreement)
+        res = hybrid_merge(TINY, TINY, a, b, in_use=in_use)
+        assert res.accepted is replaced, ratio
+        assert replaced or "the grids support the transform in use better" in res.reason
+
+
 def test_recheck_needs_a_transform_in_use():
     a, b, _ = overlapping_views(90.0)
     with pytest.raises(TypeError, match=r"in_use must be a fusion.Rigid2D \(the transform in "
