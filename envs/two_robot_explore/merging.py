@@ -7,8 +7,8 @@ Every ``mapping.merge_every`` steps the two topological maps are merged (``run_m
 checked against them. A merge of the same two maps as the last one is skipped (it would give
 the same answer). An accepted transform that differs from the one in use replaces it and the
 shared map is rebuilt (with ``"hybrid"``, one clearly different is not accepted when the grids
-support the one in use better); one the grids refute is dropped (the shared map is robot 0's
-alone).
+support the one in use clearly better, ``fusion.hybrid.IN_USE_MARGIN``); one the grids refute
+is dropped (the shared map is robot 0's alone).
 """
 
 from __future__ import annotations
