@@ -9,10 +9,9 @@ from topo.validation import check_int, check_real, config_from
 DEFAULT_ACCEPT_THRESHOLD = 0.8
 """Default :attr:`MergeConfig.accept_threshold`. ``benchmarks/calibrate_merge.py --model
 structural`` prints the smallest threshold (on a 0.05 grid) with at most 1 % false accepts of
-no-overlap pairs and 1 % wrong accepts of all tuning pairs in cross-validation; at the last fit
-that was 0.6, with 0.91 % wrong accepts, at the limit, and more wrong accepts on held-out noisy
-synthetic pairs, so the default keeps a margin (0.78 % in cross-validation;
-``benchmarks/fusion.md``)."""
+no-overlap pairs and 1 % wrong accepts of all tuning pairs in cross-validation (the ``meta``
+of the fitted model); the default stays above it when that one sits at the limit, with a
+margin for pairs unlike the tuning ones (``benchmarks/fusion.md``)."""
 
 
 METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp")
