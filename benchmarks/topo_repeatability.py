@@ -49,7 +49,7 @@ from envs.two_robot_explore_v0 import parallel_env  # noqa: E402
 from fusion.eval_results import EvalPair  # noqa: E402
 from fusion.evaluate import evaluate  # noqa: E402
 from fusion.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
-from fusion.repeatability import node_repeatability, shared_region  # noqa: E402
+from fusion.repeatability import in_region, node_repeatability, shared_region  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402
 from topo.grid import CellState  # noqa: E402
 
@@ -107,10 +107,7 @@ def _plan_nodes(pair, raw, erode: float, plans: dict) -> int:
         plans[key] = extract_topomap(world.free, world.resolution, world.origin).xy
     xy = raw.frames[0].inverse().apply(plans[key]) if len(plans[key]) else plans[key]
     region = shared_region(pair.grid_a, pair.grid_b, pair.transform, erode)
-    g = pair.grid_a
-    cells = np.floor((xy - np.asarray(g.origin)) / g.resolution).astype(np.int64)[:, ::-1]
-    ok = np.all((cells >= 0) & (cells < region.shape), axis=1)
-    return int(region[cells[ok, 0], cells[ok, 1]].sum())
+    return int(in_region(xy, region, pair.grid_a).sum())
 
 
 def _key(pair) -> str:

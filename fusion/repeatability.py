@@ -120,6 +120,26 @@ def shared_region(grid_a: Any, grid_b: Any, truth: Rigid2D, erode: float = 0.3
     return region
 
 
+def in_region(xy: Any, region: Any, grid: Any) -> np.ndarray:
+    """Whether each point lies on a ``True`` cell of ``region``, a mask over ``grid``'s cells
+    (as :func:`shared_region` gives on grid A): ``(N,)`` bool for ``(N, 2)`` points in metres
+    in the grid's frame; points off the grid are outside. Counts nodes in a region.
+
+    Raises:
+        TypeError: ``grid`` has no states, resolution or origin.
+        ValueError: ``xy`` is not ``(N, 2)``; ``region`` is not a 2-D mask of the grid's shape.
+    """
+    states, res, origin = _states_of(grid, "grid")
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"xy must be (N, 2) points, got shape {xy.shape}")
+    region = np.asarray(region)
+    if region.shape != states.shape:
+        raise ValueError(f"region must be a mask of the grid's shape {states.shape}, got shape "
+                         f"{region.shape}")
+    return _in_region(xy, region.astype(bool, copy=False), origin, res)
+
+
 def _in_region(xy: np.ndarray, region: np.ndarray, origin: np.ndarray, res: float
                ) -> np.ndarray:
     ij = _cells(xy, origin, res)

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion.pairs import GridSnapshot
-from fusion.repeatability import node_repeatability, shared_region
+from fusion.repeatability import in_region, node_repeatability, shared_region
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
 from topo.grid import CellState
@@ -140,3 +140,33 @@ def test_bad_input(kwargs, error, match):
             "grid_b": grid(), "truth": Rigid2D(), **kwargs}
     with pytest.raises(error, match=match):
         node_repeatability(**args)
+
+
+def test_in_region_finds_the_points_on_the_region_cells():
+    """A region of the grid's left half holds the points there; points right of it or off the
+    grid are outside; the count agrees with node_repeatability's own."""
+    left = np.zeros((50, 50), bool)
+    left[:, :25] = True
+    g = grid()
+    inside = in_region([[1.0, 1.0], [2.45, 4.9], [2.55, 1.0], [-0.1, 1.0], [1.0, 5.1]], left, g)
+    np.testing.assert_array_equal(inside, [True, True, False, False, False])
+    region = shared_region(g, g, Rigid2D())
+    rep = node_repeatability(topomap(NODES), topomap(NODES), g, g, Rigid2D())
+    assert int(in_region(NODES, region, g).sum()) == rep.nodes_a
+    assert in_region(np.empty((0, 2)), region, g).shape == (0,)
+
+
+@pytest.mark.parametrize(
+    ("xy", "region", "error", "match"),
+    [
+        ([1.0, 1.0], np.ones((50, 50), bool), ValueError,
+         r"xy must be \(N, 2\) points, got shape \(2,\)"),
+        ([[1.0, 1.0]], np.ones((40, 50), bool), ValueError,
+         r"region must be a mask of the grid's shape \(50, 50\), got shape \(40, 50\)"),
+    ],
+)
+def test_in_region_bad_input(xy, region, error, match):
+    with pytest.raises(error, match=match):
+        in_region(xy, region, grid())
+    with pytest.raises(TypeError, match="grid must be an OccupancyGrid or a grid snapshot"):
+        in_region([[1.0, 1.0]], np.ones((50, 50), bool), np.zeros((50, 50)))
