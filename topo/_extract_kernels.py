@@ -1,4 +1,5 @@
-"""Compiled kernel of :mod:`topo.extract`: the merge tree of a clearance field.
+"""Compiled kernels of :mod:`topo.extract`: the merge tree of a clearance field, routes inside
+its basins, the cells where two basins touch, and the edge cells around each node.
 
 No library computes the 0-dimensional persistence of an image's superlevel sets together with
 the basins and the merge (saddle) events, so this one loop is compiled (numba, cached). It is
@@ -6,6 +7,12 @@ the textbook union-find algorithm (Edelsbrunner & Harer, *Computational Topology
 pixels are added in decreasing value; a pixel with no processed neighbour starts a component
 (a maximum is born), one joining several components merges them and every component but the
 oldest dies there (the elder rule). Tests check it against a brute-force flood fill.
+
+The routes (:func:`basin_paths`, :func:`route`) are breadth-first trees inside the basins.
+The last two kernels replace numpy passes over the whole grid that kept the extraction over
+its 2 ms budget (``benchmarks/fusion.md``): :func:`touching` four shifted comparisons of the
+basin labels, :func:`edge_counts` a dilation and two summed-area tables read at a few nodes.
+Tests check both against those passes (``ndimage.maximum_filter`` for the edge).
 """
 
 from __future__ import annotations
@@ -184,3 +191,71 @@ def route(parent: np.ndarray, width: int, start: int) -> np.ndarray:
         out[i, 1] = p - out[i, 0] * width
         p = parent[p]
     return out
+
+
+@numba.njit(cache=True)
+def touching(basins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of 8-connected cells in two different basins (labels ``>= 0``), once:
+    ``(a, b)`` flat indices, ``b`` the right, lower-left, lower or lower-right neighbour of
+    ``a`` (row 0 first). One pass over the grid where four shifted comparisons and their
+    ``np.nonzero`` took most of the time of finding the passes."""
+    h, w = basins.shape
+    lab = basins.ravel()
+    a = np.empty(4 * h * w, np.int64)
+    b = np.empty(4 * h * w, np.int64)
+    n = 0
+    for y in range(h):
+        for x in range(w):
+            p = y * w + x
+            if lab[p] < 0:
+                continue
+            for dy, dx in ((0, 1), (1, -1), (1, 0), (1, 1)):
+                yy, xx = y + dy, x + dx
+                if yy >= h or xx < 0 or xx >= w:
+                    continue
+                q = yy * w + xx
+                if lab[q] >= 0 and lab[q] != lab[p]:
+                    a[n] = p
+                    b[n] = q
+                    n += 1
+    return a[:n], b[:n]
+
+
+@numba.njit(cache=True)
+def edge_counts(states: np.ndarray, open_unknown: np.ndarray, cells: np.ndarray,
+                outer: np.ndarray, inner: np.ndarray, free_code: int, occupied_code: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per node, the **edge** cells (not ``free_code``, with a ``free_code`` cell among their 8
+    neighbours) in squares about ``cells[k]`` (row, col), clipped to the grid: in the square
+    of half-side ``outer[k]``, how many are ``open_unknown`` and how many are
+    ``occupied_code``; and whether the square of half-side ``inner[k]`` (none when negative)
+    holds an ``open_unknown`` edge cell. ``open_unknown`` marks the cells of interest among
+    the unknown ones. A node's squares are a few hundred cells: counting in them is cheaper
+    than a dilation and summed-area tables over the whole grid."""
+    h, w = states.shape
+    n = cells.shape[0]
+    n_unknown = np.zeros(n, np.int64)
+    n_occupied = np.zeros(n, np.int64)
+    inside = np.zeros(n, np.bool_)
+    for k in range(n):
+        cy, cx = cells[k, 0], cells[k, 1]
+        r, ri = outer[k], inner[k]
+        for y in range(max(cy - r, 0), min(cy + r + 1, h)):
+            for x in range(max(cx - r, 0), min(cx + r + 1, w)):
+                code = states[y, x]
+                if code == free_code or not (open_unknown[y, x] or code == occupied_code):
+                    continue
+                edge = False
+                for yy in range(max(y - 1, 0), min(y + 2, h)):
+                    for xx in range(max(x - 1, 0), min(x + 2, w)):
+                        if states[yy, xx] == free_code:
+                            edge = True
+                if not edge:
+                    continue
+                if code == occupied_code:
+                    n_occupied[k] += 1
+                else:
+                    n_unknown[k] += 1
+                    if ri >= 0 and abs(y - cy) <= ri and abs(x - cx) <= ri:
+                        inside[k] = True
+    return n_unknown, n_occupied, inside

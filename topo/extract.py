@@ -77,7 +77,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import remove_small_holes, skeletonize
 
-from topo._extract_kernels import basin_paths, merge_tree, route
+from topo._extract_kernels import basin_paths, edge_counts, merge_tree, route, touching
 from topo.graph import NodeKind, TopoMap, kinds_from_degree
 from topo.grid import CellState
 from topo.validation import check_real, config_from
@@ -274,27 +274,15 @@ def _passes(basins: np.ndarray, field: np.ndarray
     two touching cells of their common boundary whose lower value is the highest, the lower
     cell (the pass) first."""
     h, w = basins.shape
-    keys, values, lows, highs = [], [], [], []
-    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        ra, rb = slice(0, h - dy), slice(dy, h)
-        ca, cb = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-        a, b = basins[ra, ca], basins[rb, cb]
-        ys, xs = np.nonzero((a != b) & (a >= 0) & (b >= 0))
-        if not len(ys):
-            continue
-        ia = (ys + ra.start) * w + xs + ca.start
-        ib = (ys + rb.start) * w + xs + cb.start
-        fa, fb = field.flat[ia], field.flat[ib]
-        lower_a = fa <= fb
-        la, lb = basins.flat[ia], basins.flat[ib]
-        keys.append(np.minimum(la, lb) * (h * w) + np.maximum(la, lb))
-        values.append(np.where(lower_a, fa, fb))
-        lows.append(np.where(lower_a, ia, ib))
-        highs.append(np.where(lower_a, ib, ia))
-    if not keys:
+    ia, ib = touching(basins)
+    if not len(ia):
         return {}
-    key, value = np.concatenate(keys), np.concatenate(values)
-    low, high = np.concatenate(lows), np.concatenate(highs)
+    fa, fb = field.flat[ia], field.flat[ib]
+    lower_a = fa <= fb
+    la, lb = basins.flat[ia], basins.flat[ib]
+    key = np.minimum(la, lb) * (h * w) + np.maximum(la, lb)
+    value = np.where(lower_a, fa, fb)
+    low, high = np.where(lower_a, ia, ib), np.where(lower_a, ib, ia)
     order = np.lexsort((high, low, -value, key))  # per pair: highest value, then lowest cells
     key, low, high = key[order], low[order], high[order]
     first = np.concatenate(([True], key[1:] != key[:-1]))
@@ -380,29 +368,14 @@ def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
     ``frontier_fraction`` open unknown rather than occupied. Counted on the edge, so that thick
     walls (a floor plan) and thin ones (a sonar map) weigh alike; unknown within
     ``frontier_margin`` of an occupied cell (``wall_distance``) is a gap in a wall seen in
-    fragments, not open unknown, and is not counted (summed-area tables). Also flagged: a node
-    with open unknown within its clearance less ``frontier_margin`` (a square of that
-    half-side: inside its own free disc, which a wall bounds)."""
-    free = states == _FREE
-    edge = ~free & ndimage.maximum_filter(free, size=3, mode="constant")
-    open_unknown = edge & (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
-    h, w = states.shape
-    tables = []
-    for mask in (open_unknown, edge & (states == _OCCUPIED)):
-        t = np.zeros((h + 1, w + 1), dtype=np.int64)
-        np.cumsum(np.cumsum(mask, axis=0), axis=1, out=t[1:, 1:])
-        tables.append(t)
-    r = np.ceil((clearance + cfg.frontier_margin) / res).astype(np.int64)
-    y0, y1 = np.maximum(cells[:, 0] - r, 0), np.minimum(cells[:, 0] + r + 1, h)
-    x0, x1 = np.maximum(cells[:, 1] - r, 0), np.minimum(cells[:, 1] + r + 1, w)
-    n_unknown, n_occupied = (t[y1, x1] - t[y0, x1] - t[y1, x0] + t[y0, x0] for t in tables)
-    # open unknown well inside the node's own free disc (a square of half-side its clearance
-    # less the margin): the disc itself is not known
-    r = np.floor((clearance - cfg.frontier_margin) / res).astype(np.int64)
-    y0, y1 = np.maximum(cells[:, 0] - r, 0), np.minimum(cells[:, 0] + r + 1, h)
-    x0, x1 = np.maximum(cells[:, 1] - r, 0), np.minimum(cells[:, 1] + r + 1, w)
-    t = tables[0]
-    inside = (r >= 0) & (t[y1, x1] - t[y0, x1] - t[y1, x0] + t[y0, x0] > 0)
+    fragments, not open unknown, and is not counted (:func:`topo._extract_kernels.edge_counts`).
+    Also flagged: a node with open unknown within its clearance less ``frontier_margin`` (a
+    square of that half-side: inside its own free disc, which a wall bounds)."""
+    open_unknown = (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
+    outer = np.ceil((clearance + cfg.frontier_margin) / res).astype(np.int64)
+    inner = np.floor((clearance - cfg.frontier_margin) / res).astype(np.int64)
+    n_unknown, n_occupied, inside = edge_counts(states, open_unknown, cells, outer, inner,
+                                                _FREE, _OCCUPIED)
     return (n_unknown > cfg.frontier_fraction * (n_unknown + n_occupied)) | inside
 
 

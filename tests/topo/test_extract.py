@@ -12,7 +12,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from topo import CellState, NodeKind, OccupancyGrid, TopoMap
-from topo._extract_kernels import basin_paths, merge_tree
+from topo._extract_kernels import basin_paths, edge_counts, merge_tree, touching
 from topo.extract import ExtractConfig, extract_topomap
 from topo.maps import FloorPlan, load_floor_plan
 
@@ -354,6 +354,47 @@ def test_basin_routes_are_shortest_and_stay_in_their_basin(seed):
             py, px = divmod(int(p), 14)
             sy, sx = divmod(s, 14)
             assert depth[p] >= max(abs(py - sy), abs(px - sx))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 9), st.integers(1, 9))
+def test_touching_cells_are_every_8_neighbour_pair_across_basins(seed, h, w):
+    rng = np.random.default_rng(seed)
+    basins = np.where(rng.random((h, w)) > 0.2, rng.integers(0, 3, (h, w)), -1)
+    a, b = touching(basins)
+    found = [tuple(sorted(pq)) for pq in zip(a.tolist(), b.tolist(), strict=True)]
+    expected = set()
+    for y, x in np.ndindex(h, w):
+        for yy, xx in ((y + 1, x - 1), (y + 1, x), (y + 1, x + 1), (y, x + 1)):
+            if 0 <= yy < h and 0 <= xx < w and basins[y, x] >= 0 and basins[yy, xx] >= 0 \
+                    and basins[y, x] != basins[yy, xx]:
+                expected.add((y * w + x, yy * w + xx))
+    assert len(found) == len(set(found)) and set(found) == expected
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.integers(1, 12))
+def test_edge_counts_are_a_dilation_counted_in_squares(seed, h, w):
+    """The kernel's counts are those of ``ndimage.maximum_filter`` (the edge: not free, next
+    to a free cell) summed over each node's clipped squares."""
+    rng = np.random.default_rng(seed)
+    states = rng.integers(0, 3, (h, w)).astype(np.int8)
+    open_unknown = (states == CellState.UNKNOWN) & (rng.random((h, w)) > 0.3)
+    n = 5
+    cells = np.column_stack([rng.integers(0, h, n), rng.integers(0, w, n)])
+    outer = rng.integers(0, 6, n)
+    inner = outer - rng.integers(0, 4, n)  # negative: no inner square
+    got = edge_counts(states, open_unknown, cells, outer, inner, int(CellState.FREE),
+                      int(CellState.OCCUPIED))
+    free = states == CellState.FREE
+    edge = ~free & ndimage.maximum_filter(free, size=3, mode="constant")
+    for k, (y, x) in enumerate(cells):
+        box = np.s_[max(y - outer[k], 0):y + outer[k] + 1, max(x - outer[k], 0):x + outer[k] + 1]
+        assert got[0][k] == np.sum((edge & open_unknown)[box])
+        assert got[1][k] == np.sum((edge & (states == CellState.OCCUPIED))[box])
+        r = inner[k]
+        small = np.s_[max(y - r, 0):y + r + 1, max(x - r, 0):x + r + 1]
+        assert got[2][k] == (r >= 0 and bool((edge & open_unknown)[small].any()))
 
 
 # ---------------------------------------------------------------------------------- bad input
