@@ -29,8 +29,9 @@ merge built from the maps' structure:
    paths leaving matched nodes, and the path evidence.
    The score is the calibrated log-odds that the alignment is right (:data:`CONFIDENCE_WEIGHTS`).
 5. **Refinement** of the best candidate with the paper's ICP-SVD (:func:`fusion.icp_svd`), gated
-   at ``eps`` and trimmed (TrICP) to the estimated overlap, then least-squares SVD fits on mutually
-   nearest nodes within ``fit_eps`` — what the oracle does with the true correspondences — and,
+   at ``eps`` and trimmed (TrICP) to the estimated overlap, then weighted least-squares SVD fits
+   on mutually nearest nodes within ``fit_eps`` (each pair weighing ``1 − d²/fit_eps²``: one
+   that may be a neighbour rather than the same place pulls little) and,
    for maps whose paths are straight node-to-node segments, on B's path points lying on A's
    paths (long corridors fix the rotation better than the few nodes of a small overlap; two
    robots' polylines of the same corridor run apart and would pull it off).

@@ -26,7 +26,8 @@ class MergeConfig:
         eps: match tolerance: nodes of A and moved B within ``eps`` may be the same place (the
             paper's ω tolerance); also the gate of the ICP refinement and the conflict distance.
         fit_eps: the final least-squares fit pairs mutually nearest nodes of any kinds within
-            this (a node at the edge of explored space may have another kind in each map).
+            this (a node at the edge of explored space may have another kind in each map),
+            each pair ``d`` apart weighing ``1 − d²/fit_eps²``.
         near_miss: see :attr:`MergeEvidence.near_misses`.
         pair_tolerance: most difference between an A pair's and a B pair's length for a 2-point
             hypothesis (about 2σ of the difference for node noise σ = 0.15 m).

@@ -13,26 +13,33 @@ from fusion.merge.prepare import PATH_CELL, PATH_FIT_WEIGHT, PATH_TOL, Prepared
 
 
 def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
-                  t: np.ndarray) -> tuple[float, np.ndarray]:
-    """The SVD fit of B's matched nodes onto A's (what the oracle does with true matches), with
-    — when neither map's paths are polylines — B's path points that lie within
-    :data:`PATH_TOL` of A's paths (moved by ``(theta, t)``) paired with their nearest A path
-    point, :data:`PATH_FIT_WEIGHT` per metre of path. Two robots' polylines between the same
-    places are routes through each one's own free space and run apart by a few decimetres:
-    paired point by point they pull the rotation off (on env map pairs the fit without them
-    is within 2° far more often, ``benchmarks/fusion.md``)."""
+                  t: np.ndarray, eps: float) -> tuple[float, np.ndarray]:
+    """The weighted SVD fit of B's matched nodes onto A's, each pair weighing
+    ``1 − d²/eps²`` for its distance ``d`` under ``(theta, t)`` (what it adds to the soft
+    count the score is made of: a pair near the gate, as likely a neighbour as the same place,
+    pulls little), with — when neither map's paths are polylines — B's path points that lie
+    within :data:`PATH_TOL` of A's paths paired with their nearest A path point,
+    :data:`PATH_FIT_WEIGHT` per metre of path. Two robots' polylines between the same places
+    are routes through each one's own free space and run apart by a few decimetres: paired
+    point by point they pull the rotation off (on env map pairs the fit without them is
+    within 2° far more often, ``benchmarks/fusion.md``)."""
     weight = 0.0 if pa.polylines or pb.polylines else PATH_FIT_WEIGHT
     P, Q, w = RK.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
                             weight, theta, t[0], t[1], PATH_TOL, pa.field,
                             *pa.field_origin, PATH_CELL)
+    n = len(matches)
+    c, s = np.cos(theta), np.sin(theta)
+    moved = P[:n] @ np.array([[c, s], [-s, c]]) + t
+    # (a pair right at the gate keeps a little weight, so that the weights never all vanish)
+    w[:n] = np.maximum(1.0 - np.sum((moved - Q[:n]) ** 2, axis=1) / (eps * eps), 1e-3)
     return rigid_fit(P, Q, w)
 
 
 def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Evaluated:
-    """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then least-squares
-    fits on mutually nearest nodes of any kinds within ``fit_eps`` (what the oracle does with
-    the true matches; a node at the edge of explored space may have another kind in each
-    map) and, for maps without polylines, on B's path points lying on A's paths
+    """Trimmed, gated ICP-SVD from ``start`` (kept if it scores better), then three weighted
+    least-squares fits on mutually nearest nodes of any kinds within ``fit_eps`` (a node at
+    the edge of explored space may have another kind in each map) and, for maps without
+    polylines, on B's path points lying on A's paths
     (:func:`least_squares`: long corridors fix the rotation far better than the 3–6 nodes a
     small overlap shares)."""
     best = start
@@ -47,5 +54,5 @@ def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Ev
         pairs = RK.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
         if len(pairs) < 3:
             break
-        theta, t, moved = *least_squares(pa, pb, pairs, theta, t), True
+        theta, t, moved = *least_squares(pa, pb, pairs, theta, t, cfg.fit_eps), True
     return evaluate(pa, pb, theta, t, cfg) if moved else best

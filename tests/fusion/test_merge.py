@@ -491,9 +491,9 @@ def test_final_fit_reads_path_points_only_for_maps_without_polylines(monkeypatch
     noisy = TopoMap.from_arrays(a.xy + rng.normal(0.0, 0.15, a.xy.shape), a.edges)
     pa, pb = prepare_pair(a, noisy, cfg)
     assert not (pa.polylines or pb.polylines)
-    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2), cfg.fit_eps)
     monkeypatch.setattr(refine, "PATH_FIT_WEIGHT", 0.0)
-    theta0, t0 = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    theta0, t0 = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2), cfg.fit_eps)
     assert abs(theta - theta0) > 1e-4 or np.linalg.norm(t - t0) > 1e-4
     monkeypatch.undo()
     # polylines: B's nodes where A's are, its routes up the branches 0.3 m to the side
@@ -505,15 +505,40 @@ def test_final_fit_reads_path_points_only_for_maps_without_polylines(monkeypatch
     pa, pb = prepare_pair(TopoMap.from_arrays(a.xy, a.edges, paths=straight),
                           TopoMap.from_arrays(a.xy, a.edges, paths=routes), cfg)
     assert pa.polylines and pb.polylines
-    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2))
+    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2), cfg.fit_eps)
     node_theta, node_t = rigid_fit(a.xy, a.xy, np.ones(a.n_nodes))
     assert theta == pytest.approx(node_theta, abs=1e-12) and abs(theta) < 1e-9
     assert np.allclose(t, node_t) and np.allclose(t, 0.0, atol=1e-9)
     # the same routes read as if they were segments would pull the fit off the nodes
     theta_s, _ = refine.least_squares(dataclasses.replace(pa, polylines=False),
                                       dataclasses.replace(pb, polylines=False), matches, 0.0,
-                                      np.zeros(2))
+                                      np.zeros(2), cfg.fit_eps)
     assert abs(theta_s) > 1e-3
+
+
+def test_final_fit_weighs_a_pair_by_its_distance():
+    """Each matched pair weighs ``1 − d²/eps²`` in the final fit: five nodes matched exactly
+    and one 0.5 m off (within a 0.6 m gate; as likely a neighbour as the same place) turn the
+    fit less than the plain SVD fit of the six pairs does, and exactly as the SVD fit
+    with those weights."""
+    from fusion.icp import rigid_fit
+    from fusion.merge import refine
+    from fusion.merge.prepare import prepare_pair
+
+    xy = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0], [2.0, 1.5], [6.0, 1.0]])
+    b = xy.copy()
+    b[5] += [0.0, 0.5]
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [1, 5]])
+    pa, pb = prepare_pair(*(TopoMap.from_arrays(p, edges, paths=[p[[u, v]] for u, v in edges])
+                            for p in (xy, b)), MergeConfig())
+    matches = np.column_stack([np.arange(6), np.arange(6)])
+    theta, t = refine.least_squares(pa, pb, matches, 0.0, np.zeros(2), 0.6)
+    weights = np.ones(6)
+    weights[5] = 1.0 - 0.5**2 / 0.6**2
+    expected, expected_t = rigid_fit(b, xy, weights)
+    plain, _ = rigid_fit(b, xy, np.ones(6))
+    assert theta == pytest.approx(expected, abs=1e-12) and np.allclose(t, expected_t)
+    assert 0.0 < abs(theta) < abs(plain)
 
 
 def test_pixel_fine_polylines_are_read_as_chords():
