@@ -11,7 +11,7 @@ Usage::
 
 Each row is a real ``train.main`` run (PPO updates included, evaluation and checkpoints off) on
 the default 10 m worlds; the rate is the run's ``time/agent_steps_per_s`` at its end. The first
-seconds include starting workers and compiling skan's numba kernels in each process, so short
+seconds include starting workers and loading the package's numba kernels in each process, so short
 runs understate the steady rate a little. RLlib rows also give the mean seconds per training
 iteration spent sampling (the env runners, in parallel) and updating (the learner, in this
 process, while the runners wait): their split bounds what more runners can gain. Every row
