@@ -15,10 +15,10 @@ from fusion.merge.prepare import PATH_CELL, PATH_FIT_WEIGHT, PATH_TOL, Prepared
 def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
                   t: np.ndarray, eps: float) -> tuple[float, np.ndarray]:
     """The weighted SVD fit of B's matched nodes onto A's, each pair weighing
-    ``1 − d²/eps²`` for its distance ``d`` under ``(theta, t)`` (what it adds to the soft
-    count the score is made of: a pair near the gate, as likely a neighbour as the same place,
-    pulls little), with — when neither map's paths are polylines — B's path points that lie
-    within :data:`PATH_TOL` of A's paths paired with their nearest A path point,
+    ``1 − d²/eps²`` for its distance ``d`` under ``(theta, t)`` (the kernel of the soft count
+    the score is made of: a pair near the gate, as likely a neighbour as the same place, pulls
+    little), with — when neither map's paths are polylines — B's path points that lie within
+    :data:`PATH_TOL` of A's paths under ``(theta, t)`` paired with their nearest A path point,
     :data:`PATH_FIT_WEIGHT` per metre of path. Two robots' polylines between the same places
     are routes through each one's own free space and run apart by a few decimetres: paired
     point by point they pull the rotation off (on env map pairs the fit without them is
