@@ -423,20 +423,13 @@ def extract_topomap(grid: Any, resolution: float | None = None,
     return _extract(work, wres, worigin, config)
 
 
-def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractConfig
-             ) -> TopoMap:
-    occupied = states == _OCCUPIED
-    if not occupied.any():  # no wall seen: nothing bounds the free space yet
-        return TopoMap.empty()
-    free = _free_space(states, res, cfg)
-    wall_distance = ndimage.distance_transform_edt(~occupied) * res
-    clearance = np.where(free, wall_distance, 0.0)
-    field = ndimage.gaussian_filter(clearance, cfg.smoothing / res) if cfg.smoothing else \
-        clearance.copy()
-    field[~free] = 0.0
-    domain = free & (field > 0.0)
-    if not domain.any():
-        return TopoMap.empty()
+def _places(field: np.ndarray, clearance: np.ndarray, domain: np.ndarray, cfg: ExtractConfig
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 4: ``(places, basins, saddles, weak)`` — the flat cells of the places (maxima of
+    ``field`` that persist by ``persistence`` and are ``min_clearance`` wide), each cell's
+    place (``basins``, ``-1`` outside the domain), and the saddle where each maximum that is
+    not a place joined its neighbour's component with that maximum (``weak``), for the
+    doorways of step 5."""
     inside = np.flatnonzero(domain)
     order = inside[np.argsort(-field.ravel()[inside], kind="stable")]
     ascent, saddle, dying, _, into = merge_tree(field, domain, order)
@@ -463,9 +456,27 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     lut = np.full(field.size, -1, dtype=np.int64)
     lut[maxima] = place_of[resolved]
     basins = np.where(ascent >= 0, lut[np.maximum(ascent, 0)], -1).reshape(field.shape)
+    return places, basins, saddle[weak], dying[weak]
+
+
+def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractConfig
+             ) -> TopoMap:
+    occupied = states == _OCCUPIED
+    if not occupied.any():  # no wall seen: nothing bounds the free space yet
+        return TopoMap.empty()
+    free = _free_space(states, res, cfg)
+    wall_distance = ndimage.distance_transform_edt(~occupied) * res
+    clearance = np.where(free, wall_distance, 0.0)
+    field = ndimage.gaussian_filter(clearance, cfg.smoothing / res) if cfg.smoothing else \
+        clearance.copy()
+    field[~free] = 0.0
+    domain = free & (field > 0.0)
+    if not domain.any():
+        return TopoMap.empty()
+    places, basins, saddles, weak = _places(field, clearance, domain, cfg)
+    flat_f, flat_c = field.ravel(), clearance.ravel()
     h, w = field.shape
     cells = [divmod(int(m), w) for m in places.tolist()]
-    centres = _summits(field, basins, places, cfg.summit_tolerance)
     kinds = [-1] * len(cells)  # places' kinds come from their degree below
 
     def narrow(y: int, x: int, top: float) -> bool:
@@ -487,7 +498,7 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
     # doorways to rooms seen too little to be places of their own: where a wide maximum that
     # does not persist joined a place's basin, the same rule as for a pass between two places
     doors: list[tuple[int, int]] = []  # (place, gateway)
-    for s, m in zip(saddle[weak].tolist(), dying[weak].tolist(), strict=True):
+    for s, m in zip(saddles.tolist(), weak.tolist(), strict=True):
         y, x = divmod(s, w)
         p = int(basins[y, x])
         if p < 0 or flat_c[m] < cfg.min_clearance \
@@ -523,29 +534,40 @@ def _extract(states: np.ndarray, res: float, origin: np.ndarray, cfg: ExtractCon
         polys.append(_route(parent, w, (y, x))[::-1])
         cells.append((y, x))
         kinds.append(-1)
-    rc = np.array(cells, dtype=np.int64).reshape(-1, 2)
+    centres = _summits(field, basins, places, cfg.summit_tolerance)
+    return _assemble(np.array(cells, dtype=np.int64).reshape(-1, 2), centres,
+                     np.array(kinds, dtype=np.int8), np.array(edges, dtype=np.int64).reshape(-1, 2),
+                     polys, clearance, states, wall_distance, origin, res, cfg)
+
+
+def _assemble(rc: np.ndarray, centres: np.ndarray, kinds: np.ndarray, edges: np.ndarray,
+              polys: list[np.ndarray], clearance: np.ndarray, states: np.ndarray,
+              wall_distance: np.ndarray, origin: np.ndarray, res: float, cfg: ExtractConfig
+              ) -> TopoMap:
+    """Steps 7–8: the :class:`TopoMap` of nodes at cells ``rc`` (the places first, placed at
+    their summits' ``centres``), ``kinds`` (``-1``: from the degree), ``edges`` and their cell
+    polylines ``polys``, in metres, with clearances and frontier flags, numbered by ``y``, then
+    ``x``."""
     node_clear = clearance[rc[:, 0], rc[:, 1]]
     frontier = _frontier(rc, node_clear, states, wall_distance, res, cfg)
     xy = origin + (rc[:, ::-1] + 0.5) * res
-    xy[: len(places)] = origin + (centres[:, ::-1] + 0.5) * res
-    edge_arr = np.array(edges, dtype=np.int64).reshape(-1, 2)
-    kind_arr = np.array(kinds, dtype=np.int8)
-    degree_kinds = kinds_from_degree(np.bincount(edge_arr.ravel(), minlength=len(rc)))
-    kind_arr = np.where(kind_arr < 0, degree_kinds, kind_arr).astype(np.int8)
+    xy[: len(centres)] = origin + (centres[:, ::-1] + 0.5) * res
+    degree_kinds = kinds_from_degree(np.bincount(edges.ravel(), minlength=len(rc)))
+    kinds = np.where(kinds < 0, degree_kinds, kinds).astype(np.int8)
     # number nodes by y, then x (then kind, for two nodes on one cell)
-    order = np.lexsort((kind_arr, xy[:, 0], xy[:, 1]))
+    order = np.lexsort((kinds, xy[:, 0], xy[:, 1]))
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     sizes = np.array([len(poly) for poly in polys], dtype=np.int64)
     points = origin + (np.concatenate(polys)[:, ::-1] + 0.5) * res if polys else np.empty((0, 2))
     ends = np.cumsum(sizes)
-    points[ends - sizes] = xy[edge_arr[:, 0]]  # from node to node (places' centres)
-    points[ends - 1] = xy[edge_arr[:, 1]]
+    points[ends - sizes] = xy[edges[:, 0]]  # from node to node (places' centres)
+    points[ends - 1] = xy[edges[:, 1]]
     steps = np.append(np.hypot(*np.diff(points, axis=0).T), 0.0)
     steps[ends - 1] = 0.0  # the step from one polyline's last point to the next one's first
     lengths = np.add.reduceat(steps, ends - sizes) if polys else np.empty(0)
     paths = np.split(points, ends[:-1]) if polys else []
     # valid by construction (indices in range, no self-loops, polylines from node to node)
-    return TopoMap(_frozen(xy[order]), _frozen(kind_arr[order]), _frozen(rank[edge_arr]),
+    return TopoMap(_frozen(xy[order]), _frozen(kinds[order]), _frozen(rank[edges]),
                    _frozen(lengths), tuple(_frozen(q) for q in paths), node_clear[order],
                    frontier[order])
