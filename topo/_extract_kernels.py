@@ -1,5 +1,5 @@
 """Compiled kernels of :mod:`topo.extract`: the merge tree of a clearance field, routes inside
-its basins, the cells where two basins touch, and the edge cells around each node.
+its basins, the cells where two basins touch, and cells counted in squares about the nodes.
 
 No library computes the 0-dimensional persistence of an image's superlevel sets together with
 the basins and the merge (saddle) events, so this one loop is compiled (numba, cached). It is
@@ -11,8 +11,8 @@ oldest dies there (the elder rule). Tests check it against a brute-force flood f
 The routes (:func:`basin_paths`, :func:`route`) are breadth-first trees inside the basins.
 The last two kernels replace numpy passes over the whole grid that kept the extraction over
 its 2 ms budget (``benchmarks/fusion.md``): :func:`touching` four shifted comparisons of the
-basin labels, :func:`edge_counts` a dilation and two summed-area tables read at a few nodes.
-Tests check both against those passes (``ndimage.maximum_filter`` for the edge).
+basin labels, :func:`box_counts` two summed-area tables read at a few nodes. Tests check both
+against those passes.
 """
 
 from __future__ import annotations
@@ -222,40 +222,27 @@ def touching(basins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
-def edge_counts(states: np.ndarray, open_unknown: np.ndarray, cells: np.ndarray,
-                outer: np.ndarray, inner: np.ndarray, free_code: int, occupied_code: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per node, the **edge** cells (not ``free_code``, with a ``free_code`` cell among their 8
-    neighbours) in squares about ``cells[k]`` (row, col), clipped to the grid: in the square
-    of half-side ``outer[k]``, how many are ``open_unknown`` and how many are
-    ``occupied_code``; and whether the square of half-side ``inner[k]`` (none when negative)
-    holds an ``open_unknown`` edge cell. ``open_unknown`` marks the cells of interest among
-    the unknown ones. A node's squares are a few hundred cells: counting in them is cheaper
-    than a dilation and summed-area tables over the whole grid."""
-    h, w = states.shape
+def box_counts(a: np.ndarray, b: np.ndarray, cells: np.ndarray, outer: np.ndarray,
+               inner: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per node ``k``, in the square of half-side ``outer[k]`` about ``cells[k]`` (row, col),
+    clipped to the grid: how many cells of the boolean masks ``a`` and ``b`` are set; and
+    whether ``a`` has a cell set in the square of half-side ``inner[k]`` (none when
+    negative). A node's squares are a few hundred cells: counting in them is cheaper than
+    summed-area tables over the whole grid."""
+    h, w = a.shape
     n = cells.shape[0]
-    n_unknown = np.zeros(n, np.int64)
-    n_occupied = np.zeros(n, np.int64)
+    n_a = np.zeros(n, np.int64)
+    n_b = np.zeros(n, np.int64)
     inside = np.zeros(n, np.bool_)
     for k in range(n):
         cy, cx = cells[k, 0], cells[k, 1]
         r, ri = outer[k], inner[k]
         for y in range(max(cy - r, 0), min(cy + r + 1, h)):
             for x in range(max(cx - r, 0), min(cx + r + 1, w)):
-                code = states[y, x]
-                if code == free_code or not (open_unknown[y, x] or code == occupied_code):
-                    continue
-                edge = False
-                for yy in range(max(y - 1, 0), min(y + 2, h)):
-                    for xx in range(max(x - 1, 0), min(x + 2, w)):
-                        if states[yy, xx] == free_code:
-                            edge = True
-                if not edge:
-                    continue
-                if code == occupied_code:
-                    n_occupied[k] += 1
-                else:
-                    n_unknown[k] += 1
+                if b[y, x]:
+                    n_b[k] += 1
+                if a[y, x]:
+                    n_a[k] += 1
                     if ri >= 0 and abs(y - cy) <= ri and abs(x - cx) <= ri:
                         inside[k] = True
-    return n_unknown, n_occupied, inside
+    return n_a, n_b, inside

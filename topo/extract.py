@@ -77,7 +77,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import remove_small_holes, skeletonize
 
-from topo._extract_kernels import basin_paths, edge_counts, merge_tree, route, touching
+from topo._extract_kernels import basin_paths, box_counts, merge_tree, route, touching
 from topo.graph import NodeKind, TopoMap, kinds_from_degree
 from topo.grid import CellState
 from topo.validation import check_real, config_from
@@ -327,11 +327,10 @@ def _ends(domain: np.ndarray, basins: np.ndarray, parent: np.ndarray, depth: np.
     first, one per ``2 · clearance + dead_end_length`` (the two spurs of a corridor's square
     end are one end). Returns ``(place, cell)`` pairs."""
     skeleton = skeletonize(domain)
-    ys, xs = np.nonzero(skeleton & (clearance >= cfg.dead_end_clearance) & (basins >= 0))
-    padded = np.zeros((skeleton.shape[0] + 2, skeleton.shape[1] + 2), dtype=np.uint8)
-    padded[1:-1, 1:-1] = skeleton  # an end has one skeleton neighbour (counted where needed)
-    count = sum(padded[ys + 1 + dy, xs + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
-    ys, xs = ys[count == 2], xs[count == 2]
+    neighbours = ndimage.convolve(skeleton.astype(np.uint8), np.ones((3, 3), np.uint8),
+                                  mode="constant")
+    ys, xs = np.nonzero(skeleton & (neighbours == 2) & (clearance >= cfg.dead_end_clearance)
+                        & (basins >= 0))
     w = basins.shape[1]
     flat_c = clearance.ravel()
     steps = int(math.ceil(cfg.dead_end_length / res))
@@ -368,14 +367,16 @@ def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
     ``frontier_fraction`` open unknown rather than occupied. Counted on the edge, so that thick
     walls (a floor plan) and thin ones (a sonar map) weigh alike; unknown within
     ``frontier_margin`` of an occupied cell (``wall_distance``) is a gap in a wall seen in
-    fragments, not open unknown, and is not counted (:func:`topo._extract_kernels.edge_counts`).
+    fragments, not open unknown, and is not counted (:func:`topo._extract_kernels.box_counts`).
     Also flagged: a node with open unknown within its clearance less ``frontier_margin`` (a
     square of that half-side: inside its own free disc, which a wall bounds)."""
-    open_unknown = (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
+    free = states == _FREE
+    edge = ~free & ndimage.maximum_filter(free, size=3, mode="constant")
+    open_unknown = edge & (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
     outer = np.ceil((clearance + cfg.frontier_margin) / res).astype(np.int64)
     inner = np.floor((clearance - cfg.frontier_margin) / res).astype(np.int64)
-    n_unknown, n_occupied, inside = edge_counts(states, open_unknown, cells, outer, inner,
-                                                _FREE, _OCCUPIED)
+    n_unknown, n_occupied, inside = box_counts(open_unknown, edge & (states == _OCCUPIED),
+                                               cells, outer, inner)
     return (n_unknown > cfg.frontier_fraction * (n_unknown + n_occupied)) | inside
 
 
@@ -415,9 +416,7 @@ def extract_topomap(grid: Any, resolution: float | None = None,
     r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
     f = max(1, int(round(config.resolution / res)))
     # one working cell of unknown around the known cells: what lies beyond them is unknown
-    pooled = _pool(states[r0:r1, c0:c1], f)
-    work = np.full((pooled.shape[0] + 2, pooled.shape[1] + 2), _UNKNOWN, dtype=np.int8)
-    work[1:-1, 1:-1] = pooled
+    work = np.pad(_pool(states[r0:r1, c0:c1], f), 1, constant_values=_UNKNOWN)
     wres = res * f
     worigin = np.array([ox + c0 * res - wres, oy + r0 * res - wres])
     return _extract(work, wres, worigin, config)

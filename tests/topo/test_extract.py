@@ -12,7 +12,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from topo import CellState, NodeKind, OccupancyGrid, TopoMap
-from topo._extract_kernels import basin_paths, edge_counts, merge_tree, touching
+from topo._extract_kernels import basin_paths, box_counts, merge_tree, touching
 from topo.extract import ExtractConfig, extract_topomap
 from topo.maps import FloorPlan, load_floor_plan
 
@@ -376,27 +376,22 @@ def test_touching_cells_are_every_8_neighbour_pair_across_basins(seed, h, w):
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.integers(1, 12))
-def test_edge_counts_are_a_dilation_counted_in_squares(seed, h, w):
-    """The kernel's counts are those of ``ndimage.maximum_filter`` (the edge: not free, next
-    to a free cell) summed over each node's clipped squares."""
+def test_box_counts_are_the_sums_over_clipped_squares(seed, h, w):
+    """The kernel's counts are the masks' sums over each node's squares clipped to the grid
+    (what the summed-area tables it replaces gave)."""
     rng = np.random.default_rng(seed)
-    states = rng.integers(0, 3, (h, w)).astype(np.int8)
-    open_unknown = (states == CellState.UNKNOWN) & (rng.random((h, w)) > 0.3)
+    a, b = rng.random((h, w)) > 0.6, rng.random((h, w)) > 0.5
     n = 5
     cells = np.column_stack([rng.integers(0, h, n), rng.integers(0, w, n)])
     outer = rng.integers(0, 6, n)
     inner = outer - rng.integers(0, 4, n)  # negative: no inner square
-    got = edge_counts(states, open_unknown, cells, outer, inner, int(CellState.FREE),
-                      int(CellState.OCCUPIED))
-    free = states == CellState.FREE
-    edge = ~free & ndimage.maximum_filter(free, size=3, mode="constant")
+    n_a, n_b, inside = box_counts(a, b, cells, outer, inner)
     for k, (y, x) in enumerate(cells):
         box = np.s_[max(y - outer[k], 0):y + outer[k] + 1, max(x - outer[k], 0):x + outer[k] + 1]
-        assert got[0][k] == np.sum((edge & open_unknown)[box])
-        assert got[1][k] == np.sum((edge & (states == CellState.OCCUPIED))[box])
+        assert n_a[k] == a[box].sum() and n_b[k] == b[box].sum()
         r = inner[k]
         small = np.s_[max(y - r, 0):y + r + 1, max(x - r, 0):x + r + 1]
-        assert got[2][k] == (r >= 0 and bool((edge & open_unknown)[small].any()))
+        assert inside[k] == (r >= 0 and bool(a[small].any()))
 
 
 # ---------------------------------------------------------------------------------- bad input
