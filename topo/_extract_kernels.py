@@ -9,8 +9,8 @@ pixels are added in decreasing value; a pixel with no processed neighbour starts
 oldest dies there (the elder rule). Tests check it against a brute-force flood fill.
 
 The routes (:func:`basin_paths`, :func:`route`) are breadth-first trees inside the basins.
-The last two kernels replace numpy passes over the whole grid that kept the extraction over
-its 2 ms budget (``benchmarks/fusion.md``): :func:`touching` four shifted comparisons of the
+The last two kernels replace numpy passes over the whole grid that took much of the
+extraction's time (``benchmarks/fusion.md``): :func:`touching` four shifted comparisons of the
 basin labels, :func:`box_counts` two summed-area tables read at a few nodes. Tests check both
 against those passes.
 """
