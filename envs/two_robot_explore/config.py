@@ -141,6 +141,33 @@ class WorldConfig:
                                                       low=0.0, low_inclusive=True))
 
 
+ODOMETRY_MODELS = ("increment", "rot_trans_rot")
+"""``RobotConfig.odometry_model`` values."""
+
+ODOMETRY_PRESETS = {"pioneer3dx": (0.05 ** 2, 0.01 ** 2, 0.03 ** 2, 0.01 ** 2)}
+"""Named ``RobotConfig.odometry_alphas``. ``"pioneer3dx"``: Stage's default odometry error for
+its differential-drive ("like a Pioneer") position model, ``odom_error [0.03 0.03 0.00 0.05]``
+(Stage 3.1 manual, Position model: proportions of error in x, y, z and heading), as the
+rot1-trans-rot2 model's variances — a 5 % standard deviation of each rotation (α1 = 0.05²) and
+3 % of each translation (α3 = 0.03²) — plus the cross terms Stage lacks, 0.01 rad per metre
+driven and 0.01 m per radian turned (α2 = α4 = 0.01²)."""
+
+
+def _check_alphas(value: object) -> tuple[float, float, float, float]:
+    """``robot.odometry_alphas``: four numbers ``>= 0`` or a preset name."""
+    if isinstance(value, str):
+        if value not in ODOMETRY_PRESETS:
+            raise ValueError(f"robot.odometry_alphas must be four numbers >= 0 or one of "
+                             f"{sorted(ODOMETRY_PRESETS)}, got {value!r}")
+        return ODOMETRY_PRESETS[value]
+    if isinstance(value, bytes) or not hasattr(value, "__len__") or len(value) != 4:
+        raise TypeError(f"robot.odometry_alphas must be four numbers >= 0 or one of "
+                        f"{sorted(ODOMETRY_PRESETS)}, got {value!r}")
+    return tuple(check_real(a, f"robot.odometry_alphas[{i}]", low=0.0, low_inclusive=True,
+                            high=1.0)
+                 for i, a in enumerate(value))
+
+
 @dataclass(frozen=True, slots=True)
 class RobotConfig:
     """A Pioneer3-DX-like differential-drive disc.
@@ -151,8 +178,17 @@ class RobotConfig:
         max_turn_rate: turn rate at action ``ω = 1``, degrees per second.
         dt: seconds of simulated time per env step.
         substeps: physics substeps per env step (fixed).
+        odometry_model: how odometry errs (:data:`ODOMETRY_MODELS`): ``"increment"``, Gaussian
+            noise on each step's increment scaled by ``odometry_noise``; ``"rot_trans_rot"``,
+            the rot1-trans-rot2 model of Thrun et al., *Probabilistic Robotics* (2005),
+            table 5.6 (``sample_motion_model_odometry``), scaled by ``odometry_alphas``
+            (``envs.two_robot_explore.robot.sample_odometry``).
         odometry_noise: ``(translation, rotation)`` relative standard deviations of the
-            odometry increments (``0`` = perfect odometry).
+            ``"increment"`` model (``0`` = perfect odometry).
+        odometry_alphas: ``(α1, α2, α3, α4)`` of the ``"rot_trans_rot"`` model, each ``>= 0``
+            (variances: rotation from rotation, rotation from translation, translation from
+            translation, translation from rotation), or the name of a preset of
+            :data:`ODOMETRY_PRESETS` (``"pioneer3dx"``), stored as its four numbers.
     """
 
     radius: float = 0.25
@@ -160,7 +196,9 @@ class RobotConfig:
     max_turn_rate: float = 100.0
     dt: float = 0.1
     substeps: int = 4
+    odometry_model: str = "increment"
     odometry_noise: tuple[float, float] = (0.0, 0.0)
+    odometry_alphas: tuple[float, float, float, float] | str = (0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         _set(self, "radius", check_real(self.radius, "robot.radius", low=0.0, high=2.0))
@@ -170,8 +208,22 @@ class RobotConfig:
                                                low=0.0, high=1000.0))
         _set(self, "dt", check_real(self.dt, "robot.dt", low=0.0, high=1.0))
         _set(self, "substeps", check_int(self.substeps, "robot.substeps", low=1))
+        _set(self, "odometry_model", _check_choice(self.odometry_model, "robot.odometry_model",
+                                                   ODOMETRY_MODELS))
         _set(self, "odometry_noise", _check_pair(self.odometry_noise, "robot.odometry_noise",
                                                  low=0.0, low_inclusive=True))
+        _set(self, "odometry_alphas", _check_alphas(self.odometry_alphas))
+        if self.odometry_model == "increment" and any(self.odometry_alphas):
+            raise ValueError(
+                f"robot.odometry_alphas apply to robot.odometry_model 'rot_trans_rot' only, got "
+                f"{self.odometry_alphas} with odometry_model 'increment'"
+            )
+        if self.odometry_model == "rot_trans_rot" and any(self.odometry_noise):
+            raise ValueError(
+                f"robot.odometry_noise applies to robot.odometry_model 'increment' only, got "
+                f"{self.odometry_noise} with odometry_model 'rot_trans_rot' (use "
+                f"robot.odometry_alphas)"
+            )
         step = self.max_speed * self.dt / self.substeps
         if step > self.radius:
             raise ValueError(

@@ -3,8 +3,9 @@
 :func:`build_space` makes a fresh ``pymunk.Space`` for an episode (walls from the world's
 segments, one dynamic disc per robot, contacts counted), and :class:`Robot` wraps one disc: it
 turns a ``(v, ω)`` command into body velocities before each physics substep, and keeps the
-robot's odometry in its own start frame. The physics is stepped once per substep for the whole
-space (never per robot).
+robot's odometry in its own start frame, erring as :attr:`RobotConfig.odometry_model` says
+(:func:`sample_odometry`). :meth:`Robot.odometry_frame` is where that frame has drifted to in the
+world. The physics is stepped once per substep for the whole space (never per robot).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 import pymunk
 
 from envs.two_robot_explore.config import RobotConfig
+from fusion.rigid import Rigid2D
 
 MOTOR_FORCE = 2000.0
 """Newtons (and newton-metres) the wheels can exert on the 10 kg disc: full speed in ~4 ms."""
@@ -40,7 +42,8 @@ class Robot:
     """
 
     __slots__ = ("index", "body", "shape", "motor", "joints", "sensor_filter", "start",
-                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true")
+                 "odometry", "collisions", "travelled", "_v", "_w", "_last_true", "_noise",
+                 "_alphas")
 
     def __init__(self, index: int, start: np.ndarray, cfg: RobotConfig) -> None:
         self.index = index
@@ -75,6 +78,10 @@ class Robot:
         self._v = 0.0
         self._w = 0.0
         self._last_true = tuple(self.start.tolist())  # true pose at the last odometry update
+        self._noise = cfg.odometry_noise
+        # the rot1-trans-rot2 model's alphas, None when that model is off or noise-free
+        self._alphas = (cfg.odometry_alphas if cfg.odometry_model == "rot_trans_rot"
+                        and any(cfg.odometry_alphas) else None)
 
     def command(self, v: float, w: float) -> None:
         """Set the forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) for the next step."""
@@ -97,14 +104,35 @@ class Robot:
         a = self.body.angle
         return p.x, p.y, math.atan2(math.sin(a), math.cos(a))
 
-    def update_odometry(self, noise: tuple[float, float], rng: np.random.Generator) -> None:
+    def odometry_frame(self) -> Rigid2D:
+        """The transform from the robot's current odometry frame to the world: true pose ∘
+        odometry⁻¹. With perfect odometry it is the start pose (the map frame); with drift it
+        moves, and the frame in which the robot's *current* surroundings are mapped right is
+        this one, so the drift-aware truth of a merge of robot ``j``'s map onto robot ``i``'s
+        is ``robots[i].odometry_frame().inverse() @ robots[j].odometry_frame()``
+        (:func:`envs.two_robot_explore.drift.drift_aware_truth`)."""
+        x, y, th = self._pose()
+        ox, oy, oth = self.odometry.tolist()
+        return Rigid2D(th, (x, y)) @ Rigid2D(oth, (ox, oy)).inverse()
+
+    def update_odometry(self, noise: tuple[float, float] | None,
+                        rng: np.random.Generator) -> None:
         """Integrate this step's true motion, seen in the robot frame, into :attr:`odometry`.
 
-        The increment ``(dx, dy, dθ)`` (robot frame at the step's start) gets Gaussian noise
-        with standard deviation ``noise[0] · |d|`` on translation and
-        ``noise[1] · |dθ| + noise[1] · 0.1 · |d|`` on rotation; with ``noise = (0, 0)`` the
-        odometry is the true pose expressed in the start frame.
+        Model ``"increment"`` (``noise``: ``RobotConfig.odometry_noise``, ``None`` = the
+        robot's config's): the increment ``(dx, dy, dθ)`` (robot frame at the step's start)
+        gets Gaussian noise with standard deviation ``noise[0] · |d|`` on translation and
+        ``noise[1] · |dθ| + noise[1] · 0.1 · |d|`` on rotation. Model ``"rot_trans_rot"``: the
+        increment is read through :func:`sample_odometry` with the config's alphas (``noise``
+        must then be ``None`` or zero). Noise-free (the default), the odometry is the true
+        pose expressed in the start frame and ``rng`` is not drawn from; otherwise each step
+        draws three standard normals from ``rng``.
         """
+        if noise is None:
+            noise = self._noise
+        if self._alphas is not None:
+            self._update_rot_trans_rot(rng)
+            return
         # Python floats throughout (the same IEEE arithmetic as numpy scalars, less overhead)
         x, y, th = self._pose()
         px, py, pth = self._last_true
@@ -126,6 +154,53 @@ class Robot:
         self.odometry[0] = ox + c * dx - s * dy
         self.odometry[1] = oy + s * dx + c * dy
         self.odometry[2] = math.atan2(math.sin(th), math.cos(th))
+
+    def _update_rot_trans_rot(self, rng: np.random.Generator) -> None:
+        """:meth:`update_odometry` for the ``"rot_trans_rot"`` model."""
+        x, y, th = self._pose()
+        px, py, pth = self._last_true
+        self._last_true = x, y, th
+        self.travelled += math.hypot(x - px, y - py)
+        rot1, trans, rot2 = sample_odometry((px, py, pth), (x, y, th), self._alphas, rng)
+        ox, oy, oth = self.odometry.tolist()
+        heading = oth + rot1
+        th = heading + rot2
+        self.odometry[0] = ox + trans * math.cos(heading)
+        self.odometry[1] = oy + trans * math.sin(heading)
+        self.odometry[2] = math.atan2(math.sin(th), math.cos(th))
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def sample_odometry(before: tuple[float, float, float], after: tuple[float, float, float],
+                    alphas: tuple[float, float, float, float],
+                    rng: np.random.Generator) -> tuple[float, float, float]:
+    """An odometry reading ``(rot1, trans, rot2)`` of the true motion ``before → after``
+    (poses ``(x, y, heading)``): the rot1-trans-rot2 model of Thrun, Burgard and Fox,
+    *Probabilistic Robotics* (2005), table 5.6, ``sample_motion_model_odometry``, read the way
+    ROS ``amcl``'s ``diff`` odometry model reads it (the alphas weigh variances):
+
+    ``rot1 − ε(α1·rot1² + α2·trans²)``, ``trans − ε(α3·trans² + α4·rot1² + α4·rot2²)``,
+    ``rot2 − ε(α1·rot2² + α2·trans²)``, ``ε(v)`` a zero-mean normal of variance ``v``
+    (three standard normals from ``rng``, always drawn). As in ``amcl`` a step backwards
+    (``rot1`` near ±π) has its rotation noise measured from π, and a turn in place
+    (``trans = 0``) has ``rot1 = 0``. Applied once per env step (``RobotConfig.dt``), so the
+    drift over a path depends on the step length as it does for a filter's update period.
+    """
+    a1, a2, a3, a4 = alphas
+    dx, dy = after[0] - before[0], after[1] - before[1]
+    trans = math.hypot(dx, dy)
+    rot1 = _wrap(math.atan2(dy, dx) - before[2]) if trans > 0.0 else 0.0
+    rot2 = _wrap(after[2] - before[2] - rot1)
+    r1 = min(abs(rot1), math.pi - abs(rot1))
+    r2 = min(abs(rot2), math.pi - abs(rot2))
+    t2 = trans * trans
+    n = rng.standard_normal(3)
+    return (rot1 - math.sqrt(a1 * r1 * r1 + a2 * t2) * float(n[0]),
+            trans - math.sqrt(a3 * t2 + a4 * (r1 * r1 + r2 * r2)) * float(n[1]),
+            rot2 - math.sqrt(a1 * r2 * r2 + a2 * t2) * float(n[2]))
 
 
 def start_frame_pose(start: np.ndarray, pose: np.ndarray) -> np.ndarray:
