@@ -2,13 +2,21 @@
 the grid alignment costs once a merge is in use.
 
     python benchmarks/merge_in_loop.py [--explorer frontier] [--worlds 20] [--size 20]
-        [--steps 3000] [--first-seed 0]
+        [--steps 3000] [--first-seed 0] [--odometry-noise S] [--odometry-alphas A]
 
 For each seed ``first_seed .. first_seed + worlds - 1`` (its own procedural ``size`` m
 building) one episode of ``--steps`` steps with a scripted team (``agents.scripted``), defaults
-otherwise. Every step with a transform in use is checked against the truth
-(``env.merge_errors()``): **wrong** is more than 5° or 1 m off at robot 1's map centroid — a
-merge that puts robot 1's rooms on the wrong rooms. Per episode: the first step merged, steps
+otherwise. Every step with a transform in use is checked against the **drift-aware** truth
+(``envs.two_robot_explore.drift.drift_aware_error``: the robots' current odometry frames, the
+errors at the robots' current places; with perfect odometry the start-frame truth):
+**wrong** is more than 5° or 1 m off — a merge that puts robot 1's rooms on the wrong rooms.
+``--odometry-noise S`` drives with ``robot.odometry_noise = (S, S)`` (the ``"increment"``
+model), ``--odometry-alphas A`` with the ``"rot_trans_rot"`` model (four numbers or a preset
+name); the table then adds the steps wrong against the env's start-frame truth
+(``env.merge_errors()``, at robot 1's map centroid), which no rigid transform can match once
+the maps are bent, the accepted merge results more than 5° off (drift-aware) at a confidence
+of 0.9 or more ("confident wrong"), and the robots' odometry drift at the end (metres, the
+larger of the two). Per episode: the first step merged, steps
 merged, steps wrong (and the first wrong transform's errors), the first step on a right
 transform (not wrong), transforms installed (each accepted merge that changed the one in use),
 merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them (the
@@ -28,6 +36,7 @@ Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -39,6 +48,8 @@ import fusion.grid_merge as grid_merge  # noqa: E402
 from agents.base import run_episode  # noqa: E402
 from agents.team import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
+from envs.two_robot_explore.drift import drift_aware_error  # noqa: E402
+from envs.two_robot_explore.robot import start_frame_pose  # noqa: E402
 
 WRONG_DEG, WRONG_M = 5.0, 1.0
 
@@ -63,24 +74,38 @@ class _GridClock:
         return out
 
 
+def robot_kwargs(noise: float, alphas: str | None) -> dict:
+    """The env's ``robot`` settings for ``--odometry-noise`` / ``--odometry-alphas``."""
+    if alphas is not None:
+        value = alphas if "," not in alphas else tuple(float(a) for a in alphas.split(","))
+        return {"odometry_model": "rot_trans_rot", "odometry_alphas": value}
+    return {"odometry_noise": (noise, noise)} if noise else {}
+
+
 def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock,
-            threshold: float | None = None) -> dict:
+            threshold: float | None = None, robot: dict | None = None) -> dict:
     """One episode's row of the table (module docstring), watched step by step."""
     mapping = {} if threshold is None else {"accept_threshold": threshold}
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
-                                            mapping=mapping)
+                                            mapping=mapping, robot=robot or {})
     clock.env = env
     row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,
-           "first_right": None, "installs": 0, "t95": None, "structural": 0, "grid": 0}
+           "first_right": None, "installs": 0, "t95": None, "structural": 0, "grid": 0,
+           "start_wrong": 0, "confident_wrong": 0, "drift": 0.0}
     last = [None]
     seen = [None]
 
     def watch(k, _obs, _rewards, infos):
+        robots = env.robots
         if env.merge is not seen[0]:  # a new merge result: who supplied an accepted one
             seen[0] = env.merge
             if env.merge is not None and env.merge.accepted:
                 row["grid" if getattr(env.merge, "supplied_by", None) == "grid"
                     else "structural"] += 1
+                rot, _ = drift_aware_error(env.merge.transform, robots[0], robots[1])
+                conf = getattr(env.merge, "confidence", None)
+                if rot > WRONG_DEG and conf is not None and conf >= 0.9:
+                    row["confident_wrong"] += 1
         t = env.shared.transform
         cov = next(iter(infos.values()))["true_coverage"] if infos else 0.0
         if row["t95"] is None and cov >= 0.95:
@@ -93,7 +118,9 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
         if t is not last[0]:
             row["installs"] += 1
             last[0] = t
-        rot, trans = env.merge_errors()
+        start_rot, start_trans = env.merge_errors()
+        row["start_wrong"] += start_rot > WRONG_DEG or start_trans > WRONG_M
+        rot, trans = drift_aware_error(t, robots[0], robots[1])
         if rot > WRONG_DEG or trans > WRONG_M:
             row["wrong"] += 1
             row["first_wrong"] = row["first_wrong"] or f"step {k}: {rot:.0f}° / {trans:.1f} m"
@@ -102,6 +129,8 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
 
     out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
     row.update(steps=out["steps"], drops=env.merge_state().drops)
+    row["drift"] = max(float(math.dist(start_frame_pose(r.start, r.true_pose())[:2],
+                                       r.odometry[:2])) for r in env.robots)
     return row
 
 
@@ -114,30 +143,42 @@ def main() -> None:
     parser.add_argument("--accept-threshold", type=float, default=None)
     parser.add_argument("--first-seed", type=int, default=0,
                         help="seed of the first world (100 and on: worlds never tuned on)")
+    parser.add_argument("--odometry-noise", type=float, default=0.0,
+                        help="robot.odometry_noise = (S, S), the 'increment' model")
+    parser.add_argument("--odometry-alphas", default=None,
+                        help="the 'rot_trans_rot' model: a preset name or a1,a2,a3,a4")
     args = parser.parse_args()
+    robot = robot_kwargs(args.odometry_noise, args.odometry_alphas)
     clock = _GridClock()
     print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m "
           f"(seeds {args.first_seed}-{args.first_seed + args.worlds - 1}), {args.steps} steps, "
-          f"accept_threshold {args.accept_threshold or 'default'}\n")
+          f"accept_threshold {args.accept_threshold or 'default'}, robot {robot or 'default'}\n")
     print("| seed | first merged | steps merged | steps wrong | first wrong | first right | "
-          "installs | drops | accepted: structural / grids | T95 |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "installs | drops | accepted: structural / grids | T95 | wrong (start frame) | "
+          "confident wrong | drift m |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     t0 = time.perf_counter()
     for seed in range(args.first_seed, args.first_seed + args.worlds):
-        r = episode(seed, args.explorer, args.steps, args.size, clock, args.accept_threshold)
+        r = episode(seed, args.explorer, args.steps, args.size, clock, args.accept_threshold,
+                    robot)
         rows.append(r)
         print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
               f"{r['first_wrong'] or ''} | {r['first_right'] or '-'} | {r['installs']} | "
-              f"{r['drops']} | {r['structural']} / {r['grid']} | {r['t95'] or '-'} |", flush=True)
+              f"{r['drops']} | {r['structural']} / {r['grid']} | {r['t95'] or '-'} | "
+              f"{r['start_wrong']} | {r['confident_wrong']} | {r['drift']:.2f} |", flush=True)
     wall = time.perf_counter() - t0
     steps = sum(r["steps"] for r in rows)
     merged = sum(r["merged"] for r in rows)
     wrong = sum(r["wrong"] for r in rows)
     print(f"\nmerged in {sum(r['first'] is not None for r in rows)} of {len(rows)} episodes; "
           f"a wrong transform in use in {sum(r['wrong'] > 0 for r in rows)}; steps wrong / "
-          f"merged: {wrong} / {merged} ({wrong / max(merged, 1):.1%}); drops "
-          f"{sum(r['drops'] for r in rows)}")
+          f"merged: {wrong} / {merged} ({wrong / max(merged, 1):.1%}), of all steps "
+          f"{wrong / max(steps, 1):.1%}; drops {sum(r['drops'] for r in rows)}")
+    print(f"steps wrong against the start-frame truth: {sum(r['start_wrong'] for r in rows)}; "
+          f"accepted results > {WRONG_DEG:g}° off at confidence >= 0.9: "
+          f"{sum(r['confident_wrong'] for r in rows)}; median drift "
+          f"{statistics.median(r['drift'] for r in rows):.2f} m")
     structural, grid = sum(r["structural"] for r in rows), sum(r["grid"] for r in rows)
     print(f"accepted merges supplied by the structural merge (grid-checked): {structural} of "
           f"{structural + grid} ({structural / max(structural + grid, 1):.0%}); by the grid "
