@@ -49,6 +49,12 @@ def _check_optional_real(value: object, name: str, **bounds: Any) -> float | Non
     return None if value is None else check_real(value, name, **bounds)
 
 
+def _check_bool(value: object, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
 def _set(obj: object, name: str, value: object) -> None:
     object.__setattr__(obj, name, value)
 
@@ -332,6 +338,9 @@ class MappingConfig:
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).
+        cycle_check: with three or more robots, keep only pairwise merges that the cycles
+            they close agree with (``fusion.team.consistent_edges``); ``False`` uses the
+            pairwise decisions alone (for ablations). No effect with two robots.
     """
 
     grid_resolution: float = 0.1
@@ -347,6 +356,7 @@ class MappingConfig:
     local_map_size: int = 64
     local_map_resolution: float = 0.15
     max_nodes: int = 32
+    cycle_check: bool = True
 
     def __post_init__(self) -> None:
         _set(self, "grid_resolution", check_real(self.grid_resolution,
@@ -384,6 +394,7 @@ class MappingConfig:
         _set(self, "max_nodes", check_int(self.max_nodes, "mapping.max_nodes", low=1))
         if self.max_nodes > 256:
             raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
+        _check_bool(self.cycle_check, "mapping.cycle_check")
 
     @property
     def sensor_model(self) -> SensorModel:
@@ -392,11 +403,42 @@ class MappingConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class CommConfig:
+    """Communication between robots (the env's manual, Communication).
+
+    Attributes:
+        range: two robots closer than this (metres, centre to centre) are in contact and
+            exchange their maps; robots in contact with a common teammate are in contact too
+            (multi-hop: the connected groups of the "in range" graph). ``None``: unlimited, all
+            robots always in contact.
+        line_of_sight: robots in range are in contact only if no wall lies between their
+            centres (sonar-band radios through walls are lossy).
+    """
+
+    range: float | None = None
+    line_of_sight: bool = False
+
+    def __post_init__(self) -> None:
+        _set(self, "range", _check_optional_real(self.range, "comm.range", low=0.0))
+        _check_bool(self.line_of_sight, "comm.line_of_sight")
+
+    @property
+    def unlimited(self) -> bool:
+        """Every robot always in contact (no range, no line of sight)."""
+        return self.range is None and not self.line_of_sight
+
+
+MAX_ROBOTS = 8
+"""Largest ``EnvConfig.n_robots``."""
+
+
+@dataclass(frozen=True, slots=True)
 class EnvConfig:
     """Everything that defines a ``two_robot_explore`` episode (the manual's Arguments table).
 
     Attributes:
-        world, robot, sonar, mapping: the groups above.
+        world, robot, sonar, mapping, comm: the groups above.
+        n_robots: robots in the team, ``2`` to :data:`MAX_ROBOTS`.
         max_cycles: truncation after this many steps.
         target_coverage: termination when the true covered fraction of the reachable free area
             reaches this, in ``(0, 1]``.
@@ -411,6 +453,8 @@ class EnvConfig:
     robot: RobotConfig = field(default_factory=RobotConfig)
     sonar: SonarConfig = field(default_factory=SonarConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
+    comm: CommConfig = field(default_factory=CommConfig)
+    n_robots: int = 2
     max_cycles: int = 1000
     target_coverage: float = 0.95
     reward_mode: str = "shared"
@@ -424,6 +468,10 @@ class EnvConfig:
         _set(self, "robot", config_from(RobotConfig, self.robot, "robot"))
         _set(self, "sonar", config_from(SonarConfig, self.sonar, "sonar"))
         _set(self, "mapping", config_from(MappingConfig, self.mapping, "mapping"))
+        _set(self, "comm", config_from(CommConfig, self.comm, "comm"))
+        _set(self, "n_robots", check_int(self.n_robots, "n_robots"))
+        if not 2 <= self.n_robots <= MAX_ROBOTS:
+            raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {self.n_robots}")
         _set(self, "max_cycles", check_int(self.max_cycles, "max_cycles", low=1))
         _set(self, "target_coverage", check_real(self.target_coverage, "target_coverage",
                                                  low=0.0, high=1.0))

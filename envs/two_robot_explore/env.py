@@ -323,12 +323,14 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from envs.two_robot_explore.actions import DISCRETE_ACTIONS, action_space, parse_actions
+from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.global_state import (
     STATE_MAP_SIZE,
     STATE_SAMPLES,
     STATE_SCALARS,
     GlobalState,
+    state_scalars,
     state_space,
 )
 from envs.two_robot_explore.mapping import (
@@ -339,11 +341,18 @@ from envs.two_robot_explore.mapping import (
     SharedMap,
     compose_pose,
 )
-from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES, MergeLoop, MergeState
+from envs.two_robot_explore.merging import (
+    MERGE_METHODS,
+    MERGE_SOURCES,
+    MergeState,
+    PairState,
+    TeamMerging,
+)
 from envs.two_robot_explore.observations import (
     MAX_CLEARANCE,
     MAX_DEGREE,
     N_NODE_FEATURES,
+    TEAMMATE_FEATURES,
     GraphEncoder,
     observation_space,
 )
@@ -354,11 +363,19 @@ from envs.two_robot_explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
 
 AGENTS = ("robot_0", "robot_1")
+"""The two-robot env's agents (``agent_names(2)``)."""
+
+
+def agent_names(n: int) -> tuple[str, ...]:
+    """The agents of an ``n``-robot team: ``robot_0 … robot_{n-1}``."""
+    return tuple(f"robot_{i}" for i in range(n))
+
 
 __all__ = ["AGENTS", "DISCRETE_ACTIONS", "MAX_CLEARANCE", "MAX_DEGREE", "MERGE_METHODS",
            "MERGE_SOURCES", "N_NODE_FEATURES", "STATE_MAP_SIZE", "STATE_SAMPLES",
-           "STATE_SCALARS", "MergeState", "TwoRobotExploreEnv", "env", "parallel_env",
-           "raw_env"]
+           "STATE_SCALARS", "TEAMMATE_FEATURES", "MergeState", "MultiRobotExploreEnv",
+           "PairState", "TwoRobotExploreEnv", "agent_names", "env", "multi_env",
+           "multi_parallel_env", "parallel_env", "raw_env", "state_scalars"]
 
 
 @dataclass(slots=True)
@@ -382,8 +399,9 @@ def _generator(state: dict[str, Any]) -> np.random.Generator:
     return rng
 
 
-class TwoRobotExploreEnv(ParallelEnv):
-    """The two-robot sonar exploration env; the module docstring is its manual.
+class MultiRobotExploreEnv(ParallelEnv):
+    """The sonar exploration env for a team of ``n_robots``; the module docstring is its
+    manual.
 
     Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`merge_state`; the global
     state for centralised critics: :meth:`state`, :attr:`state_space`.
@@ -403,11 +421,15 @@ class TwoRobotExploreEnv(ParallelEnv):
     """
 
     metadata = {
-        "name": "two_robot_explore_v0",
+        "name": "multi_robot_explore_v0",
         "render_modes": ["human", "rgb_array"],
         "render_fps": 10,
         "is_parallelizable": True,
     }
+
+    two_robot = False
+    """The ``two_robot_explore_v0`` layout: one ``teammate`` observation (5,) instead of
+    ``teammates`` (N − 1, 7), and no ``contacts``/``fused_robots`` infos."""
 
     def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
                  **kwargs: Any) -> None:
@@ -428,9 +450,13 @@ class TwoRobotExploreEnv(ParallelEnv):
                file_world: World | None) -> None:
         """Everything ``__init__`` builds from a checked config (a copy passes the world file
         it already loaded: ``file_world``)."""
+        if self.two_robot and config.n_robots != 2:
+            raise ValueError(f"n_robots must be 2 for {self.metadata['name']}, got "
+                             f"{config.n_robots}; use multi_robot_explore_v0 for larger teams")
         self.config = config
         self.render_mode = render_mode
-        self.possible_agents = list(AGENTS)
+        self.n_robots = config.n_robots
+        self.possible_agents = list(agent_names(config.n_robots))
         self.agents: list[str] = []
         self._max_cycles = config.max_cycles
         cfg = config
@@ -445,13 +471,13 @@ class TwoRobotExploreEnv(ParallelEnv):
             diag = math.hypot(*cfg.world.size)
         self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
         self._build_spaces()
-        self.state_space = state_space()
+        self.state_space = state_space(config.n_robots)
         self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
                                         cfg.mapping.local_map_resolution)
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
-        self._snapshots: list[RobotMapSnapshot | None] = [None, None]  # this step's, if taken
+        self._snapshots: list[RobotMapSnapshot | None] = [None] * config.n_robots
         self._history: _History | None = None  # how this episode came about (Copies)
 
     # ------------------------------------------------------------------ copies
@@ -459,7 +485,7 @@ class TwoRobotExploreEnv(ParallelEnv):
         """The state for ``pickle`` and ``copy`` (manual, Copies): the config, the render mode,
         the loaded world file, the generator's state, and how the episode came about — the
         generator's state at ``reset``, the start poses given, the commands of every step
-        since (a ``(steps, 2, 2)`` float64 array) and ``max_cycles`` changes — plus the
+        since (a ``(steps, N, 2)`` float64 array) and ``max_cycles`` changes — plus the
         original's step count, agents, poses and contact counts, which the restored env must
         reproduce. No physics or grids: :meth:`__setstate__` replays."""
         h = self._history
@@ -469,7 +495,8 @@ class TwoRobotExploreEnv(ParallelEnv):
                 "rng": h.rng_state,
                 "starts": h.starts,
                 "max_cycles": h.max_cycles,
-                "commands": np.array(h.commands, dtype=np.float64).reshape(-1, 2, 2),
+                "commands": np.array(h.commands, dtype=np.float64).reshape(
+                    -1, self.n_robots, 2),
                 "max_cycles_changes": list(h.max_cycles_changes),
                 "check": self._replay_check(),
             }
@@ -535,18 +562,19 @@ class TwoRobotExploreEnv(ParallelEnv):
             self.max_cycles = value
 
     def _replay_check(self) -> tuple:
-        """What a replay must reproduce: steps, agents, both robots' exact poses and
-        contact counts."""
+        """What a replay must reproduce: steps, agents, every robot's exact pose and
+        contact count."""
         return (self.steps, tuple(self.agents), tuple(r._pose() for r in self.robots),
                 tuple(r.collisions for r in self.robots))
 
     # ------------------------------------------------------------------ spaces
     def _build_spaces(self) -> None:
         """One observation and one action space object per agent, built once."""
-        self._observation_spaces = {a: observation_space(self.config, self.frame_radius)
-                                    for a in AGENTS}
-        self._action_spaces = {a: action_space(self.config.action_type) for a in AGENTS}
-        obs = self._observation_spaces[AGENTS[0]]
+        agents = self.possible_agents
+        self._observation_spaces = {a: observation_space(self.config, self.frame_radius,
+                                                         self.two_robot) for a in agents}
+        self._action_spaces = {a: action_space(self.config.action_type) for a in agents}
+        obs = self._observation_spaces[agents[0]]
         self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
         self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
         self._odo_bound = float(self._obs_high["odometry"][0])  # R as a float32 value
@@ -556,14 +584,16 @@ class TwoRobotExploreEnv(ParallelEnv):
         try:
             return self._observation_spaces[agent]
         except KeyError:
-            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+            raise ValueError(f"agent must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object every call)."""
         try:
             return self._action_spaces[agent]
         except KeyError:
-            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+            raise ValueError(f"agent must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
 
     @property
     def max_cycles(self) -> int:
@@ -615,18 +645,20 @@ class TwoRobotExploreEnv(ParallelEnv):
         else:
             self._world = procedural_world(cfg.world, rng, robot_radius=cfg.robot.radius)
         world = self._world
+        n = self.n_robots
         if starts is None:
             starts = world.sample_starts(rng, cfg.world.start_clearance,
-                                         cfg.world.min_start_separation)
+                                         cfg.world.min_start_separation, n)
         else:
             self._check_starts(starts)
-        self.robots = [Robot(i, starts[i], cfg.robot) for i in range(2)]
+        self.robots = [Robot(i, starts[i], cfg.robot) for i in range(n)]
         self.space = build_space(world.segments, self.robots)
-        self.caster = RayCaster(world.segments, cfg.robot.radius)
-        self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(2)]
+        self.caster = RayCaster(world.segments, cfg.robot.radius, robots=n)
+        self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(n)]
         # map frames: each robot's start; the truth frame_i -> world is its start pose
         self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
-        self.true_merge = self.frames[0].inverse() @ self.frames[1]
+        self._frame_inverses = [f.inverse() for f in self.frames]
+        self.true_merge = self._frame_inverses[0] @ self.frames[1]
         x0, y0, x1, y1 = world.extent
         corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
         self.maps = []
@@ -637,23 +669,27 @@ class TwoRobotExploreEnv(ParallelEnv):
             self.maps.append(RobotMap((-radius, -radius, radius, radius),
                                       cfg.mapping.grid_resolution, model))
         self.shared = SharedMap(self.maps[0].geometry)
-        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model)
+        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model,
+                                     robots=n)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
-        self._merging = MergeLoop(cfg.mapping)
-        self._extracted_at = [0, 0]  # known cells of each map at its last extraction
+        self._merging = TeamMerging(n, cfg.mapping)
+        self.views = TeamViews(self.maps, cfg.comm)
+        self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0
-        self._snapshots = [None, None]
+        self._snapshots = [None] * n
         self._state = GlobalState(world.extent, self.frames[0], self.oracle, self.shared)
-        self._prev_collisions = [0, 0]
+        self._prev_collisions = [0] * n
         self._shared_delta = 0
-        self._own_delta = [0, 0]
+        self._own_delta = [0] * n
         self._oracle_delta = 0
-        self._coll_delta = [0, 0]
+        self._coll_delta = [0] * n
         self._graphs = [GraphEncoder(cfg.mapping.max_nodes, self.frame_radius)
-                        for _ in range(2)]
-        self.agents = list(AGENTS)
+                        for _ in range(n)]
+        self.agents = list(self.possible_agents)
         self._ready = True
-        self._sense_and_map(travelled=[0.0, 0.0])
+        self._contacts_changed = False
+        self._contact(0)
+        self._sense_and_map(travelled=[0.0] * n)
         self._history = history
 
     def _parse_options(self, options: dict[str, Any] | None) -> np.ndarray | None:
@@ -664,18 +700,19 @@ class TwoRobotExploreEnv(ParallelEnv):
         unknown = sorted(str(k) for k in options if k != "start_poses")
         if unknown:
             warnings.warn(
-                f"reset options {unknown} are not used by two_robot_explore_v0; known: "
+                f"reset options {unknown} are not used by {self.metadata['name']}; known: "
                 f"['start_poses']", stacklevel=3)
         if "start_poses" not in options:
             return None
         try:
             starts = np.asarray(options["start_poses"], dtype=np.float64)
         except (TypeError, ValueError) as exc:
-            raise TypeError("options['start_poses'] must be numeric [[x, y, theta], "
-                            "[x, y, theta]]") from exc
-        if starts.shape != (2, 3) or not np.all(np.isfinite(starts)):
-            raise ValueError(f"options['start_poses'] must be finite with shape (2, 3), got "
-                             f"{starts.tolist()}")
+            raise TypeError("options['start_poses'] must be numeric [[x, y, theta], ...], "
+                            "one row per robot") from exc
+        n = self.n_robots
+        if starts.shape != (n, 3) or not np.all(np.isfinite(starts)):
+            raise ValueError(f"options['start_poses'] must be finite with shape ({n}, 3) (one "
+                             f"[x, y, theta] per robot), got {starts.tolist()}")
         return starts
 
     def _check_starts(self, starts: np.ndarray) -> None:
@@ -687,8 +724,11 @@ class TwoRobotExploreEnv(ParallelEnv):
                 raise ValueError(
                     f"options['start_poses'][{k}] = {starts[k, :2].tolist()} is not a drivable "
                     f"position of world {world.name!r} (free with robot clearance)")
-        if math.dist(starts[0, :2], starts[1, :2]) < 2 * self.config.robot.radius:
-            raise ValueError("options['start_poses'] put the two robots on top of each other")
+        for i in range(len(starts)):
+            for j in range(i + 1, len(starts)):
+                if math.dist(starts[i, :2], starts[j, :2]) < 2 * self.config.robot.radius:
+                    raise ValueError(f"options['start_poses'] put robots {i} and {j} on top "
+                                     f"of each other")
 
     # ------------------------------------------------------------------ step
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -698,7 +738,8 @@ class TwoRobotExploreEnv(ParallelEnv):
             raise RuntimeError(
                 "step() called after the episode ended (all agents terminated or truncated); "
                 "call reset() to start a new episode")
-        self._advance(parse_actions(actions, self.agents, AGENTS, self.config.action_type))
+        self._advance(parse_actions(actions, self.agents, self.possible_agents,
+                                    self.config.action_type))
         rewards = self._rewards()
         terminations = self._terminations()
         truncations = self._truncations()
@@ -711,13 +752,16 @@ class TwoRobotExploreEnv(ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _advance(self, commands: list[tuple[float, float]]) -> None:
-        """One step's state change from both robots' parsed ``(v, ω)`` commands (recorded
-        for copies): physics, odometry, sensing, mapping, merging; no outputs."""
+        """One step's state change from every robot's parsed ``(v, ω)`` commands (recorded
+        for copies): physics, contacts, odometry, sensing, mapping, merging; no outputs."""
         self._apply_actions(commands)
         self._simulate()
         self.steps += 1
-        self._snapshots = [None, None]
-        travelled = [0.0, 0.0]
+        n = self.n_robots
+        self._snapshots = [None] * n
+        self._shared_delta = 0
+        self._contact(self.steps)
+        travelled = [0.0] * n
         for i, robot in enumerate(self.robots):
             before = robot.travelled
             robot.update_odometry(self.config.robot.odometry_noise, self._rng)
@@ -747,7 +791,6 @@ class TwoRobotExploreEnv(ParallelEnv):
         cfg = self.config
         scfg = cfg.sonar
         half = math.radians(scfg.cone) / 2.0
-        self._shared_delta = 0
         self._oracle_delta = 0
         poses = [robot.true_pose() for robot in self.robots]
         for i, pose in enumerate(poses):
@@ -762,7 +805,7 @@ class TwoRobotExploreEnv(ParallelEnv):
                                    sonar.mount_radius, scfg.max_range, half)
             n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
             self._own_delta[i] = n_fresh
-            if n_fresh:
+            if n_fresh and (i == 0 or self.views.in_contact(0, i)):
                 self._shared_delta += self.shared.add(i, rmap, (slice(r0, r1), slice(c0, c1)))
             self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
@@ -776,8 +819,38 @@ class TwoRobotExploreEnv(ParallelEnv):
                     rmap.extract(cfg.mapping.topo)
                     self._graphs[i].refresh(rmap.topomap)
 
+    def _contact(self, step: int) -> None:
+        """Who is in contact now (before this step's odometry and scans enter the maps);
+        robot 0's fused map takes in what a merged teammate met again mapped meanwhile."""
+        gained = self.views.update(step, np.array([r._pose()[:2] for r in self.robots]),
+                                   [r.odometry for r in self.robots], self.space)
+        if gained or not self.config.comm.unlimited:
+            self._contacts_changed = True
+        for i, j in gained:
+            if i == 0 and j in self.shared.members:
+                self._shared_delta += self.shared.add(j, self.maps[j],
+                                                      self.maps[j].known_window())
+
     def _fuse(self) -> None:
-        self._shared_delta += self._merging.step(self.steps, self.maps, self.shared)
+        """Merge the pairs due; when what a robot knows changes, its fused map (robot 0's
+        is rebuilt)."""
+        changed = self._merging.step(self.steps, self.views)
+        if not (changed or self._contacts_changed):
+            return
+        self._contacts_changed = False
+        centres = {}
+        for i, m in enumerate(self.maps):
+            win = m.known_window()
+            if win is not None:
+                g = m.geometry
+                centres[i] = np.array([g.origin[0] + 0.5 * (win[1].start + win[1].stop)
+                                       * g.resolution,
+                                       g.origin[1] + 0.5 * (win[0].start + win[0].stop)
+                                       * g.resolution])
+        if 0 in self._merging.refresh(self.steps, self.views, centres):
+            members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
+            known = {j: self.views.view(0, j) for j in (0, *members)}
+            self._shared_delta += self.shared.rebuild(known, members)
 
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:
@@ -792,7 +865,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             gained = self._shared_delta * self.shared.geometry.resolution ** 2
         else:
             gained = self._oracle_delta * self.oracle.geometry.resolution ** 2
-        r = float(cfg.coverage_reward * gained - cfg.collision_penalty * (coll[0] + coll[1])
+        r = float(cfg.coverage_reward * gained - cfg.collision_penalty * sum(coll)
                   - cfg.time_penalty)
         return dict.fromkeys(self.agents, r)
 
@@ -809,26 +882,14 @@ class TwoRobotExploreEnv(ParallelEnv):
         return dict.fromkeys(self.agents, self._truncated())
 
     # ------------------------------------------------------------------ observations
-    def _poses_across(self) -> list[np.ndarray] | None:
-        """Each robot's odometry pose in the other robot's frame, via the merge transform
-        (robot 0's by its inverse, robot 1's by it); ``None`` before a merge. Robot ``i``'s
-        entry places it on its teammate's map (``local_map``), the other is its ``teammate``."""
-        t = self.shared.transform
-        if t is None:
-            return None
-        return [compose_pose(self.shared.inverse, self.robots[0].odometry),
-                compose_pose(t, self.robots[1].odometry)]
-
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        across = self._poses_across()
-        return {a: self._observe_one(i, across) for i, a in enumerate(AGENTS)
+        return {a: self._observe_one(i) for i, a in enumerate(self.possible_agents)
                 if a in self.agents}
 
-    def _observe_one(self, i: int, across: list[np.ndarray] | None) -> dict[str, np.ndarray]:
+    def _observe_one(self, i: int) -> dict[str, np.ndarray]:
         cfg = self.config
         robot = self.robots[i]
         odo = robot.odometry
-        lo, hi = self._obs_low, self._obs_high
         ox, oy, oth = odo.tolist()
         c, s = math.cos(oth), math.sin(oth)
         # clipped as floats, then rounded: the bounds are float32 values, so this is the
@@ -837,42 +898,76 @@ class TwoRobotExploreEnv(ParallelEnv):
         odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
         sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
         nodes, mask, adj = self._graphs[i].encode(self.maps[i].topomap, ox, oy, c, s)
-        teammate = np.zeros(5, dtype=np.float32)
-        if across is not None:
-            peer = across[1 - i]
-            dx, dy = peer[0] - ox, peer[1] - oy
-            dth = peer[2] - oth
-            teammate[:] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
-            np.clip(teammate, lo["teammate"], hi["teammate"], out=teammate)
-        return {
+        obs = {
             "sonar": sonar,
             "odometry": odometry,
             "graph_nodes": nodes,
             "graph_mask": mask,
             "graph_adjacency": adj,
-            "local_map": self._local_map(i, across),
-            "teammate": teammate,
+            "local_map": self._local_map(i),
         }
+        if self.two_robot:
+            obs["teammate"] = self._teammate(i, 1 - i, ox, oy, oth, c, s, "teammate")
+        else:
+            obs["teammates"] = np.stack([self._teammate(i, j, ox, oy, oth, c, s, "teammates")
+                                         for j in range(self.n_robots) if j != i])
+        return obs
 
-    def _local_map(self, i: int, across: list[np.ndarray] | None) -> np.ndarray:
+    def _teammate(self, i: int, j: int, ox: float, oy: float, oth: float, c: float,
+                  s: float, key: str) -> np.ndarray:
+        """Robot ``i``'s observation row of teammate ``j`` (manual, Observations, c)."""
+        lo, hi = self._obs_low[key], self._obs_high[key]
+        width = 5 if self.two_robot else TEAMMATE_FEATURES
+        row = np.zeros(width, dtype=np.float32)
+        frame = self._merging.frames[i].get(j)
+        peer_odo = self.views.odometry(i, j, [r.odometry for r in self.robots])
+        if frame is not None and peer_odo is not None:
+            peer = compose_pose(frame[0], peer_odo)
+            dx, dy = peer[0] - ox, peer[1] - oy
+            dth = peer[2] - oth
+            row[:5] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
+        if not self.two_robot:
+            seen = int(self.views.seen[i, j])
+            row[5] = float(self.views.in_contact(i, j))
+            row[6] = 1.0 if seen < 0 else min((self.steps - seen) / self._max_cycles, 1.0)
+        np.clip(row, lo if lo.ndim == 1 else lo[0], hi if hi.ndim == 1 else hi[0], out=row)
+        return row
+
+    def _local_map(self, i: int) -> np.ndarray:
         own = self.maps[i]
-        other = None
-        if across is not None:
-            peer = self.maps[1 - i]
-            other = (peer.states, peer.geometry, across[i])
-        return self._sampler.image(own.states, own.geometry, self.robots[i].odometry, other)
+        odo = self.robots[i].odometry
+        others = []
+        for j, (_, from_i) in self._merging.frames[i].items():
+            if j != i:
+                peer = self.views.view(i, j)
+                others.append((peer.states, peer.geometry, compose_pose(from_i, odo)))
+        return self._sampler.image(own.states, own.geometry, odo, others)
 
     # ------------------------------------------------------------------ infos
+    def true_transform(self, i: int, j: int) -> Rigid2D:
+        """The true transform from robot ``j``'s map frame into robot ``i``'s (their start
+        poses)."""
+        if (i, j) == (0, 1):
+            return self.true_merge
+        return self._frame_inverses[i] @ self.frames[j]
+
     def merge_errors(self) -> tuple[float, float]:
-        """Rotation error (degrees) and translation error (metres, at the centroid of robot
-        1's map) of the merge transform in use against ground truth; NaN before a merge."""
-        return self._merging.errors(self.shared.transform, self.maps[1].topomap,
-                                    self.true_merge, self.robots[1].odometry[:2])
+        """Rotation error (degrees) and translation error (metres, at the centroid of the
+        teammate's map) of the merge transforms in use in robot 0's fused map against ground
+        truth, the largest over its teammates; NaN when it has none."""
+        worst = (math.nan, math.nan)
+        for j, (to_0, _) in sorted(self.shared.members.items()):
+            rot, trans = self._merging.errors(j, to_0, self.views.view(0, j).topomap,
+                                              self.true_transform(0, j),
+                                              self.robots[j].odometry[:2])
+            worst = (rot, trans) if math.isnan(worst[0]) else (max(worst[0], rot),
+                                                               max(worst[1], trans))
+        return worst
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         """Small, numeric, comparable infos (manual, Infos): no NaN, no wall clock, no live
         objects, so that equal episodes give equal infos and infos are cheap to send."""
-        in_use = self.shared.transform is not None
+        in_use = bool(self.shared.members)
         rot_err, trans_err = self.merge_errors() if in_use else (0.0, 0.0)
         common = {
             "true_coverage": self.oracle.fraction,
@@ -881,8 +976,8 @@ class TwoRobotExploreEnv(ParallelEnv):
             "shared_coverage": self.shared.area / self._world_area,
             "overlap": self.oracle.overlap,
             "merge_accepted": in_use,
-            "merge_method": MERGE_METHODS.index(self._merging.method),
-            "merge_source": MERGE_SOURCES.index(self._merging.source),
+            "merge_method": MERGE_METHODS.index(self._merging.pair01.method),
+            "merge_source": MERGE_SOURCES.index(self._merging.pair01.source),
             "merge_errors_valid": in_use,
             "merge_rotation_error_deg": rot_err,
             "merge_translation_error_m": trans_err,
@@ -890,7 +985,7 @@ class TwoRobotExploreEnv(ParallelEnv):
             "merge_drops": self._merging.drops,
         }
         out = {}
-        for i, a in enumerate(AGENTS):
+        for i, a in enumerate(self.possible_agents):
             if a not in self.agents:
                 continue
             rmap = self.maps[i]
@@ -902,6 +997,9 @@ class TwoRobotExploreEnv(ParallelEnv):
                 "pose": robot.true_pose(),
                 "odometry": robot.odometry.copy(),
             }
+            if not self.two_robot:
+                out[a]["contacts"] = len(self.views.contacts(i))
+                out[a]["fused_robots"] = len(self._merging.frames[i])
         return out
 
     # ------------------------------------------------------------------ snapshots, state
@@ -914,24 +1012,43 @@ class TwoRobotExploreEnv(ParallelEnv):
         of a step and shared by that step's later calls.
         """
         self._require_reset()
-        try:
-            i = AGENTS.index(agent)
-        except ValueError:
-            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}") from None
+        i = self._index(agent, "agent")
         snap = self._snapshots[i]
         if snap is None:
             snap = RobotMapSnapshot.of(self.maps[i], self.robots[i].odometry, self.steps)
             self._snapshots[i] = snap
         return snap
 
-    def merge_state(self) -> MergeState:
-        """The merge state now (:class:`MergeState`: the transform in use, the method that
-        supplied it, the last merge result, counts, the last merge call's wall time)."""
+    def _index(self, agent: str, name: str) -> int:
+        try:
+            return self.possible_agents.index(agent)
+        except ValueError:
+            raise ValueError(f"{name} must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
+
+    def teammate_map(self, agent: str, teammate: str) -> RobotMapSnapshot | None:
+        """``teammate``'s map as ``agent`` knows it (manual, Communication): a read-only
+        :class:`~envs.two_robot_explore.mapping.RobotMapSnapshot` of its live map while the
+        two are in contact, of the copy from their last contact after that (``step`` says
+        when), ``None`` if they never were in contact. ``teammate == agent``: its own map."""
         self._require_reset()
-        return self._merging.state(self.shared.transform)
+        i, j = self._index(agent, "agent"), self._index(teammate, "teammate")
+        if self.views.in_contact(i, j):
+            return self.robot_map(teammate)
+        view = self.views.view(i, j)
+        if view is None:
+            return None
+        return RobotMapSnapshot.of(view, self.views.odometry(i, j, []), int(self.views.seen[i, j]))
+
+    def merge_state(self) -> MergeState:
+        """The merge state now (:class:`MergeState`: the robot-1 → robot-0 transform in use,
+        what supplied it, the last merge result, counts, the last merge call's wall time; each
+        pair's state, each robot's fused map and frames, the contacts)."""
+        self._require_reset()
+        return self._merging.state(self.views, self.shared.transform)
 
     def state(self) -> np.ndarray:
-        """The global state for centralised critics: a ``(STATE_SCALARS + 3 ·
+        """The global state for centralised critics: a ``(state_scalars(N) + 3 ·
         STATE_MAP_SIZE²,)`` float32 vector in :attr:`state_space` (manual, State)."""
         self._require_reset()
         return self._state.vector([r._pose() for r in self.robots], self.oracle, self.shared,
@@ -959,14 +1076,25 @@ class TwoRobotExploreEnv(ParallelEnv):
             self._renderer = None
 
 
+class TwoRobotExploreEnv(MultiRobotExploreEnv):
+    """``two_robot_explore_v0``: the team of two (``n_robots`` must be 2) with the layout its
+    users rely on — one ``teammate`` observation (5,) and no ``contacts``/``fused_robots``
+    infos; everything else is :class:`MultiRobotExploreEnv` (the manual)."""
+
+    metadata = {**MultiRobotExploreEnv.metadata, "name": "two_robot_explore_v0"}
+    two_robot = True
+
+
 def parallel_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
                  **kwargs: Any) -> TwoRobotExploreEnv:
-    """The native ``ParallelEnv`` (arguments: see the manual's Arguments table)."""
+    """The native ``ParallelEnv`` of ``two_robot_explore_v0`` (arguments: see the manual's
+    Arguments table)."""
     return TwoRobotExploreEnv(config, render_mode=render_mode, **kwargs)
 
 
 raw_env = TwoRobotExploreEnv
-"""The unwrapped env class (native parallel; there is no separate AEC implementation)."""
+"""The unwrapped two-robot env class (native parallel; there is no separate AEC
+implementation)."""
 
 
 def env(config: EnvConfig | None = None, *, render_mode: str | None = None,
@@ -974,3 +1102,16 @@ def env(config: EnvConfig | None = None, *, render_mode: str | None = None,
     """The AEC version: PettingZoo's ``parallel_to_aec`` (order-enforcing) around
     :func:`parallel_env`."""
     return parallel_to_aec(parallel_env(config, render_mode=render_mode, **kwargs))
+
+
+def multi_parallel_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+                       **kwargs: Any) -> MultiRobotExploreEnv:
+    """The native ``ParallelEnv`` of ``multi_robot_explore_v0`` (``n_robots`` 2–8; arguments:
+    see the manual's Arguments table)."""
+    return MultiRobotExploreEnv(config, render_mode=render_mode, **kwargs)
+
+
+def multi_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+              **kwargs: Any) -> AECEnv:
+    """The AEC version of :func:`multi_parallel_env`."""
+    return parallel_to_aec(multi_parallel_env(config, render_mode=render_mode, **kwargs))

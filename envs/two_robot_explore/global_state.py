@@ -25,15 +25,22 @@ STATE_SAMPLES = 4
 """Each state map block is the mean of ``STATE_SAMPLES²`` points sampled evenly inside it."""
 
 STATE_SCALARS = 12
-"""Entries of the state vector before its maps (manual, State)."""
+"""Entries of the two-robot state vector before its maps (manual, State):
+``state_scalars(2)``."""
 
 
-def state_space() -> spaces.Box:
-    """The state vector's space: ``(STATE_SCALARS + 3 · STATE_MAP_SIZE²,)`` float32 in
-    ``[0, 1]``, the headings' cosines and sines in ``[-1, 1]``."""
-    n = STATE_SCALARS + 3 * STATE_MAP_SIZE ** 2
+def state_scalars(robots: int) -> int:
+    """Entries of the state vector before its maps: 4 per robot, then 4 (manual, State)."""
+    return 4 * robots + 4
+
+
+def state_space(robots: int = 2) -> spaces.Box:
+    """The state vector's space: ``(state_scalars(robots) + 3 · STATE_MAP_SIZE²,)`` float32
+    in ``[0, 1]``, the headings' cosines and sines in ``[-1, 1]``."""
+    n = state_scalars(robots) + 3 * STATE_MAP_SIZE ** 2
     low = np.zeros(n, dtype=np.float32)
-    low[[2, 3, 6, 7]] = -1.0  # cos, sin of the headings
+    for i in range(robots):
+        low[4 * i + 2: 4 * i + 4] = -1.0  # cos, sin of the headings
     return spaces.Box(low, np.ones(n, dtype=np.float32), dtype=np.float32)
 
 
@@ -75,13 +82,15 @@ class GlobalState:
         """The state now, from both robots' true ``poses`` ``(x, y, θ)``, the coverage, the
         shared map and the step count (manual, State)."""
         x0, y0, x1, y1 = self.extent
-        head = np.zeros(STATE_SCALARS, dtype=np.float64)
+        n = len(poses)
+        head = np.zeros(state_scalars(n), dtype=np.float64)
         for i, (x, y, th) in enumerate(poses):
             head[4 * i: 4 * i + 4] = ((x - x0) / (x1 - x0), (y - y0) / (y1 - y0),
                                       math.cos(th), math.sin(th))
-        head[[0, 1, 4, 5]] = np.clip(head[[0, 1, 4, 5]], 0.0, 1.0)
-        head[8:] = (oracle.fraction, oracle.overlap, float(shared.transform is not None),
-                    min(steps / max_cycles, 1.0))
+        xy = [4 * i + k for i in range(n) for k in (0, 1)]
+        head[xy] = np.clip(head[xy], 0.0, 1.0)
+        head[4 * n:] = (oracle.fraction, oracle.overlap, len(shared.members) / (n - 1),
+                        min(steps / max_cycles, 1.0))
         return np.concatenate([
             head.astype(np.float32),
             _blocks(oracle.union, self._world_cells),

@@ -22,6 +22,7 @@ larger code (occupied wins over free, known over unknown).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +171,19 @@ class RobotMap:
                 b[2], b[3] = min(b[2], c0), max(b[3], c1)
         return counts
 
+    def copy(self) -> RobotMap:
+        """An independent copy (grid, known cells, topological map): what a teammate keeps of
+        this map after their contact ends."""
+        out = RobotMap.__new__(RobotMap)
+        out.grid = self.grid.copy()
+        out.geometry = self.geometry
+        out.states = out.grid.states()
+        out.ever = self.ever.copy()
+        out.n_ever = self.n_ever
+        out.bbox = None if self.bbox is None else list(self.bbox)
+        out.topomap = self.topomap
+        return out
+
     def known_window(self) -> tuple[slice, slice] | None:
         """Slices of :attr:`bbox` (``None`` before the first scan)."""
         if self.bbox is None:
@@ -220,37 +234,39 @@ class RobotMapSnapshot:
 
 
 class SharedMap:
-    """The team's map in robot 0's frame: ``map_0 ∪ transform · map_1`` (known cells).
+    """A robot's fused map in its own frame: its known cells and those of the teammates merged
+    with it, each moved by its transform into this frame (``map_0 ∪ T_01 · map_1 ∪ …``). The
+    env keeps robot 0's (the team map the reward counts).
 
     Attributes:
-        ever: ``(H, W)`` bool cells known in the shared map, robot 0's geometry.
+        ever: ``(H, W)`` bool cells known in the fused map, the owner's geometry.
         count: ``ever.sum()`` kept incrementally.
-        transform: the merge transform in use (B → A), ``None`` until a merge is accepted.
-        inverse: ``transform.inverse()`` (A → B), kept with it (``None`` likewise).
+        members: ``{j: (to_owner, from_owner)}`` for each merged teammate ``j``: its frame →
+            the owner's and back (``fusion.Rigid2D``); empty until a merge is accepted.
+        owner: the robot whose frame and map it is built on.
     """
 
-    __slots__ = ("geometry", "ever", "count", "_transform", "_inverse")
+    __slots__ = ("geometry", "ever", "count", "members", "owner")
 
-    def __init__(self, geometry: Geometry) -> None:
+    def __init__(self, geometry: Geometry, owner: int = 0) -> None:
         self.geometry = geometry
+        self.owner = owner
         self.ever = np.zeros(geometry.shape, dtype=bool)
         self.count = 0
-        self.transform = None
+        self.members: dict[int, tuple[Rigid2D, Rigid2D]] = {}
 
     @property
     def transform(self) -> Rigid2D | None:
-        """The merge transform in use (B → A); setting it also sets :attr:`inverse`."""
-        return self._transform
-
-    @transform.setter
-    def transform(self, value: Rigid2D | None) -> None:
-        self._transform = value
-        self._inverse = None if value is None else value.inverse()
+        """Robot 1's frame → the owner's (robot 0's) in use, ``None`` when robot 1 is not
+        merged (the two-robot env's "merge transform in use")."""
+        member = self.members.get(1)
+        return None if member is None else member[0]
 
     @property
     def inverse(self) -> Rigid2D | None:
-        """``transform.inverse()`` (A → B), ``None`` before a merge."""
-        return self._inverse
+        """``transform``'s inverse (``None`` likewise)."""
+        member = self.members.get(1)
+        return None if member is None else member[1]
 
     @property
     def area(self) -> float:
@@ -258,18 +274,20 @@ class SharedMap:
         return self.count * self.geometry.resolution ** 2
 
     def add(self, index: int, robot_map: RobotMap, window: tuple[slice, slice] | None) -> int:
-        """OR robot ``index``'s newly known cells in ``window`` into the shared map; returns how
-        many shared cells became known (robot 1 counts only once a merge is accepted)."""
+        """OR robot ``index``'s known cells in ``window`` of ``robot_map`` (its map, or the
+        owner's copy of it) into the fused map; returns how many fused cells became known
+        (a teammate counts only while merged)."""
         if window is None:
             return 0
-        if index == 0:
+        if index == self.owner:
             rs, cs = window
             new = or_patch(self.ever, robot_map.ever[rs, cs], rs.start, cs.start)
         else:
-            if self.transform is None:
+            member = self.members.get(index)
+            if member is None:
                 return 0
             res = warp_window(self.geometry, robot_map.geometry, robot_map.ever, window,
-                              self.transform, self.inverse)
+                              member[0], member[1])
             if res is None:
                 return 0
             (rs, cs), vals = res
@@ -277,17 +295,18 @@ class SharedMap:
         self.count += new
         return new
 
-    def rebuild(self, map_0: RobotMap, map_1: RobotMap, transform: Rigid2D | None) -> int:
-        """Start over with a new merge transform (``None``: robot 0's map alone, the merge
-        dropped); returns the change of the known cell count (negative if the new transform
-        overlaps more, or robot 1's cells leave)."""
+    def rebuild(self, maps: Mapping[int, RobotMap],
+                members: Mapping[int, tuple[Rigid2D, Rigid2D]]) -> int:
+        """Start over with new merged teammates (``members`` as the attribute; ``maps``: the
+        owner's map and each member's as the owner knows it); returns the change of the known
+        cell count (negative if a new transform overlaps more, or teammates leave)."""
         before = self.count
-        self.transform = transform
-        self.ever[...] = map_0.ever
-        self.count = map_0.n_ever
-        win = map_1.known_window()
-        if win is not None and transform is not None:
-            self.add(1, map_1, win)
+        self.members = dict(members)
+        own = maps[self.owner]
+        self.ever[...] = own.ever
+        self.count = own.n_ever
+        for j in sorted(self.members):
+            self.add(j, maps[j], maps[j].known_window())
         return self.count - before
 
 
@@ -305,16 +324,17 @@ class OracleCoverage:
 
     Attributes:
         swept: per robot, ``(H, W)`` bool world cells it has swept; ``n_swept``: their counts.
-        union: ``(H, W)`` bool, world cells swept by either robot.
-        both: cells swept by both; ``covered``: reachable cells swept by either (the coverage
-            numerator); ``count``: ``union.sum()``.
+        union: ``(H, W)`` bool, world cells swept by any robot.
+        both: sweeps of a cell another robot swept before; ``covered``: reachable cells swept
+            by any robot (the coverage numerator); ``count``: ``union.sum()``.
     """
 
     __slots__ = ("geometry", "reachable", "n_reachable", "swept", "n_swept", "union", "both",
                  "covered", "count", "_model")
 
     def __init__(self, extent: tuple[float, float, float, float], resolution: float,
-                 reachable: np.ndarray, model: SensorModel | None = None) -> None:
+                 reachable: np.ndarray, model: SensorModel | None = None,
+                 robots: int = 2) -> None:
         # the robots' cell size and sensor model
         grid = OccupancyGrid(resolution=resolution, extent=extent, model=model)
         self.geometry = geometry_of(grid)
@@ -327,8 +347,8 @@ class OracleCoverage:
                              f"known (|l_free| and l_occupied above threshold), got {m}")
         self.reachable = reachable
         self.n_reachable = int(np.count_nonzero(reachable))
-        self.swept = [np.zeros(self.geometry.shape, dtype=bool) for _ in range(2)]
-        self.n_swept = [0, 0]
+        self.swept = [np.zeros(self.geometry.shape, dtype=bool) for _ in range(robots)]
+        self.n_swept = [0] * robots
         self.union = np.zeros(self.geometry.shape, dtype=bool)
         self.both = 0
         self.covered = 0
@@ -341,9 +361,14 @@ class OracleCoverage:
 
     @property
     def overlap(self) -> float:
-        """Fraction of the smaller robot sweep also swept by the other robot."""
-        small = min(self.n_swept)
-        return self.both / small if small else 0.0
+        """How much the robots swept twice: cells swept again by another robot over the most
+        that could be (all but the largest sweep). With two robots, the fraction of the
+        smaller robot's sweep the other also swept."""
+        if len(self.n_swept) == 2:
+            small = min(self.n_swept)
+            return self.both / small if small else 0.0
+        most = sum(self.n_swept) - max(self.n_swept)
+        return (sum(self.n_swept) - self.count) / most if most else 0.0
 
     @property
     def area(self) -> float:
@@ -397,16 +422,22 @@ class LocalMapSampler:
         return out
 
     def image(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
-              other: tuple[np.ndarray, Geometry, np.ndarray] | None = None) -> np.ndarray:
+              others: Sequence[tuple[np.ndarray, Geometry, np.ndarray]] = ()) -> np.ndarray:
         """The ``(1, size, size)`` uint8 ``local_map``: :data:`LOCAL_MAP_VALUES` of
-        :meth:`sample`'s states, with ``other`` = ``(states, geometry, pose)`` of a second
-        grid of the cell-wise maximum of both samples (as ``sample(..., out=...)``); one
-        compiled pass, a fresh array."""
+        :meth:`sample`'s states, with ``others`` = ``(states, geometry, pose)`` of further
+        grids of the cell-wise maximum of all samples (as ``sample(..., out=...)``); one
+        compiled pass for up to one other grid, a fresh array."""
         img = np.empty((1, self.size, self.size), dtype=np.uint8)
-        if other is None:
+        if len(others) > 1:
+            out = self.sample(states, geometry, pose)
+            for st, g, p in others:
+                self.sample(st, g, p, out=out)
+            img[0] = LOCAL_MAP_VALUES[out].reshape(self.size, self.size)
+            return img
+        if not others:
             states2, g2, pose2 = NO_STATES, geometry, pose
         else:
-            states2, g2, pose2 = other
+            states2, g2, pose2 = others[0]
         sample_image(img, LOCAL_MAP_VALUES, self._steps, self._steps, states,
                      geometry.origin[0], geometry.origin[1], geometry.resolution,
                      float(pose[0]), float(pose[1]), float(pose[2]), states2, g2.origin[0],

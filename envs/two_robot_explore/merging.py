@@ -14,13 +14,17 @@ is dropped (the shared map is robot 0's alone).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
+from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
 from envs.two_robot_explore.config import MappingConfig
-from envs.two_robot_explore.mapping import RobotMap, SharedMap
+from envs.two_robot_explore.mapping import RobotMap
 from fusion.rigid import Rigid2D
+from fusion.team import CycleCheck, Edge, consistent_edges, frames_from
 from topo.graph import TopoMap
 from topo.grid import OccupancyGrid
 
@@ -35,18 +39,46 @@ the merge result that supplied the transform in use (``"none"``: no transform in
 
 
 @dataclass(frozen=True, slots=True)
-class MergeState:
-    """The merge state at one env step (``TwoRobotExploreEnv.merge_state``).
+class PairState:
+    """One robot pair's merging at one env step (``MergeState.pairs``).
 
     Attributes:
-        transform: the robot-1 → robot-0 transform in use (``fusion.Rigid2D``, ``p_0 = R p_1 +
-            T``), ``None`` when none is (never merged, or dropped).
-        method: ``method`` of the merge result that supplied it (``"none"`` without one).
+        transform: ``T_ij`` in use, robot j's frame → robot i's (``i < j``), ``None`` if none.
+        confidence: the last merge call's calibrated confidence (0 before the first).
+        method, source: what supplied the transform in use (as :class:`MergeState`).
+        calls, drops: merge calls of this pair; transforms dropped (the grids refuted them).
+        kept: the transform in use passes the team's cycle check (with everything the team
+            knows; ``False`` without a transform).
+    """
+
+    transform: Rigid2D | None
+    confidence: float
+    method: str
+    source: str
+    calls: int
+    drops: int
+    kept: bool
+
+
+@dataclass(frozen=True, slots=True)
+class MergeState:
+    """The merge state at one env step (``merge_state()``).
+
+    Attributes:
+        transform: the robot-1 → robot-0 transform in use in robot 0's fused map
+            (``fusion.Rigid2D``, ``p_0 = R p_1 + T``), ``None`` when robot 1 is not in it.
+        method: ``method`` of the merge result that supplied robot pair (0, 1)'s transform
+            (``"none"`` without one).
         source: what supplied it: ``"structural"`` (the topological maps' merge) or ``"grid"``
             (the grid alignment); ``"none"`` without one.
         last: the last merge call's ``fusion.MergeResult`` (``None`` before the first).
         merges: merge calls this episode; ``drops``: transforms dropped (the grids refuted them).
         time_s: wall time of the last merge call, seconds (NaN before the first).
+        pairs: ``{(i, j): PairState}`` for every robot pair ``i < j`` (each pair's confidence).
+        frames: ``frames[i][j]``: robot j's frame → robot i's, for every robot j in robot i's
+            fused map (``frames[i][i]`` is the identity).
+        fused: ``fused[i]``: the robots of robot i's fused map (its merged component), sorted.
+        contacts: ``contacts[i]``: the teammates robot i is in contact with now.
     """
 
     transform: Rigid2D | None
@@ -56,6 +88,10 @@ class MergeState:
     merges: int
     drops: int
     time_s: float
+    pairs: dict[tuple[int, int], PairState] = field(default_factory=dict)
+    frames: tuple[dict[int, Rigid2D], ...] = ()
+    fused: tuple[tuple[int, ...], ...] = ()
+    contacts: tuple[tuple[int, ...], ...] = ()
 
 
 def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
@@ -83,57 +119,57 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
     return merge_maps(map_a, map_b, method=method), None
 
 
-class MergeLoop:
-    """One episode's merging (module docstring): the schedule, and what supplied the transform
-    in use.
+class PairLoop:
+    """One robot pair's merging (``i < j``): its schedule, the transform in use and what
+    supplied it. The pair is merged only while the two robots are in contact, on their live
+    maps; ``history`` keeps every change of its transform in use, so that a teammate learns
+    of it when it learns the maps (``TeamMerging``).
 
     Attributes:
+        i, j: the robots.
         result: the last merge call's result (``None`` before the first).
-        calls: merge calls; ``drops``: transforms dropped because the grids refuted them.
-        method, source: the result ``method`` and the :data:`MERGE_SOURCES` name of what
-            supplied the transform in use (``"none"`` without one).
-        time_s: wall time of the last merge call, seconds (NaN before the first).
+        calls, drops: merge calls; transforms dropped because the grids refuted them.
+        method, source: what supplied the transform in use (``"none"`` without one).
+        transform: ``T_ij`` in use (robot j's frame → robot i's), ``None`` if none.
+        history: ``(step, transform or None, confidence)`` of every change of it.
+        last_run: the step of the last merge call (``-1`` before).
     """
 
-    def __init__(self, config: MappingConfig) -> None:
+    __slots__ = ("i", "j", "config", "result", "calls", "drops", "method", "source",
+                 "transform", "history", "last_run", "_grid_checked_at", "_grid_tried_at",
+                 "_merged_maps")
+
+    def __init__(self, i: int, j: int, config: MappingConfig) -> None:
+        self.i, self.j = i, j
         self.config = config
         self.result: Any = None
         self.calls = 0
         self.drops = 0
         self.method = "none"
         self.source = "none"
-        self.time_s = math.nan
+        self.transform: Rigid2D | None = None
+        self.history: list[tuple[int, Rigid2D | None, float]] = []
+        self.last_run = -1
+        self._grid_checked_at = 0  # step the grid alignment was last considered
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self._merged_maps: tuple = (None, None)  # the topological maps of the last merge
-        self._errors: tuple | None = None  # (transform, robot 1's map, truth, errors) last
 
-    def step(self, steps: int, maps: list[RobotMap], shared: SharedMap) -> int:
-        """Merge if one is due at step ``steps`` and keep the result; returns the change of
-        the shared map's known cells (a new transform rebuilds it)."""
-        try_grids = self._due(steps, maps)
-        if try_grids is None:
-            return 0
+    def due(self, steps: int, map_i: RobotMap, map_j: RobotMap) -> bool | None:
+        """``None`` if this pair has nothing to merge at merge step ``steps``, else whether it
+        also tries the grids (and then counts them as tried). The grid alignment is
+        considered at most every ``grid_merge_every`` steps (considering it uses the slot)."""
         cfg = self.config
-        result, refuted = run_merge(maps[0].topomap, maps[1].topomap, cfg.merge_method,
-                                    maps[0].grid, maps[1].grid, try_grids=try_grids,
-                                    in_use=shared.transform,
-                                    accept_threshold=cfg.accept_threshold)
-        return self._install(result, refuted, maps, shared)
-
-    def _due(self, steps: int, maps: list[RobotMap]) -> bool | None:
-        """``None`` if no merge is due at step ``steps``, else whether it also tries the grids
-        (and then counts it as tried)."""
-        cfg = self.config
-        if not cfg.merge_every or cfg.merge_method == "none" or steps % cfg.merge_every:
-            return None
         # the structural merge needs 3 nodes a map; the grid alignment (hybrid) only grids
-        small = min(m.topomap.n_nodes for m in maps) < 3
+        small = min(map_i.topomap.n_nodes, map_j.topomap.n_nodes) < 3
         if small and cfg.merge_method != "hybrid":
             return None
-        known = maps[0].n_ever + maps[1].n_ever
-        try_grids = bool(cfg.grid_merge_every and steps % cfg.grid_merge_every == 0
-                         and known >= self._grid_tried_at * (1.0 + cfg.grid_merge_growth))
-        topomaps = (maps[0].topomap, maps[1].topomap)
+        known = map_i.n_ever + map_j.n_ever
+        slot = bool(cfg.grid_merge_every
+                    and steps - self._grid_checked_at >= cfg.grid_merge_every)
+        if slot:
+            self._grid_checked_at = steps
+        try_grids = slot and known >= self._grid_tried_at * (1.0 + cfg.grid_merge_growth)
+        topomaps = (map_i.topomap, map_j.topomap)
         unchanged = topomaps[0] is self._merged_maps[0] and topomaps[1] is self._merged_maps[1]
         if (small or unchanged) and not try_grids:
             return None  # no structural merge to try, or the same maps: the same answer
@@ -142,51 +178,189 @@ class MergeLoop:
             self._grid_tried_at = known
         return try_grids
 
-    def _install(self, result: Any, refuted: str | None, maps: list[RobotMap],
-                 shared: SharedMap) -> int:
-        """Keep a merge's result; an accepted new transform re-warps the shared map, and one
-        the grids ``refuted`` (why, from :func:`run_merge`) is dropped: robot 0's map alone.
-        Returns the change of the shared map's known cells."""
+    def run(self, steps: int, map_i: RobotMap, map_j: RobotMap, try_grids: bool) -> bool:
+        """Merge the two maps now and keep the result; returns whether the transform in use
+        changed (a new one accepted, or the one in use dropped)."""
+        cfg = self.config
+        result, refuted = run_merge(map_i.topomap, map_j.topomap, cfg.merge_method,
+                                    map_i.grid, map_j.grid, try_grids=try_grids,
+                                    in_use=self.transform,
+                                    accept_threshold=cfg.accept_threshold)
         self.result = result
         self.calls += 1
-        self.time_s = float(result.time_s)
-        if result.accepted and (shared.transform is None
-                                or not result.transform.allclose(shared.transform)):
+        self.last_run = steps
+        confidence = float(getattr(result, "confidence", 0.0))
+        if result.accepted and (self.transform is None
+                                or not result.transform.allclose(self.transform)):
             if result.method not in MERGE_METHODS:
                 raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
                                    f"code; known: {list(MERGE_METHODS)}")
             self.method = result.method
             # a hybrid result says what supplied it; any other method is the structural merge
             self.source = getattr(result, "supplied_by", None) or "structural"
-            return shared.rebuild(maps[0], maps[1], result.transform)
-        if refuted is not None and shared.transform is not None:
+            self.transform = result.transform
+            self.history.append((steps, self.transform, confidence))
+            return True
+        if refuted is not None and self.transform is not None:
             self.drops += 1
             self.method = "none"
             self.source = "none"
-            return shared.rebuild(maps[0], maps[1], None)
-        return 0
+            self.transform = None
+            self.history.append((steps, None, confidence))
+            return True
+        return False
 
-    def errors(self, transform: Rigid2D | None, map_b: TopoMap, truth: Rigid2D,
+    def known(self, step: int) -> tuple[Rigid2D | None, float]:
+        """The transform in use and its confidence as of ``step`` (``(None, 0)`` before)."""
+        for s, transform, confidence in reversed(self.history):
+            if s <= step:
+                return transform, confidence
+        return None, 0.0
+
+
+class TeamMerging:
+    """One episode's merging for the whole team: the pairs' merges, scheduled; each robot's
+    fused map (its merged component and the frames into its own) from what it knows.
+
+    Every ``merge_every`` steps, pairs in contact are considered, at most
+    ``max(1, N // 2)`` merged per merge step (so a robot's share of the merge cost does not
+    grow with the team): first pairs that would join two robots not yet in one fused map,
+    then the least recently merged. Robot ``i`` knows a pair's transform as it was at the
+    later of its last contacts with the pair's two robots, and fuses the maps it holds
+    (``TeamViews``) along the pairs that pass the cycle check (``fusion.team``).
+
+    Attributes:
+        pairs: ``{(i, j): PairLoop}``.
+        result, calls, drops, time_s: the last merge call's result; totals; its wall time.
+        frames: ``frames[i]``: ``{j: (to_i, from_i)}`` for each robot j in robot i's fused map.
+        check: the team's cycle check with everything known (for ``merge_state``).
+    """
+
+    def __init__(self, n: int, config: MappingConfig) -> None:
+        self.n = n
+        self.config = config
+        self.pairs = {(i, j): PairLoop(i, j, config) for i in range(n) for j in range(i + 1, n)}
+        self.result: Any = None
+        self.calls = 0
+        self.drops = 0
+        self.time_s = math.nan
+        ident = Rigid2D.identity()
+        self.frames: list[dict[int, tuple[Rigid2D, Rigid2D]]] = [{i: (ident, ident)}
+                                                                 for i in range(n)]
+        self.check: CycleCheck | None = None
+        self._keys: list[tuple | None] = [None] * n
+        self._per_step = max(1, n // 2)
+        self._errors: dict[int, tuple] = {}
+
+    @property
+    def pair01(self) -> PairLoop:
+        """Robot pair (0, 1) (the two-robot env's only pair)."""
+        return self.pairs[(0, 1)]
+
+    def step(self, steps: int, views: TeamViews) -> bool:
+        """Merge the pairs due at step ``steps``; returns whether a pair's transform changed."""
+        cfg = self.config
+        if not cfg.merge_every or cfg.merge_method == "none" or steps % cfg.merge_every:
+            return False
+        changed = False
+        runs = 0
+        for pair in self._order(views):
+            if runs == self._per_step:
+                break
+            mi, mj = views.maps[pair.i], views.maps[pair.j]
+            try_grids = pair.due(steps, mi, mj)
+            if try_grids is None:
+                continue
+            changed |= pair.run(steps, mi, mj, try_grids)
+            runs += 1
+            self.result = pair.result
+            self.calls += 1
+            self.time_s = float(pair.result.time_s)
+            self.drops = sum(p.drops for p in self.pairs.values())
+        return changed
+
+    def _order(self, views: TeamViews) -> list[PairLoop]:
+        """Pairs in contact, those joining two fused maps first, then least recently run."""
+        if self.n == 2:
+            return [self.pair01] if views.in_contact(0, 1) else []
+        comp = {}
+        for i in range(self.n):
+            for j in self.frames[i]:
+                comp.setdefault(j, min(self.frames[i]))
+        live = [p for p in self.pairs.values() if views.in_contact(p.i, p.j)]
+        return sorted(live, key=lambda p: (comp.get(p.i) == comp.get(p.j), p.last_run, p.i,
+                                           p.j))
+
+    def refresh(self, steps: int, views: TeamViews, centres: dict[int, np.ndarray]) -> list[int]:
+        """Recompute each robot's fused map from what it knows now; returns the robots whose
+        fused map changed (members or frames)."""
+        changed = []
+        for r in range(self.n):
+            key = self._knowledge(r, steps, views)
+            if key == self._keys[r]:
+                continue
+            self._keys[r] = key
+            edges = [Edge(i, j, t, c) for (i, j), (t, c) in key if t is not None]
+            held = {j for j in range(self.n) if views.view(r, j) is not None}
+            edges = [e for e in edges if e.i in held and e.j in held]
+            check = consistent_edges(edges, centres, check=self.config.cycle_check)
+            frames = frames_from(r, check.kept)
+            old = self.frames[r]
+            if frames.keys() != old.keys() or any(
+                    frames[j][0] is not old[j][0] and not frames[j][0].allclose(old[j][0])
+                    for j in frames):
+                self.frames[r] = frames
+                changed.append(r)
+        edges = [Edge(p.i, p.j, p.transform, p.history[-1][2]) for p in self.pairs.values()
+                 if p.transform is not None]
+        self.check = consistent_edges(edges, centres, check=self.config.cycle_check)
+        return changed
+
+    def _knowledge(self, r: int, steps: int, views: TeamViews) -> tuple:
+        """What robot ``r`` knows of the pairs' transforms: ``((i, j), (transform,
+        confidence))`` for each pair with one, as of its latest contact with i or j."""
+        out = []
+        for (i, j), pair in self.pairs.items():
+            if not pair.history:
+                continue
+            if views.in_contact(r, i) or views.in_contact(r, j):
+                known = (pair.transform, pair.history[-1][2])
+            else:
+                known = pair.known(int(max(views.seen[r, i], views.seen[r, j])))
+            out.append(((i, j), known))
+        return tuple(out)
+
+    def errors(self, j: int, transform: Rigid2D, map_j: TopoMap, truth: Rigid2D,
                fallback: Any) -> tuple[float, float]:
-        """Rotation error (degrees) and translation error (metres, at the centroid of robot 1's
-        map ``map_b``; at ``fallback``, robot 1's position, when it has no node) of
-        ``transform`` against ``truth``; NaN without a transform. The last answer is kept
+        """Rotation error (degrees) and translation error (metres, at the centroid of robot
+        j's map ``map_j``; at ``fallback``, its position, when it has no node) of ``transform``
+        (robot j → the reference robot) against ``truth``. The last answer per robot is kept
         while the transform, the map and the truth stay the same objects."""
-        if transform is None:
-            return math.nan, math.nan
-        cached = self._errors
-        if (cached is not None and cached[0] is transform and cached[1] is map_b
+        cached = self._errors.get(j)
+        if (cached is not None and cached[0] is transform and cached[1] is map_j
                 and cached[2] is truth):
             return cached[3]
-        xy = map_b.xy
+        xy = map_j.xy
         at = xy.mean(axis=0) if len(xy) else fallback
         errors = (math.degrees(transform.rotation_error(truth)),
                   transform.translation_error(truth, at))
         # with no nodes the errors are measured at the moving robot: not kept
-        self._errors = (transform, map_b, truth, errors) if len(xy) else None
+        if len(xy):
+            self._errors[j] = (transform, map_j, truth, errors)
+        else:
+            self._errors.pop(j, None)
         return errors
 
-    def state(self, transform: Rigid2D | None) -> MergeState:
-        """A :class:`MergeState` with ``transform``, the one in use."""
-        return MergeState(transform, self.method, self.source, self.result, self.calls,
-                          self.drops, self.time_s)
+    def state(self, views: TeamViews, transform: Rigid2D | None) -> MergeState:
+        """A :class:`MergeState` (``transform``: robot 1 → robot 0 in robot 0's fused map)."""
+        kept = set() if self.check is None else set(self.check.kept)
+        pairs = {k: PairState(p.transform, float(getattr(p.result, "confidence", 0.0))
+                              if p.result is not None else 0.0, p.method, p.source, p.calls,
+                              p.drops, k in kept)
+                 for k, p in self.pairs.items()}
+        p01 = self.pair01
+        return MergeState(transform, p01.method, p01.source, self.result, self.calls,
+                          self.drops, self.time_s, pairs,
+                          tuple({j: f[0] for j, f in fr.items()} for fr in self.frames),
+                          tuple(tuple(sorted(fr)) for fr in self.frames),
+                          tuple(views.contacts(i) for i in range(self.n)))

@@ -24,9 +24,17 @@ N_NODE_FEATURES = 2 + len(NodeKind) + 3
 """Per node: ``x, y``, the kind one-hot, degree, clearance, frontier flag (the manual)."""
 
 
-def observation_space(config: EnvConfig, frame_radius: float) -> spaces.Dict:
+TEAMMATE_FEATURES = 7
+"""Per teammate in ``teammates``: ``x, y``, ``cos, sin`` of the relative heading, valid flag,
+in-contact flag, age of the last contact (the manual)."""
+
+
+def observation_space(config: EnvConfig, frame_radius: float,
+                      two_robot: bool = False) -> spaces.Dict:
     """One robot's observation space (manual, Observations); ``frame_radius`` bounds the
-    odometry (metres from the robot's start) and twice it the relative positions."""
+    odometry (metres from the robot's start) and twice it the relative positions.
+    ``two_robot``: the ``two_robot_explore_v0`` layout, one ``teammate`` (5,) instead of
+    ``teammates`` (N − 1, 7)."""
     r = frame_radius
     n = config.mapping.max_nodes
     size = config.mapping.local_map_size
@@ -37,16 +45,22 @@ def observation_space(config: EnvConfig, frame_radius: float) -> spaces.Dict:
     node_hi[:, :2] = 2 * r
     node_hi[:, -3] = MAX_DEGREE
     node_hi[:, -2] = MAX_CLEARANCE
-    return spaces.Dict({
+    obs = {
         "sonar": spaces.Box(0.0, 1.0, (len(config.sonar.angles),), f32),
         "odometry": spaces.Box(np.array([-r, -r, -1, -1], f32), np.array([r, r, 1, 1], f32)),
         "graph_nodes": spaces.Box(node_lo, node_hi, dtype=f32),
         "graph_mask": spaces.Box(0.0, 1.0, (n,), f32),
         "graph_adjacency": spaces.Box(0.0, 1.0, (n, n), f32),
         "local_map": spaces.Box(0, 255, (1, size, size), np.uint8),
-        "teammate": spaces.Box(np.array([-2 * r, -2 * r, -1, -1, 0], f32),
-                               np.array([2 * r, 2 * r, 1, 1, 1], f32)),
-    })
+    }
+    lo = np.array([-2 * r, -2 * r, -1, -1, 0, 0, 0], f32)
+    hi = np.array([2 * r, 2 * r, 1, 1, 1, 1, 1], f32)
+    if two_robot:
+        obs["teammate"] = spaces.Box(lo[:5], hi[:5])
+    else:
+        n = config.n_robots - 1
+        obs["teammates"] = spaces.Box(np.tile(lo, (n, 1)), np.tile(hi, (n, 1)))
+    return spaces.Dict(obs)
 
 
 class GraphEncoder:

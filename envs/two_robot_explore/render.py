@@ -25,7 +25,9 @@ if TYPE_CHECKING:
 PANEL = 320
 """Side of one panel in pixels (the frame is 2 × 2 panels)."""
 
-ROBOT_COLOURS = ((220, 60, 40), (40, 100, 220))
+ROBOT_COLOURS = ((220, 60, 40), (40, 100, 220), (40, 160, 70), (200, 150, 20),
+                 (150, 60, 190), (20, 170, 170), (200, 60, 140), (110, 110, 110))
+"""One colour per robot (``robot_0`` … ``robot_7``)."""
 STATE_COLOURS = np.array([[150, 150, 150], [255, 255, 255], [20, 20, 20]], dtype=np.uint8)
 """Panel colour of each cell state: unknown grey, free white, occupied black."""
 
@@ -134,7 +136,7 @@ class Renderer:
             pose = robot.true_pose()
             origins = sonar.origins(pose)
             half = math.radians(sonar.cfg.cone) / 2
-            colour = (240, 120, 100) if i == 0 else (100, 140, 240)
+            colour = tuple(min(255, c + 60) for c in ROBOT_COLOURS[i])
             for (ox, oy), a, r in zip(origins.tolist(), sonar.angles.tolist(),
                                       sonar.last.tolist(), strict=True):
                 th = pose[2] + a
@@ -167,42 +169,44 @@ class Renderer:
                     f" m2", (offset[0] + 4, offset[1] + 4))
 
     def _shared_panel(self, env: TwoRobotExploreEnv, offset: tuple[int, int]) -> None:
-        m0, m1 = env.maps
+        m0 = env.maps[0]
         win0 = m0.known_window()
-        t = env.shared.transform
         if win0 is None:
             return
+        members = env.shared.members
         g = m0.geometry
         rows, cols = win0
-        states = m0.states
-        if t is not None and m1.known_window() is not None:
-            moved = warp_window(g, m1.geometry, m1.states, m1.known_window(), t)
-            if moved is not None:
-                (r1, c1), vals = moved
+        moved = []
+        for j, (to_0, _) in sorted(members.items()):
+            mj = env.views.view(0, j)
+            if mj.known_window() is None:
+                continue
+            warped = warp_window(g, mj.geometry, mj.states, mj.known_window(), to_0)
+            if warped is not None:
+                moved.append(warped)
+                (r1, c1), _ = warped
                 rows = slice(min(rows.start, r1.start), max(rows.stop, r1.stop))
                 cols = slice(min(cols.start, c1.start), max(cols.stop, c1.stop))
-                states = m0.states[rows, cols].copy()
-                sub = (slice(r1.start - rows.start, r1.stop - rows.start),
-                       slice(c1.start - cols.start, c1.stop - cols.start))
-                np.maximum(states[sub], vals, out=states[sub])
-            else:
-                states = m0.states[rows, cols]
-        else:
-            states = m0.states[rows, cols]
+        states = m0.states[rows, cols].copy()
+        for (r1, c1), vals in moved:
+            sub = (slice(r1.start - rows.start, r1.stop - rows.start),
+                   slice(c1.start - cols.start, c1.stop - cols.start))
+            np.maximum(states[sub], vals, out=states[sub])
         box = (g.origin[0] + cols.start * g.resolution, g.origin[1] + rows.start * g.resolution,
                g.origin[0] + cols.stop * g.resolution, g.origin[1] + rows.stop * g.resolution)
         view = _View(box, offset)
         self._blit_cells(STATE_COLOURS[states], g, rows, cols, view)
         merge = env.merge
-        if t is None:
+        if (len(members) == 1 and merge is not None and merge.accepted
+                and getattr(merge, "merged", None) is not None):
+            self._draw_graph(merge.merged, view)  # the last merge fused the two graphs
+        else:  # each graph moved by its transform in use
             self._draw_graph(m0.topomap, view)
-        elif merge is not None and merge.accepted and getattr(merge, "merged", None) is not None:
-            self._draw_graph(merge.merged, view)
-        else:  # merged earlier; the last attempt (a re-examination) kept the transform in use
-            self._draw_graph(m0.topomap, view)
-            self._draw_graph(m1.topomap, view, t)
-        status = "merged" if t is not None else "not merged"
-        self._label(f"shared map (robot_0 frame), {status}", (offset[0] + 4, offset[1] + 4))
+            for j, (to_0, _) in sorted(members.items()):
+                self._draw_graph(env.views.view(0, j).topomap, view, to_0)
+        n = len(members) + 1
+        status = f"{n} of {env.n_robots} robots merged" if members else "not merged"
+        self._label(f"fused map (robot_0 frame), {status}", (offset[0] + 4, offset[1] + 4))
 
     # ------------------------------------------------------------------ frame
     def draw(self, env: TwoRobotExploreEnv) -> np.ndarray | None:

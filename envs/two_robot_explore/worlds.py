@@ -139,12 +139,14 @@ class World:
         return out
 
     def sample_starts(self, rng: np.random.Generator, clearance: float,
-                      min_separation: float) -> np.ndarray:
-        """Two start poses ``(2, 3)`` ``(x, y, heading)``: drivable cells with at least
-        ``clearance`` metres of free space, ``min_separation`` apart, random headings.
+                      min_separation: float, n: int = 2) -> np.ndarray:
+        """``n`` start poses ``(n, 3)`` ``(x, y, heading)``: drivable cells with at least
+        ``clearance`` metres of free space, each ``min_separation`` from the others, random
+        headings (the first two drawn as for a pair, then each from the cells far enough
+        from those before).
 
         Raises:
-            ValueError: the map has no such cells, or no pair that far apart.
+            ValueError: the map has no such cells, or no ``n`` that far apart.
         """
         ok = self.drivable & (self.clearance >= clearance)
         cells = np.flatnonzero(ok)
@@ -163,13 +165,24 @@ class World:
                 f"world {self.name!r} is too small for two robots: no start cells "
                 f"{min_separation} m apart (world.min_start_separation)"
             )
-        second = int(far[rng.integers(len(far))])
-        poses = np.empty((2, 3))
-        for k, c in enumerate((first, second)):
+        chosen = [first, int(far[rng.integers(len(far))])]
+        while len(chosen) < n:
+            ok_far = np.ones(len(cells), dtype=bool)
+            for c in chosen:
+                cy, cx = divmod(c, w)
+                ok_far &= np.hypot(iy - cy, ix - cx) * self.resolution >= min_separation
+            far = cells[ok_far]
+            if len(far) == 0:
+                raise ValueError(
+                    f"world {self.name!r} is too small for {n} robots: no start cells "
+                    f"{min_separation} m apart (world.min_start_separation)")
+            chosen.append(int(far[rng.integers(len(far))]))
+        poses = np.empty((n, 3))
+        for k, c in enumerate(chosen):
             cy, cx = divmod(c, w)
             poses[k, 0] = self.origin[0] + (cx + 0.5) * self.resolution
             poses[k, 1] = self.origin[1] + (cy + 0.5) * self.resolution
-        poses[:, 2] = rng.uniform(-math.pi, math.pi, size=2)
+        poses[:, 2] = rng.uniform(-math.pi, math.pi, size=n)
         return poses
 
 

@@ -47,7 +47,8 @@ def test_rgb_array_shows_robot_1_in_the_shared_panel_once_merged():
     for _ in range(50):
         par.step({a: np.array([0.8, 0.2]) for a in par.agents})
     assert par.maps[1].topomap.n_nodes
-    par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
+    par.shared.rebuild({0: par.maps[0], 1: par.maps[1]},
+                       {1: (par.true_merge, par.true_merge.inverse())})
     par._merging.result = SimpleNamespace(accepted=True, merged=par.maps[0].topomap)  # robot 0's graph
     own_graph = par.render()
     par._merging.result = SimpleNamespace(accepted=False, merged=par.maps[0].topomap)  # kept transform

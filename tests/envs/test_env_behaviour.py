@@ -11,6 +11,7 @@ from conftest import SMALL
 from envs import two_robot_explore_v0
 from envs.two_robot_explore.env import MERGE_METHODS
 from envs.two_robot_explore.mapping import compose_pose
+from fusion.rigid import Rigid2D
 
 
 def _flatten(par, obs, rewards, terms, truncs, infos):
@@ -117,14 +118,24 @@ def test_windowed_bookkeeping_matches_the_whole_grid():
         assert rmap.ever[:, c0].any() and rmap.ever[:, c1 - 1].any()
 
 
+def _use_transform(par, transform):
+    """Put ``transform`` (robot 1 → robot 0) in use as a merge would: both robots' fused maps
+    and robot 0's shared map."""
+    ident = Rigid2D.identity()
+    inverse = transform.inverse()
+    par._merging.frames[0] = {0: (ident, ident), 1: (transform, inverse)}
+    par._merging.frames[1] = {1: (ident, ident), 0: (inverse, transform)}
+    par.shared.rebuild({0: par.maps[0], 1: par.maps[1]}, {1: (transform, inverse)})
+
+
 def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
     # without dropouts (a "no echo" belief clears space through walls) and odometry noise, the
     # robots' maps hold what the sonars truly swept: with the true transform the shared map
     # covers what the oracle counts, up to the range noise and nearest-cell resampling
     _, par = _episode(8, 150, sonar={"dropout_prob": 0.0})
-    par.shared.rebuild(par.maps[0], par.maps[1], par.true_merge)
+    _use_transform(par, par.true_merge)
     assert par.shared.area == pytest.approx(par.oracle.area, rel=0.05)
-    obs = par._observe_one(0, par._poses_across())
+    obs = par._observe_one(0)
     truth = np.array([r.true_pose() for r in par.robots])
     dx, dy = truth[1, :2] - truth[0, :2]
     c, s = math.cos(truth[0, 2]), math.sin(truth[0, 2])
@@ -261,7 +272,7 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     assert merged["merge_errors_valid"] and merged["merge_rotation_error_deg"] == pytest.approx(92.0)
     assert MERGE_METHODS[merged["merge_method"]] == "hybrid"
     assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
-    assert par._observe_one(0, par._poses_across())["teammate"][4] == 0.0
+    assert par._observe_one(0)["teammate"][4] == 0.0
 
 
 def test_the_accept_threshold_reaches_the_grid_alignment(monkeypatch):

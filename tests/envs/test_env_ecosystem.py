@@ -89,7 +89,7 @@ def test_robot_map_is_a_read_only_snapshot_later_steps_do_not_change():
     with pytest.raises(RuntimeError, match=r"call reset\(\)"):
         env.robot_map("robot_0")
     env.reset(seed=2)
-    with pytest.raises(ValueError, match=r"agent must be one of \('robot_0', 'robot_1'\), got 'robot_2'"):
+    with pytest.raises(ValueError, match=r"agent must be one of \['robot_0', 'robot_1'\], got 'robot_2'"):
         env.robot_map("robot_2")
     snap = env.robot_map("robot_0")
     assert env.robot_map("robot_0") is snap  # one copy per step

@@ -145,8 +145,21 @@ def test_local_map_image_is_the_sampled_states_as_pixels(seed, merged):
     want = sampler.sample(s1, g1, p1)
     if merged:
         sampler.sample(s2, g2, p2, out=want)
-    got = sampler.image(s1, g1, p1, (s2, g2, p2) if merged else None)
+    got = sampler.image(s1, g1, p1, [(s2, g2, p2)] if merged else [])
     assert got.shape == (1, 64, 64) and got.dtype == np.uint8
+    np.testing.assert_array_equal(got.ravel(), LOCAL_MAP_VALUES[want])
+
+
+def test_local_map_image_of_several_teammates_is_the_cellwise_maximum():
+    rng = np.random.default_rng(5)
+    grids = [(rng.integers(0, 3, (60, 70)).astype(np.int8),
+              Geometry(tuple(rng.uniform(-4, -2, 2)), 0.1, (60, 70)), rng.uniform(-1, 1, 3))
+             for _ in range(4)]
+    sampler = LocalMapSampler(64, 0.1)
+    want = sampler.sample(*grids[0])
+    for g in grids[1:]:
+        sampler.sample(*g, out=want)
+    got = sampler.image(*grids[0], grids[1:])
     np.testing.assert_array_equal(got.ravel(), LOCAL_MAP_VALUES[want])
 
 

@@ -1,0 +1,208 @@
+"""Merging N maps: pairwise merges assembled into one graph of frames, look-alikes rejected by
+cycle consistency.
+
+A pairwise merge of robots ``i < j`` gives ``T_ij`` (robot j's frame → robot i's, ``p_i = R p_j
++ T``) and a confidence. With three or more robots the pairwise merges over-determine the
+frames: around any cycle the transforms must compose to the identity (A→B→C agrees with A→C).
+A look-alike merge (a room row shifted onto its twin, a 180°-turned corridor) breaks every
+cycle it is in, while right merges agree with each other, so :func:`consistent_edges` keeps
+the edges that the cycles they close support:
+
+1. **Votes.** Every triangle whose three edges are all merged is checked: its composed
+   transform ``T_ab · T_bc · T_ca`` must move the three robots' map centres by at most
+   ``tolerance_m`` and turn by at most ``tolerance_deg``. Each edge counts the consistent
+   (``+``) and inconsistent (``−``) triangles it is in. An edge with ``−`` votes and no more
+   ``+`` votes than ``−`` votes is **disputed** and left out: in an inconsistent triangle of
+   three robots any one edge may be the wrong one, and a wrong merge costs more than a late one.
+2. **Spanning forest.** The remaining edges are added by decreasing confidence
+   (Kruskal's order); an edge closing a longer cycle is kept only if the path through the
+   forest already built agrees with it, so the forest is consistent by construction.
+
+This is pairwise consistency maximisation (PCM, Mangelson et al. 2018) reduced to what frames
+without odometry links allow: the group-k consistency of triangles, and a greedy maximum
+consistent set. :func:`frames_from` then composes each robot's transform into a root robot's
+frame along the forest (both directions composed from the edges' own transforms and inverses,
+so a two-robot team gets exactly the pairwise transform and its inverse).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+
+from fusion.rigid import Rigid2D
+
+CYCLE_TOLERANCE_DEG = 5.0
+"""Largest rotation (degrees) a consistent triangle may compose to: two merges right to 2°
+each compose to at most 4°; look-alikes are tens of degrees or whole metres off."""
+
+CYCLE_TOLERANCE_M = 1.0
+"""Largest displacement (metres) of a robot's map centre around a consistent triangle."""
+
+
+@dataclass(frozen=True, slots=True)
+class Edge:
+    """A pairwise merge in use between robots ``i < j``.
+
+    Attributes:
+        i, j: the robots (``i < j``).
+        transform: ``T_ij``, robot j's frame → robot i's.
+        confidence: its calibrated probability of being right.
+        inverse: ``transform.inverse()``, computed once (``None``: computed here).
+    """
+
+    i: int
+    j: int
+    transform: Rigid2D
+    confidence: float
+    inverse: Rigid2D | None = None
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.i, int) and isinstance(self.j, int) and 0 <= self.i < self.j):
+            raise ValueError(f"an edge needs robots 0 <= i < j, got i={self.i!r}, j={self.j!r}")
+        if not isinstance(self.transform, Rigid2D):
+            raise TypeError(f"transform must be a Rigid2D, got {type(self.transform).__name__}")
+        if self.inverse is None:
+            object.__setattr__(self, "inverse", self.transform.inverse())
+
+    def towards(self, k: int) -> Rigid2D:
+        """The transform into robot ``k``'s frame from the other end's (``k`` is i or j)."""
+        return self.transform if k == self.i else self.inverse
+
+
+@dataclass(frozen=True, slots=True)
+class CycleCheck:
+    """What :func:`consistent_edges` decided.
+
+    Attributes:
+        kept: the edges of the consistent spanning forest, keyed ``(i, j)``.
+        disputed: edges left out by the triangle votes.
+        rejected: edges left out because the forest's path disagreed with them.
+        votes: ``(i, j) → (consistent, inconsistent)`` triangle counts.
+    """
+
+    kept: dict[tuple[int, int], Edge]
+    disputed: tuple[tuple[int, int], ...]
+    rejected: tuple[tuple[int, int], ...]
+    votes: dict[tuple[int, int], tuple[int, int]]
+
+
+def _agrees(a: Rigid2D, b: Rigid2D, at: np.ndarray, tolerance_deg: float,
+            tolerance_m: float) -> bool:
+    """Whether two transforms between the same frames agree at point ``at`` (their source
+    frame)."""
+    return (math.degrees(a.rotation_error(b)) <= tolerance_deg
+            and a.translation_error(b, at) <= tolerance_m)
+
+
+def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | None = None,
+                     *, check: bool = True, tolerance_deg: float = CYCLE_TOLERANCE_DEG,
+                     tolerance_m: float = CYCLE_TOLERANCE_M) -> CycleCheck:
+    """The consistent subset of pairwise merges (module docstring).
+
+    Args:
+        edges: the merges in use, at most one per pair.
+        centres: a point per robot in its own frame where agreement is measured (its map's
+            centre; missing robots: their frame origin).
+        check: ``False`` keeps the pairwise decisions alone: a spanning forest by confidence,
+            no votes, no rejection (for ablations).
+        tolerance_deg, tolerance_m: what a consistent cycle may compose to.
+
+    Returns:
+        a :class:`CycleCheck`.
+
+    Raises:
+        ValueError: two edges for the same pair, or a tolerance that is not positive.
+    """
+    if tolerance_deg <= 0 or tolerance_m <= 0:
+        raise ValueError(f"tolerances must be > 0, got {tolerance_deg} deg, {tolerance_m} m")
+    by_pair: dict[tuple[int, int], Edge] = {}
+    for e in edges:
+        if (e.i, e.j) in by_pair:
+            raise ValueError(f"two edges for robots ({e.i}, {e.j})")
+        by_pair[(e.i, e.j)] = e
+    centres = centres or {}
+
+    def centre(k: int) -> np.ndarray:
+        return np.asarray(centres.get(k, (0.0, 0.0)), dtype=np.float64)
+
+    votes = {p: [0, 0] for p in by_pair}
+    if check:
+        graph = nx.Graph(list(by_pair))
+        for a, b, c in _triangles(graph):
+            # c → a directly, and c → b → a: they must agree at c's map centre
+            direct = by_pair[(a, c)].transform
+            around = by_pair[(a, b)].transform @ by_pair[(b, c)].transform
+            ok = _agrees(direct, around, centre(c), tolerance_deg, tolerance_m)
+            for p in ((a, b), (b, c), (a, c)):
+                votes[p][0 if ok else 1] += 1
+    disputed = tuple(sorted(p for p, (plus, minus) in votes.items() if minus and plus <= minus))
+    order = sorted((e for p, e in by_pair.items() if p not in disputed),
+                   key=lambda e: (-e.confidence, e.i, e.j))
+    forest = nx.Graph()
+    forest.add_nodes_from(range(1 + max((e.j for e in edges), default=0)))
+    kept: dict[tuple[int, int], Edge] = {}
+    rejected = []
+    for e in order:
+        if nx.has_path(forest, e.i, e.j):
+            if not check:
+                continue  # the forest has this pair already: pairwise decisions alone
+            path = nx.shortest_path(forest, e.i, e.j)
+            along = _compose_path(path, kept)  # j → i along the forest
+            if not _agrees(e.transform, along, centre(e.j), tolerance_deg, tolerance_m):
+                rejected.append((e.i, e.j))
+            continue
+        forest.add_edge(e.i, e.j)
+        kept[(e.i, e.j)] = e
+    return CycleCheck(kept, disputed, tuple(rejected),
+                      {p: (v[0], v[1]) for p, v in votes.items()})
+
+
+def _triangles(graph: nx.Graph) -> list[tuple[int, int, int]]:
+    """The graph's triangles as sorted robot triples ``a < b < c``."""
+    out = set()
+    for a, b in graph.edges:
+        for c in set(graph[a]) & set(graph[b]):
+            out.add(tuple(sorted((a, b, c))))
+    return sorted(out)
+
+
+def _compose_path(path: Sequence[int], edges: Mapping[tuple[int, int], Edge]) -> Rigid2D:
+    """The transform from ``path[-1]``'s frame into ``path[0]``'s along the path's edges."""
+    out = None
+    for a, b in zip(path, path[1:], strict=False):
+        step = edges[(min(a, b), max(a, b))].towards(a)  # b's frame → a's
+        out = step if out is None else out @ step
+    return out if out is not None else Rigid2D.identity()
+
+
+def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
+                ) -> dict[int, tuple[Rigid2D, Rigid2D]]:
+    """Every robot of ``root``'s component of the forest ``kept``, with ``(to_root,
+    from_root)``: its frame → root's and root's → its, each composed from the edges'
+    transforms (not inverted afterwards), so a single edge gives exactly ``(T, T.inverse())``
+    as stored. ``root`` maps to the identity both ways."""
+    ident = Rigid2D.identity()
+    out = {root: (ident, ident)}
+    adj: dict[int, list[Edge]] = {}
+    for e in kept.values():
+        adj.setdefault(e.i, []).append(e)
+        adj.setdefault(e.j, []).append(e)
+    queue = [root]
+    while queue:
+        a = queue.pop(0)
+        to_a, from_a = out[a]
+        for e in sorted(adj.get(a, ()), key=lambda e: (e.i, e.j)):
+            b = e.j if a == e.i else e.i
+            if b in out:
+                continue
+            b_to_a = e.towards(a)
+            a_to_b = e.towards(b)
+            out[b] = (b_to_a if a == root else to_a @ b_to_a,
+                      a_to_b if a == root else a_to_b @ from_a)
+            queue.append(b)
+    return out
