@@ -172,6 +172,24 @@ class SyntheticPair:
         return self.transform.degrees
 
 
+GENERIC_CONFIG = SyntheticConfig(spacing=(2.5, 5.0), jitter=0.15, map_nodes=(12, 50),
+                                 overlap_range=(0.2, 1.0), spurious_rate=0.08)
+"""Generic corridor-lattice pairs (``benchmarks/generic_graphs.py``): a more regular lattice
+than the defaults' (jitter 0.15 m, spacing 2.5–5 m, so more chance alignments), smaller maps
+(12–50 explored world nodes), overlap 0.2–1, 10 % dropped nodes and more spurious spurs; the
+noise is set per level. Not what ``benchmarks/calibrate_merge.py`` fits on by default
+(``fusion.evaluate.synthetic_pairs`` uses :class:`SyntheticConfig`'s defaults): a graph source
+the structural merge was not made on."""
+
+
+def generic_pairs(n: int, seed: int, noise: float) -> Iterator[SyntheticPair]:
+    """``n`` pairs of :data:`GENERIC_CONFIG` at node noise ``noise`` (:func:`generate_pairs`:
+    the last ``round(0.2 n)`` have no overlap; the same worlds at every noise level)."""
+    noise = check_real(noise, "noise", low=0.0, low_inclusive=True)
+    fields = {f: getattr(GENERIC_CONFIG, f) for f in SyntheticConfig.__dataclass_fields__}
+    return generate_pairs(n, seed, {**fields, "noise": noise})
+
+
 # ------------------------------------------------------------------------------------ worlds
 def random_world(rng: np.random.Generator, shape: tuple[int, int],
                  config: SyntheticConfig | None = None) -> World:

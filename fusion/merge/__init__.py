@@ -43,7 +43,9 @@ The baselines share steps 4–6 so that their difference is the search alone: ``
 paper's ICP-SVD from its own initialisation (no refinement), ``"exhaustive"`` the paper's search
 (:func:`fusion.exhaustive_search`, ``exhaustive_step_deg``; its tied optima all refined, the best
 by score kept, the others its runner-up), and ``"multistart_icp"`` the paper's ICP from
-``multistart_starts`` rotations about the centroids, the 4 best refined.
+``multistart_starts`` rotations about the centroids, the 4 best refined, and ``"ransac"`` a plain
+two-point RANSAC (``ransac_iterations`` minimal sets from *all* node pairs, kind-gated inlier
+counts; :func:`fusion.merge.baselines.ransac`).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.icp import degeneracy
-from fusion.merge.baselines import exhaustive, multistart_icp, paper_icp
+from fusion.merge.baselines import exhaustive, multistart_icp, paper_icp, ransac
 from fusion.merge.config import DEFAULT_ACCEPT_THRESHOLD, METHODS, MergeConfig, config_of
 from fusion.merge.evidence import (
     CALIBRATION_FEATURES,
@@ -131,7 +133,7 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
         map_a: the fixed map (its frame is the result's frame).
         map_b: the map moved onto A.
         method: ``"auto"`` (the global structural merge of the module doc), ``"paper_icp"``,
-            ``"exhaustive"`` or ``"multistart_icp"`` (:data:`METHODS`).
+            ``"exhaustive"``, ``"multistart_icp"`` or ``"ransac"`` (:data:`METHODS`).
         config: :class:`MergeConfig`, a dict of its fields, or ``None`` for the defaults.
 
     Returns:
@@ -175,6 +177,8 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
         found = paper_icp(view_a, view_b, pa, pb, cfg)
     elif method == "exhaustive":
         found = exhaustive(view_a, view_b, pa, pb, cfg)
+    elif method == "ransac":
+        found = ransac(pa, pb, cfg)
     else:
         found = multistart_icp(view_a, view_b, pa, pb, cfg)
     if isinstance(found, str):

@@ -14,7 +14,7 @@ of the fitted model); the default stays above it when that one sits at the limit
 margin for pairs unlike the tuning ones (``benchmarks/fusion.md``)."""
 
 
-METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp")
+METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp", "ransac")
 """Names accepted by :func:`merge_maps` ``method``."""
 
 
@@ -59,6 +59,9 @@ class MergeConfig:
             of being right) at least this (:data:`DEFAULT_ACCEPT_THRESHOLD`).
         multistart_starts: starting rotations of ``"multistart_icp"``.
         exhaustive_step_deg: rotation step of ``"exhaustive"`` (the paper's 2°).
+        ransac_iterations: minimal sets (two node pairs) ``"ransac"`` draws at most.
+        ransac_seed: seed of the generator ``"ransac"`` draws them with (a merge is
+            reproducible).
 
     How the defaults were chosen: ``benchmarks/merge_tuning.md``.
     """
@@ -83,6 +86,8 @@ class MergeConfig:
     accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     multistart_starts: int = 12
     exhaustive_step_deg: float = 2.0
+    ransac_iterations: int = 2000
+    ransac_seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("eps", "fit_eps", "near_miss", "pair_tolerance", "coarse_tolerance",
@@ -95,7 +100,8 @@ class MergeConfig:
         check_real(self.min_margin, "min_margin", low=0.0, low_inclusive=True)
         for name, low in (("knn", 0), ("max_hypotheses", 1), ("path_pool", 1), ("sparse_pool", 0),
                           ("candidates", 1), ("icp_max_iter", 1), ("scored", 1),
-                          ("min_inliers", 3), ("multistart_starts", 1)):
+                          ("min_inliers", 3), ("multistart_starts", 1),
+                          ("ransac_iterations", 1), ("ransac_seed", 0)):
             check_int(getattr(self, name), name, low=low)
 
     @classmethod

@@ -73,7 +73,7 @@ def square_loop_with_spurs() -> TopoMap:
     return TopoMap.from_arrays(xy, edges)
 
 
-@pytest.mark.parametrize("method", ["auto", "exhaustive", "multistart_icp"])
+@pytest.mark.parametrize("method", ["auto", "exhaustive", "multistart_icp", "ransac"])
 def test_symmetric_map_is_ambiguous_not_confidently_wrong(method):
     a = square_loop_with_spurs()
     b = a.transformed(Rigid2D.from_degrees(33.0, (4.0, -2.0)))
@@ -152,6 +152,22 @@ def test_paper_icp_works_near_identity_and_fails_at_half_turn(pair):
     assert math.degrees(far.transform.rotation_error(Rigid2D.from_degrees(180.0))) > 2.0
 
 
+def test_ransac_finds_the_pair_and_is_reproducible(pair):
+    runs = [merge_maps(pair.map_a, pair.map_b, method="ransac") for _ in range(2)]
+    assert runs[0].accepted
+    assert runs[0].transform.rotation_error(pair.transform) < math.radians(2.0)
+    assert runs[1].transform.allclose(runs[0].transform, atol=0.0)
+    other = merge_maps(pair.map_a, pair.map_b, method="ransac",
+                       config={"ransac_seed": 5, "ransac_iterations": 300})
+    assert other.transform.rotation_error(pair.transform) < math.radians(2.0)
+
+
+@pytest.mark.parametrize("field", ["ransac_iterations", "ransac_seed"])
+def test_ransac_settings_validated(field):
+    with pytest.raises(ValueError, match=f"{field} must be >= "):
+        MergeConfig(**{field: -1})
+
+
 def test_auto_agrees_with_exhaustive_search(pair):
     auto = merge_maps(pair.map_a, pair.map_b)
     exhaustive = merge_maps(pair.map_a, pair.map_b, method="exhaustive")
@@ -203,7 +219,8 @@ def test_wrong_types():
 def test_unknown_method_lists_valid_ones():
     good = square_loop_with_spurs()
     with pytest.raises(ValueError, match=r"method must be one of \['auto', 'paper_icp', "
-                                         r"'exhaustive', 'multistart_icp'\], got 'icp'"):
+                                         r"'exhaustive', 'multistart_icp', 'ransac'\], "
+                                         r"got 'icp'"):
         merge_maps(good, good, method="icp")
 
 

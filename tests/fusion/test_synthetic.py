@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion.synthetic import (
+    GENERIC_CONFIG,
     PAIR_KINDS,
     SyntheticConfig,
     generate_pairs,
+    generic_pairs,
     make_pair,
     pair_kind,
     random_world,
@@ -108,3 +110,17 @@ def test_bad_config_and_arguments():
         make_pair(np.random.default_rng(0), overlap=1.5)
     with pytest.raises(ValueError, match="n must be >= 0, got -1"):
         list(generate_pairs(-1))
+
+
+def test_generic_pairs_follow_their_config_at_every_noise_level():
+    quiet, noisy = (list(generic_pairs(10, 3, noise)) for noise in (0.0, 0.1))
+    assert [p.kind for p in quiet] == [pair_kind(i, 10, 0.2) for i in range(10)]
+    lo, hi = GENERIC_CONFIG.overlap_range
+    assert all(lo - 0.1 <= p.overlap <= hi for p in quiet if p.kind == "overlap")
+    for a, b in zip(quiet, noisy, strict=True):  # the same worlds, only the noise differs
+        assert a.transform.allclose(b.transform, atol=0.0) and a.noise == 0.0 and b.noise == 0.1
+    p = quiet[0]
+    moved = p.transform.apply(p.map_b.xy[p.correspondences[:, 1]])
+    np.testing.assert_allclose(p.map_a.xy[p.correspondences[:, 0]], moved, atol=1e-9)
+    with pytest.raises(ValueError, match="noise must be >= 0.0"):
+        generic_pairs(3, 0, -0.1)

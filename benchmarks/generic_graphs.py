@@ -1,0 +1,152 @@
+"""The structural merge on generic corridor-lattice graphs, against a plain RANSAC and the oracle.
+
+    python benchmarks/generic_graphs.py [--seed 900] [--pairs 75] [--noise 0,0.05,0.1,0.15]
+        [--methods auto,ransac] [--json out.json]
+
+Pairs: :func:`fusion.synthetic.generic_pairs` (:data:`fusion.synthetic.GENERIC_CONFIG`: a more
+regular lattice than the one the merge was tuned on, 12–50 explored world nodes a robot,
+overlap 0.2–1, 10 % dropped nodes, spurious spurs, frontier stubs, any rotation), ``--pairs``
+per noise level of which 80 % overlap and 20 % do not. **Seeds**: the reported figures use seed
+900 (the default); what was tuned was looked at on seed 500 only (``--seed 500``).
+
+Methods: ``auto`` (``merge_maps(method="auto")``), ``ransac`` (``merge_maps(method="ransac")``:
+a two-point RANSAC over all node pairs with kind-gated inliers, scored and accepted like
+``auto``: the search alone differs), ``ransac plain`` (the same alignment accepted on its
+inliers alone: at least :data:`PLAIN_MIN_INLIERS` matched nodes, not collinear — a RANSAC
+without the calibrated evidence) and the ``oracle`` (SVD on the true correspondences, always
+accepted). A merge **succeeds** when accepted, < 2° and < 0.3 m at B's centroid
+(``fusion.eval_results.is_success``); an accepted merge of a no-overlap pair is a **false
+accept**. ``ceiling`` is the pairs on which ``auto`` or ``ransac`` found the right transform,
+accepted or not: what a better accept rule could reach with these searches.
+
+Printed: success per noise level and per overlap band (0.2–0.4, 0.4–0.7, 0.7–1) for every
+method, false accepts and wrong accepts (accepted, not right, of overlapping pairs), and the
+median time. ``--json`` writes every record.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from fusion.eval_results import (  # noqa: E402
+    EvalPair,
+    is_success,
+    oracle_transform,
+    transform_errors,
+)
+from fusion.merge import merge_maps  # noqa: E402
+from fusion.synthetic import generic_pairs  # noqa: E402
+from topo.fileio import atomic_write_json  # noqa: E402
+
+PLAIN_MIN_INLIERS = 9
+"""``ransac plain`` accepts an alignment with at least this many matched nodes (not collinear):
+the smallest count with at most 5 % false accepts on the tuning seed (500: 2 of 60; 8 gave 12),
+about the false-accept rate of the RANSAC the issue compared with."""
+BANDS = ((0.2, 0.4), (0.4, 0.7), (0.7, 1.01))
+REPORT_SEED = 900
+TUNE_SEED = 500
+
+
+def records(seed: int, pairs: int, noise_levels: list[float], methods: list[str]) -> list[dict]:
+    """One record per pair: its noise, kind, overlap and, per method, accepted / right."""
+    out = []
+    for noise in noise_levels:
+        for p in generic_pairs(pairs, seed, noise):
+            ep = EvalPair(f"generic/s{noise:g}/{p.index}", p.map_a, p.map_b,
+                          None if p.kind == "other_world" else p.transform, p.correspondences,
+                          p.overlap, p.kind, noise)
+            overlap = p.kind == "overlap"
+            rec = {"name": ep.name, "noise": noise, "kind": p.kind, "overlap": p.overlap,
+                   "shared": p.n_shared, "n_a": p.map_a.n_nodes, "n_b": p.map_b.n_nodes}
+            oracle = oracle_transform(ep) if overlap else None
+            rec["oracle"] = {"accepted": oracle is not None,
+                             "right": overlap and is_success(transform_errors(oracle, ep))
+                             if oracle is not None else False}
+            for method in methods:
+                r = merge_maps(p.map_a, p.map_b, method=method)
+                errors = transform_errors(r.transform, ep) if overlap else None
+                rec[method] = {"accepted": r.accepted, "right": is_success(errors),
+                               "rotation_deg": None if errors is None else errors[0],
+                               "translation_m": None if errors is None else errors[1],
+                               "confidence": r.confidence, "time_s": r.time_s,
+                               "inliers": 0 if r.evidence is None else r.evidence.inliers,
+                               "collinear": True if r.evidence is None
+                               else r.evidence.collinear}
+                if method == "ransac":
+                    e = rec[method]
+                    rec["ransac plain"] = {"accepted": e["inliers"] >= PLAIN_MIN_INLIERS
+                                           and not e["collinear"], "right": e["right"]}
+            out.append(rec)
+    return out
+
+
+def _pct(k: int, n: int) -> str:
+    return f"{100 * k / n:.1f} % ({k}/{n})" if n else "–"
+
+
+def report(recs: list[dict], methods: list[str]) -> str:
+    """The tables of the module docstring, as markdown."""
+    cols = [*methods, *(["ransac plain"] if "ransac" in methods else []), "oracle"]
+    pos = [r for r in recs if r["kind"] == "overlap"]
+    neg = [r for r in recs if r["kind"] != "overlap"]
+    lines = ["| pairs | " + " | ".join(cols) + " | ceiling |",
+             "|---" * (len(cols) + 2) + "|"]
+
+    def row(label: str, rows: list[dict]) -> str:
+        cells = [_pct(sum(r[c]["accepted"] and r[c]["right"] for r in rows), len(rows))
+                 for c in cols]
+        ceiling = sum(any(r[m]["right"] for m in methods) for r in rows)
+        return f"| {label} | " + " | ".join(cells) + f" | {_pct(ceiling, len(rows))} |"
+
+    lines.append(row(f"all overlapping ({len(pos)})", pos))
+    for noise in sorted({r["noise"] for r in pos}):
+        lines.append(row(f"σ {noise:g} m", [r for r in pos if r["noise"] == noise]))
+    for lo, hi in BANDS:
+        lines.append(row(f"overlap {lo:g}–{min(hi, 1):g}",
+                         [r for r in pos if lo <= r["overlap"] < hi]))
+    lines.append("")
+    lines.append("| | " + " | ".join(cols[:-1]) + " |")
+    lines.append("|---" * len(cols) + "|")
+    lines.append(f"| false accepts (of {len(neg)} no-overlap) | " + " | ".join(
+        _pct(sum(r[c]["accepted"] for r in neg), len(neg)) for c in cols[:-1]) + " |")
+    lines.append(f"| wrong accepts (of {len(pos)} overlapping) | " + " | ".join(
+        _pct(sum(r[c]["accepted"] and not r[c]["right"] for r in pos), len(pos))
+        for c in cols[:-1]) + " |")
+    lines.append("| median time (ms) | " + " | ".join(
+        f"{1000 * np.median([r[c]['time_s'] for r in recs]):.1f}" if c in methods else "–"
+        for c in cols[:-1]) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seed", type=int, default=REPORT_SEED,
+                        help=f"pairs' seed (reported: {REPORT_SEED}; tuning: {TUNE_SEED})")
+    parser.add_argument("--pairs", type=int, default=75, help="pairs per noise level")
+    parser.add_argument("--noise", default="0,0.05,0.1,0.15", help="node noise levels (m)")
+    parser.add_argument("--methods", default="auto,ransac")
+    parser.add_argument("--json", type=Path, default=None, help="write every record here")
+    args = parser.parse_args(argv)
+    noise = [float(v) for v in args.noise.split(",")]
+    methods = [m for m in args.methods.split(",") if m]
+    for m in methods:  # compiled kernels load on the first call: not in the times
+        p = next(iter(generic_pairs(1, 0, 0.0)))
+        merge_maps(p.map_a, p.map_b, method=m)
+    recs = records(args.seed, args.pairs, noise, methods)
+    print(f"generic corridor-lattice pairs, seed {args.seed}, {args.pairs} per noise level "
+          f"{noise}")
+    print(report(recs, methods))
+    if args.json is not None:
+        atomic_write_json(args.json, recs)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
