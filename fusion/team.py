@@ -9,11 +9,14 @@ cycle it is in, while right merges agree with each other, so :func:`consistent_e
 the edges that the cycles they close support:
 
 1. **Votes.** Every triangle whose three edges are all merged is checked: its composed
-   transform ``T_ab · T_bc · T_ca`` must move the three robots' map centres by at most
+   transform ``T_ab · T_bc · T_ca`` must move the third robot's map centre by at most
    ``tolerance_m`` and turn by at most ``tolerance_deg``. Each edge counts the consistent
-   (``+``) and inconsistent (``−``) triangles it is in. An edge with ``−`` votes and no more
-   ``+`` votes than ``−`` votes is **disputed** and left out: in an inconsistent triangle of
-   three robots any one edge may be the wrong one, and a wrong merge costs more than a late one.
+   (``+``) and inconsistent (``−``) triangles it is in. The edges with the most ``−`` votes
+   (of those, the fewest ``+``) are **disputed** and left out, all of them when several tie,
+   and the votes are counted again without them, until no triangle is inconsistent. A
+   look-alike among four robots breaks two triangles while its right neighbours break one
+   each: it goes alone. In an inconsistent triangle of three robots any edge may be the
+   wrong one: all three go, since a wrong merge costs more than a late one.
 2. **Spanning forest.** The remaining edges are added by decreasing confidence
    (Kruskal's order); an edge closing a longer cycle is kept only if the path through the
    forest already built agrees with it, so the forest is consistent by construction.
@@ -82,7 +85,8 @@ class CycleCheck:
         kept: the edges of the consistent spanning forest, keyed ``(i, j)``.
         disputed: edges left out by the triangle votes.
         rejected: edges left out because the forest's path disagreed with them.
-        votes: ``(i, j) → (consistent, inconsistent)`` triangle counts.
+        votes: ``(i, j) → (consistent, inconsistent)`` triangle counts before any edge was
+            left out.
     """
 
     kept: dict[tuple[int, int], Edge]
@@ -130,17 +134,31 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
     def centre(k: int) -> np.ndarray:
         return np.asarray(centres.get(k, (0.0, 0.0)), dtype=np.float64)
 
-    votes = {p: [0, 0] for p in by_pair}
-    if check:
-        graph = nx.Graph(list(by_pair))
-        for a, b, c in _triangles(graph):
-            # c → a directly, and c → b → a: they must agree at c's map centre
-            direct = by_pair[(a, c)].transform
-            around = by_pair[(a, b)].transform @ by_pair[(b, c)].transform
-            ok = _agrees(direct, around, centre(c), tolerance_deg, tolerance_m)
-            for p in ((a, b), (b, c), (a, c)):
-                votes[p][0 if ok else 1] += 1
-    disputed = tuple(sorted(p for p, (plus, minus) in votes.items() if minus and plus <= minus))
+    consistent = {}
+    for tri in _triangles(nx.Graph(list(by_pair))) if check else ():
+        a, b, c = tri
+        # c → a directly, and c → b → a: they must agree at c's map centre
+        direct = by_pair[(a, c)].transform
+        around = by_pair[(a, b)].transform @ by_pair[(b, c)].transform
+        consistent[tri] = _agrees(direct, around, centre(c), tolerance_deg, tolerance_m)
+    first_votes = None
+    out: set[tuple[int, int]] = set()
+    while True:
+        votes = {p: [0, 0] for p in by_pair if p not in out}
+        for (a, b, c), ok in consistent.items():
+            sides = ((a, b), (b, c), (a, c))
+            if all(p in votes for p in sides):
+                for p in sides:
+                    votes[p][0 if ok else 1] += 1
+        if first_votes is None:
+            first_votes = {p: (v[0], v[1]) for p, v in votes.items()}
+        worst = max((v[1] for v in votes.values()), default=0)
+        if worst == 0:
+            break
+        tied = [p for p, v in votes.items() if v[1] == worst]
+        fewest = min(votes[p][0] for p in tied)
+        out.update(p for p in tied if votes[p][0] == fewest)
+    disputed = tuple(sorted(out))
     order = sorted((e for p, e in by_pair.items() if p not in disputed),
                    key=lambda e: (-e.confidence, e.i, e.j))
     forest = nx.Graph()
@@ -158,8 +176,7 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
             continue
         forest.add_edge(e.i, e.j)
         kept[(e.i, e.j)] = e
-    return CycleCheck(kept, disputed, tuple(rejected),
-                      {p: (v[0], v[1]) for p, v in votes.items()})
+    return CycleCheck(kept, disputed, tuple(rejected), first_votes)
 
 
 def _triangles(graph: nx.Graph) -> list[tuple[int, int, int]]:

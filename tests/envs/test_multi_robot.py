@@ -1,0 +1,185 @@
+"""multi_robot_explore_v0: teams of N robots, range-limited contact, the N-way merge."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+from conftest import SMALL
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+from envs import multi_robot_explore_v0, two_robot_explore_v0
+from envs.two_robot_explore.global_state import state_scalars
+from envs.two_robot_explore.observations import TEAMMATE_FEATURES
+
+TEAM = {**SMALL, "world": {"size": (12.0, 12.0)}, "sonar": {"rays": 1},
+        "mapping": {"merge_every": 10, "grid_merge_every": 20, "topo_every": 10}}
+
+
+def _actions(env, rng):
+    return {a: np.array([rng.uniform(0.3, 1.0), rng.uniform(-1, 1)], dtype=np.float32)
+            for a in env.agents}
+
+
+def _run(env, seed, steps):
+    rng = np.random.default_rng(seed)
+    obs, infos = env.reset(seed=seed)
+    out = []
+    for k in range(steps):
+        if not env.agents:
+            break
+        if k % 10 == 0:
+            act = _actions(env, rng)
+        obs, rew, term, trunc, infos = env.step(act)
+        out.append((obs, rew, term, trunc, infos))
+    return out
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_pettingzoo_api_for_teams(n):
+    parallel_api_test(multi_robot_explore_v0.parallel_env(n_robots=n, **TEAM), num_cycles=60)
+
+
+@pytest.mark.parametrize("n", [3, 4])
+def test_pettingzoo_seed_test_for_teams(n):
+    parallel_seed_test(lambda: multi_robot_explore_v0.parallel_env(n_robots=n, **TEAM))
+
+
+def test_spaces_agents_and_state_grow_with_the_team():
+    env = multi_robot_explore_v0.parallel_env(n_robots=4, **TEAM)
+    obs, infos = env.reset(seed=0)
+    assert env.possible_agents == ["robot_0", "robot_1", "robot_2", "robot_3"]
+    assert env.observation_space("robot_3")["teammates"].shape == (3, TEAMMATE_FEATURES)
+    assert "teammate" not in obs["robot_0"]
+    assert env.state().shape == env.state_space.shape
+    assert env.state_space.shape[0] == state_scalars(4) + 3 * 32 * 32
+    assert infos["robot_2"]["contacts"] == 3 and infos["robot_2"]["fused_robots"] == 1
+    starts = np.array([r.start for r in env.robots])
+    d = np.hypot(*(starts[:, None, :2] - starts[None, :, :2]).transpose(2, 0, 1))
+    assert (d[~np.eye(4, dtype=bool)] >= env.config.world.min_start_separation).all()
+
+
+def test_the_same_seed_gives_the_same_team_episode_over_many_steps():
+    kw = {"n_robots": 3, "comm": {"range": 4.0}, **TEAM}
+    a = _run(multi_robot_explore_v0.parallel_env(**kw), 7, 200)
+    b = _run(multi_robot_explore_v0.parallel_env(**kw), 7, 200)
+    assert len(a) == len(b) == 200
+    for (oa, ra, *_, ia), (ob, rb, *_, ib) in zip(a, b, strict=True):
+        assert ra == rb
+        for agent in oa:
+            for key in oa[agent]:
+                np.testing.assert_array_equal(oa[agent][key], ob[agent][key])
+            assert repr(ia[agent]) == repr(ib[agent])
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_team_copy_continues_exactly(how):
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, comm={"range": 5.0}, **TEAM)
+    rng = np.random.default_rng(1)
+    env.reset(seed=2)
+    for _ in range(40):
+        env.step(_actions(env, rng))
+    twin = pickle.loads(pickle.dumps(env)) if how == "pickle" else copy.deepcopy(env)
+    for _ in range(60):
+        act = _actions(env, rng)
+        o1, r1, *_ = env.step(act)
+        o2, r2, *_ = twin.step(act)
+        assert r1 == r2
+        np.testing.assert_array_equal(o1["robot_2"]["teammates"], o2["robot_2"]["teammates"])
+        np.testing.assert_array_equal(o1["robot_1"]["local_map"], o2["robot_1"]["local_map"])
+
+
+def _put_in_use(env, i, j):
+    """Give pair (i, j) the true transform, as an accepted merge would."""
+    pair = env._merging.pairs[(i, j)]
+    pair.transform = env.true_transform(i, j)
+    pair.history.append((env.steps, pair.transform, 1.0))
+    env._contacts_changed = True
+
+
+def test_out_of_range_the_fused_map_does_not_grow_from_the_teammate():
+    env = multi_robot_explore_v0.parallel_env(
+        n_robots=2, comm={"range": 3.0}, max_cycles=400, world={"size": (16.0, 16.0)},
+        mapping={"merge_method": "none"})
+    seed = next(s for s in range(50) if env.reset(seed=s) and env.views.in_contact(0, 1))
+    assert env.views.in_contact(0, 1), seed
+    _put_in_use(env, 0, 1)
+    env.step({a: np.zeros(2, dtype=np.float32) for a in env.agents})
+    assert env.merge_state().fused[0] == (0, 1)
+    rng = np.random.default_rng(4)
+    grew_apart = False
+    for _ in range(300):
+        before = env.shared.count
+        own_before = env.maps[0].n_ever
+        env.step({"robot_0": np.array([0.0, 0.0], dtype=np.float32),
+                  "robot_1": np.array([1.0, rng.uniform(-0.5, 0.5)], dtype=np.float32)})
+        if not env.views.in_contact(0, 1):
+            grew_apart = True
+            # robot 0 stands still: only its own new cells (sonar noise) enter its fused map
+            assert env.shared.count - before <= env.maps[0].n_ever - own_before
+    assert grew_apart, "robot 1 never left communication range"
+    held = env.teammate_map("robot_0", "robot_1")
+    live = env.robot_map("robot_1")
+    assert held.known_cells < live.known_cells and held.step < env.steps
+    obs = env._observe_one(0)["teammates"][0]
+    assert obs[4] == 1.0 and obs[5] == 0.0 and 0.0 < obs[6] < 1.0
+
+
+def test_robots_never_in_contact_know_nothing_of_each_other():
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, comm={"range": 0.1}, **TEAM)
+    obs, _ = env.reset(seed=0)
+    assert env.teammate_map("robot_0", "robot_2") is None
+    np.testing.assert_array_equal(obs["robot_0"]["teammates"][:, 5:], [[0, 1], [0, 1]])
+    for _ in range(30):
+        obs, *_ = env.step({a: np.array([0.5, 0.3], dtype=np.float32) for a in env.agents})
+    assert env.merge_state().contacts == ((), (), ()) and env.merge_state().merges == 0
+
+
+def test_line_of_sight_needs_no_wall_between_the_robots():
+    env = multi_robot_explore_v0.parallel_env(n_robots=2, comm={"range": 100.0,
+                                                                "line_of_sight": True}, **TEAM)
+    seen = set()
+    for seed in range(40):
+        env.reset(seed=seed)
+        seen.add(env.views.in_contact(0, 1))
+        if len(seen) == 2:
+            break
+    assert seen == {True, False}
+
+
+def test_a_merge_found_in_contact_reaches_a_third_robot_only_through_contact():
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, comm={"range": 0.1},
+                                              mapping={"merge_method": "none"}, **{
+                                                  k: v for k, v in TEAM.items()
+                                                  if k != "mapping"})
+    env.reset(seed=1)
+    _put_in_use(env, 0, 1)
+    env.step({a: np.zeros(2, dtype=np.float32) for a in env.agents})
+    # robots 0 and 1 were never in contact: neither holds the other's map to fuse
+    assert env.merge_state().fused == ((0,), (1,), (2,))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"n_robots": 1}, r"n_robots must be between 2 and 8, got 1"),
+    ({"n_robots": 9}, r"n_robots must be between 2 and 8, got 9"),
+    ({"n_robots": 3.0}, r"n_robots must be an integer, got float"),
+    ({"comm": {"range": -1.0}}, r"comm.range must be > 0.0, got -1.0"),
+    ({"comm": {"line_of_sight": 1}}, r"comm.line_of_sight must be True or False, got 1"),
+    ({"comm": {"radius": 3}}, r"radius"),
+])
+def test_bad_team_settings_are_refused(kwargs, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        multi_robot_explore_v0.parallel_env(**kwargs)
+
+
+def test_start_poses_must_give_every_robot_one_row():
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, **TEAM)
+    with pytest.raises(ValueError, match=r"must be finite with shape \(3, 3\)"):
+        env.reset(seed=0, options={"start_poses": [[1.0, 1.0, 0.0], [3.0, 3.0, 0.0]]})
+
+
+def test_the_two_robot_env_is_a_team_of_two():
+    with pytest.raises(ValueError, match="n_robots must be 2 for two_robot_explore_v0, got 3"):
+        two_robot_explore_v0.parallel_env(n_robots=3)
