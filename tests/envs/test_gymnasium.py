@@ -15,7 +15,12 @@ from gymnasium.wrappers import FlattenObservation, RecordVideo, RenderCollection
 
 import envs
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.centralised import GYMNASIUM_ID, CentralisedExploreEnv
+from envs.two_robot_explore.centralised import (
+    GYMNASIUM_ID,
+    MULTI_GYMNASIUM_ID,
+    CentralisedExploreEnv,
+    CentralisedMultiRobotEnv,
+)
 
 AGENTS = ("robot_0", "robot_1")
 
@@ -33,7 +38,7 @@ def comparable(infos: dict) -> dict:
     return {a: {k: v for k, v in info.items() if keep(k, v)} for a, info in infos.items()}
 
 
-class ComparableInfos(CentralisedExploreEnv):
+class _Comparable:
     """Gymnasium's checker compares the infos of two identical steps with ``==``; until the
     env's infos are all small numbers it is given :func:`comparable` infos."""
 
@@ -44,6 +49,14 @@ class ComparableInfos(CentralisedExploreEnv):
     def step(self, action):
         *out, infos = super().step(action)
         return (*out, comparable(infos))
+
+
+class ComparableInfos(_Comparable, CentralisedExploreEnv):
+    """The two-robot view with :func:`comparable` infos."""
+
+
+class ComparableTeam(_Comparable, CentralisedMultiRobotEnv):
+    """The team view with :func:`comparable` infos."""
 
 
 def test_registered_under_its_gymnasium_id():
@@ -201,6 +214,116 @@ def test_record_video_writes_a_video(tmp_path):
 )
 def test_bad_actions(kwargs, action, error, match):
     env = CentralisedExploreEnv(**SMALL, **kwargs)
+    env.reset(seed=0)
+    with pytest.raises(error, match=match):
+        env.step(action)
+
+
+# ------------------------------------------------------------------------ teams of N robots
+TEAM = {"world": {"size": (12.0, 12.0)}, "max_cycles": 12, "sonar": {"rays": 1},
+        "comm": {"range": 5.0}}
+"""A small, fast team setting: a 12 x 12 m building, one ray per sonar cone."""
+
+
+def test_multi_robot_ids_are_registered():
+    import pettingzoo
+
+    from envs import multi_robot_explore_v0
+
+    assert "topomerge/multi_robot_explore_v0" in envs.ENV_IDS
+    assert MULTI_GYMNASIUM_ID in envs.GYMNASIUM_IDS and MULTI_GYMNASIUM_ID in gymnasium.registry
+    par = pettingzoo.make("parallel", "topomerge/multi_robot_explore_v0", n_robots=3, **TEAM)
+    assert isinstance(par, multi_robot_explore_v0.raw_env)
+    assert par.possible_agents == ["robot_0", "robot_1", "robot_2"]
+    aec = pettingzoo.make("aec", "topomerge/multi_robot_explore_v0", n_robots=4, **TEAM)
+    assert aec.possible_agents == [f"robot_{i}" for i in range(4)]
+    env = gymnasium.make(MULTI_GYMNASIUM_ID, n_robots=3, **TEAM)
+    assert isinstance(env.unwrapped, CentralisedMultiRobotEnv)
+    assert env.spec.max_episode_steps is None
+    assert env.action_space == gymnasium.spaces.Box(-1.0, 1.0, (6,), np.float32)
+    assert env.observation_space["robot_2"]["teammates"].shape == (2, 7)
+    discrete = gymnasium.make(MULTI_GYMNASIUM_ID, n_robots=4, action_type="discrete", **TEAM)
+    assert discrete.action_space == gymnasium.spaces.MultiDiscrete([5] * 4)
+    for e in (par, aec, env, discrete):
+        e.close()
+
+
+def test_parallel_env_for_picks_the_version_by_n_robots():
+    two = envs.parallel_env_for(dict(SMALL))
+    assert two.metadata["name"] == "two_robot_explore_v0"
+    assert "teammate" in two.observation_space("robot_0").spaces
+    assert envs.parallel_env_for({**SMALL, "n_robots": 2}).metadata["name"] == (
+        "two_robot_explore_v0")
+    three = envs.parallel_env_for({**TEAM, "n_robots": 3})
+    assert three.metadata["name"] == "multi_robot_explore_v0"
+    assert three.possible_agents == ["robot_0", "robot_1", "robot_2"]
+    with pytest.raises(TypeError, match="config must be a mapping of EnvConfig fields, got list"):
+        envs.parallel_env_for([("n_robots", 3)])
+
+
+@pytest.mark.parametrize("n_robots", [1, 9, "3"])
+def test_bad_team_size_names_the_field(n_robots):
+    match = "n_robots must be" + (" between 2 and 8, got" if n_robots != "3" else "")
+    with pytest.raises((ValueError, TypeError), match=match):
+        gymnasium.make(MULTI_GYMNASIUM_ID, n_robots=n_robots, **TEAM)
+    with pytest.raises((ValueError, TypeError), match=match):
+        envs.parallel_env_for({"n_robots": n_robots})
+
+
+@pytest.mark.parametrize("n_robots", [3, 4])
+def test_team_is_the_same_episode_as_the_parallel_env(n_robots):
+    from envs import multi_robot_explore_v0
+
+    kwargs = {**TEAM, "n_robots": n_robots, "reward_mode": "individual"}
+    single = gymnasium.make(MULTI_GYMNASIUM_ID, **kwargs)
+    par = multi_robot_explore_v0.parallel_env(**kwargs)
+    agents = par.possible_agents
+    rng = np.random.default_rng(3)
+    obs_s, _ = single.reset(seed=5)
+    obs_p, _ = par.reset(seed=5)
+    steps = 0
+    while True:
+        joint = rng.uniform(-1, 1, 2 * n_robots).astype(np.float32)
+        obs_s, rew_s, term_s, trunc_s, info_s = single.step(joint)
+        obs_p, rew_p, term_p, trunc_p, info_p = par.step(
+            {a: joint[2 * i:2 * i + 2] for i, a in enumerate(agents)})
+        steps += 1
+        for a in agents:
+            for key, value in obs_p[a].items():
+                np.testing.assert_array_equal(obs_s[a][key], value)
+        assert rew_s == sum(rew_p.values())
+        assert data_equivalence(comparable(info_s), comparable(info_p), exact=True)
+        assert (term_s, trunc_s) == (term_p["robot_0"], trunc_p["robot_0"])
+        if term_s or trunc_s:
+            break
+    assert steps == TEAM["max_cycles"] and trunc_s
+    single.close()
+
+
+def test_team_gymnasium_env_checker():
+    kwargs = {**TEAM, "n_robots": 3, "action_type": "discrete"}
+    env = ComparableTeam(**kwargs)
+    env.spec = dataclasses.replace(gymnasium.spec(MULTI_GYMNASIUM_ID), kwargs=kwargs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=True)
+    assert [str(w.message) for w in caught] == []
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "action", "error", "match"),
+    [
+        ({}, np.zeros(4), ValueError, r"action must have shape \(6,\) "
+                                      r"\(\[v_0, w_0, \.\.\., v_2, w_2\]\), got shape \(4,\)"),
+        ({"action_type": "discrete"}, np.array([1, 2]), ValueError,
+         r"action must be 3 integers \(robot 0's action, \.\.\., robot 2's\)"),
+        ({"action_type": "discrete"}, np.array([1, 2, 7]), ValueError,
+         r"action of robot_2 must be in \[0, 5\), got 7"),
+    ],
+)
+def test_team_bad_actions(kwargs, action, error, match):
+    env = CentralisedMultiRobotEnv(n_robots=3, **TEAM, **kwargs)
     env.reset(seed=0)
     with pytest.raises(error, match=match):
         env.step(action)
