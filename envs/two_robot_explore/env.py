@@ -1,8 +1,14 @@
-"""Two sonar robots explore an unknown building and merge their maps.
+"""A team of sonar robots explores an unknown building and merges its maps.
+
+Two envs share this manual: ``multi_robot_explore_v0`` (teams of ``n_robots`` = 2–8, with
+range-limited communication: ``comm``) and ``two_robot_explore_v0``, the team of two with its
+original observation layout (one ``teammate`` row, no ``contacts``/``fused_robots`` infos).
+Where the manual says "two robots", a larger team does the same pairwise (Merging N maps).
 
 ## Description
 
-Two Pioneer3-DX-like robots (``robot_0``, ``robot_1``) start at random, unknown-to-each-other
+Two Pioneer3-DX-like robots (``robot_0``, ``robot_1``; ``robot_0 … robot_{N-1}`` in a team of
+N) start at random, unknown-to-each-other
 poses in a 2-D indoor world simulated with pymunk. Each drives by a velocity command, senses
 with a ring of 8 sonars, and builds an occupancy grid and a topological map (places and the
 paths between them) **in its own odometry frame**. Every ``merge_every`` steps the two robots'
@@ -40,7 +46,8 @@ the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size
 | ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
 | ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
 | ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
-| ``teammate`` | (5,) f32 | teammate's estimated pose (c) | -2R, -1, 0 | 2R, 1, 1 |
+| ``teammate`` | (5,) f32 | teammate's estimated pose (c; ``two_robot_explore_v0``) | -2R, -1, 0 | 2R, 1, 1 |
+| ``teammates`` | (N−1, 7) f32 | per teammate (``multi_robot_explore_v0``) (h) | -2R, -1, 0 | 2R, 1, 1 |
 
 (a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
 one-hot (junction, dead end, corner, gateway; 0–1), degree (0–16), clearance (m, 0–10), frontier
@@ -50,6 +57,10 @@ topological map (see Maps).
 m/pixel; 0 occupied, 128 unknown, 255 free.
 (c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
 is accepted; all 0 before).
+(h) one row per teammate, in index order, skipping the robot itself: the five entries of (c)
+for that teammate (valid: it is in this robot's fused map; its pose is the one at their last
+contact when out of contact), then ``in_contact`` (0/1) and ``age``: steps since their last
+contact / ``max_cycles`` (0 in contact, 1 if never; clipped to 1).
 
 Before a merge is accepted a robot's ``local_map`` shows only its own map. The raw maps are
 read through the env (Infos, below).
@@ -113,6 +124,32 @@ alone again until the next accepted merge. Other values run one ``fusion.merge_m
 ``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of about 166 path endpoints) it
 raises a ``ValueError`` from ``step()`` instead of running for minutes.
 
+## Communication
+
+``comm.range`` (metres, ``None`` = unlimited, the default) limits who exchanges maps: two
+robots whose centres are at most that far apart are in range (with ``comm.line_of_sight``, only
+if no wall crosses the segment between them); robots are **in contact** when a chain of
+in-range robots joins them (multi-hop relaying through teammates).
+What robot ``i`` knows of teammate ``j``'s map is ``j``'s live map while they are in contact and
+the copy from the end of their last step in contact afterwards: between contacts nothing
+streams (``env.teammate_map(agent, teammate)`` reads it; ``None`` if they never met). Pairs are
+merged only while in contact, on their live maps; a merge's transform becomes known to a robot
+with the maps, i.e. as it was at its last contact with either robot of the pair.
+
+## Merging N maps
+
+Every ``merge_every`` steps the pairs in contact are merged pairwise (the two-robot merge
+below, each pair with its own schedule), at most ``max(1, N // 2)`` pairs per merge step —
+first pairs that would join two fused maps, then the least recently merged — so each robot's
+share of the merge cost does not grow with the team. Each robot assembles the pairs' transforms
+it knows into a graph of frames; with three or more robots **cycle consistency** rejects
+look-alike merges (``fusion.team``: A→B→C must agree with A→C within 5° and 1 m; the edges that
+break the most triangles are left out until none is broken, then a spanning forest by
+confidence). Robot ``i``'s **fused map** is its component of that forest: its own map and each
+member's (as it knows it) moved into its frame. ``mapping.cycle_check = False`` uses the
+pairwise decisions alone. ``merge_state()`` reports every pair (transform, confidence, kept by
+the cycle check), each robot's fused members and frames, and the contacts.
+
 ## Rewards
 
 Team reward (both robots get it), every step:
@@ -120,8 +157,11 @@ Team reward (both robots get it), every step:
     coverage_reward · (new shared-map area, m²) − collision_penalty · (new contacts of either
     robot) − time_penalty
 
-The shared map is robot 0's known cells plus robot 1's moved by the latest accepted merge
-transform. When a new merge changes the transform, or the transform is dropped, the shared map
+The shared map is robot 0's fused map: its known cells plus robot 1's moved by the latest
+accepted merge transform (in a team, plus every teammate's in robot 0's fused map, each by its
+frame: a teammate's cells count once it merges into robot 0's component, as robot 1's do with
+two robots; unmerged components do not count until they do, and with limited communication
+robot 0 counts what it knows, so bringing maps back to robot 0 pays). When a new merge changes the transform, or the transform is dropped, the shared map
 is rebuilt and the change of its area (possibly negative: a wrong merge overlaps what it should
 not, a dropped one takes robot 1's cells out) enters the reward.
 ``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
@@ -143,7 +183,7 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 
 ## Starting State
 
-Two random drivable cells at least ``world.start_clearance`` (0.45 m) from any wall and
+``N`` random drivable cells (two for ``two_robot_explore_v0``) at least ``world.start_clearance`` (0.45 m) from any wall and
 ``world.min_start_separation`` (2 m) apart, in the same connected region, random headings;
 each robot's odometry starts at ``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first
 scan is taken at reset. A ``reset`` that raises (bad ``start_poses``) leaves no episode:
@@ -182,6 +222,8 @@ TorchRL turns every entry into a tensor). Per robot:
 | ``merge_drops`` | int | transforms dropped because the grids refuted them (see Maps) |
 | ``pose`` | (3,) f64 | true world pose ``x, y, θ`` (for metrics; explorers must not use it) |
 | ``odometry`` | (3,) f64 | odometry pose in the robot's own start frame |
+| ``contacts`` | int | teammates in contact now (``multi_robot_explore_v0``) |
+| ``fused_robots`` | int | robots in this robot's fused map, itself included (likewise) |
 
 (d) the world cells the robots' inverse sensor model updates for each scan taken from the
 robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
@@ -201,22 +243,23 @@ that plan on maps are given read access this way (``agents.base.Explorer.bind``)
 ## State
 
 ``state()`` is a global view for centralised critics (MAPPO-style): a float32 vector in
-``state_space`` (a ``Box`` of ``STATE_SCALARS + 3 · STATE_MAP_SIZE²`` = 3084 values), in the
+``state_space`` (a ``Box`` of ``state_scalars(N) + 3 · STATE_MAP_SIZE²`` values, 4N + 4 + 3072:
+3084 for two robots), in the
 world frame, the same layout for every world (positions as fractions of the world's extent):
 
 | index | meaning | min | max |
 |---|---|---|---|
-| 0–3 | robot 0's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
-| 4–7 | robot 1: the same | 0, -1 | 1 |
-| 8 | ``true_coverage`` | 0 | 1 |
-| 9 | ``overlap`` | 0 | 1 |
-| 10 | a merge transform is in use (0/1) | 0 | 1 |
-| 11 | steps / ``max_cycles`` | 0 | 1 |
-| 12 + k | swept: share of world block ``k`` truly swept | 0 | 1 |
-| 12 + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
-| 12 + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
+| 4i … 4i+3 | robot i's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
+| 4N | ``true_coverage`` | 0 | 1 |
+| 4N+1 | ``overlap`` | 0 | 1 |
+| 4N+2 | share of the teammates in robot 0's fused map (two robots: a merge in use, 0/1) | 0 | 1 |
+| 4N+3 | steps / ``max_cycles`` | 0 | 1 |
+| S + k | swept: share of world block ``k`` truly swept | 0 | 1 |
+| S + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
+| S + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
 
-The world's extent is cut into ``STATE_MAP_SIZE × STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
+``S = 4N + 4`` (12 for two robots). The world's extent is cut into ``STATE_MAP_SIZE ×
+STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
 · 32 + column``, row 0 at the bottom; each share is measured at 4 × 4 points evenly spread in
 the block. (g) the shared map placed in the world by robot 0's true start pose: a wrong merge
 shows as known cells where nothing was swept. The reachable channel is fixed per world.
@@ -265,6 +308,10 @@ are a ``ValueError``.
 | ``world.loop_prob`` | float | 0.3 | chance of an extra door (loops) |
 | ``world.obstacle_density`` | float | 0.5 | furniture boxes per 10 m² |
 | ``world.png_resolution`` | float | 0.1 | m/pixel of PNG maps |
+| ``n_robots`` | int | 2 | robots in the team, 2–8 (``two_robot_explore_v0``: 2) |
+| ``comm.range`` | float or None | None | contact range, m (see Communication) |
+| ``comm.line_of_sight`` | bool | False | contact also needs no wall between |
+| ``mapping.cycle_check`` | bool | True | cycle consistency (see Merging N maps) |
 | ``robot.radius`` | float | 0.25 | disc radius, m |
 | ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
 | ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |
@@ -295,11 +342,14 @@ are a ``ValueError``.
 | ``action_type`` | str | ``"continuous"`` | or ``"discrete"`` |
 | ``render_mode`` | str or None | None | ``"human"`` (pygame-ce window) or ``"rgb_array"`` |
 
-Reset options: ``{"start_poses": [[x, y, θ], [x, y, θ]]}`` (world frame, radians) places the
-robots; other keys are ignored with a warning.
+Reset options: ``{"start_poses": [[x, y, θ], ...]}`` (one row per robot, world frame,
+radians) places the robots; other keys are ignored with a warning.
 
 ## Version History
 
+* multi_robot_explore_v0: initial release (teams of 2–8, communication, the N-way merge; at
+  ``n_robots = 2``, ``comm.range = None`` the same episodes as two_robot_explore_v0 but for
+  the ``teammates`` layout and the two infos).
 * v0: initial release. (Unreleased changes within v0, dynamics unchanged: small numeric
   infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact copies by replay,
   the sonar cast by the env's own ray caster with the same readings; the topological maps
