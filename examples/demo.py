@@ -1,15 +1,19 @@
-"""``make demo``: two scripted explorers run one episode of ``two_robot_explore_v0``.
+"""``make demo``: two scripted explorers run one episode of ``two_robot_explore_v0``, then a
+team of ``--team`` (4) Frontier explorers one episode of ``multi_robot_explore_v0`` with an 8 m
+communication range.
 
-Prints the coverage and how good the map merge was, writes the last frame to ``out/demo.png``
-and a short GIF (every 20th step) to ``out/demo.gif``. The explorers are ``agents.scripted``
-ones (``--explorer``, default ``coordinated_frontier``).
+Prints the coverage and how good the map merges were, writes the last frames to
+``out/demo.png`` and ``out/team.png`` and a short GIF (every 20th step) to ``out/demo.gif``.
+The two-robot explorers are ``agents.scripted`` ones (``--explorer``, default
+``coordinated_frontier``).
 
-    python examples/demo.py [--out out] [--seed 0] [--explorer NAME]
+    python examples/demo.py [--out out] [--seed 0] [--explorer NAME] [--team N]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -19,7 +23,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.team import make_team  # noqa: E402
-from envs import two_robot_explore_v0  # noqa: E402
+from agents.scripted import Frontier  # noqa: E402
+from envs import multi_robot_explore_v0, two_robot_explore_v0  # noqa: E402
 from topo.fileio import atomic_write  # noqa: E402
 
 
@@ -31,6 +36,8 @@ def main() -> None:
     parser.add_argument("--no-gif", action="store_true")
     parser.add_argument("--explorer", default="coordinated_frontier",
                         help="agents.team.EXPLORERS name of the explorer driving both robots")
+    parser.add_argument("--team", type=int, default=4,
+                        help="robots of the multi-robot episode (2-8; 0 skips it)")
     args = parser.parse_args()
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     import imageio.v3 as iio
@@ -75,6 +82,41 @@ def main() -> None:
         atomic_write(gif, lambda fh: iio.imwrite(fh, np.stack(frames), extension=".gif",
                                                  duration=100, loop=0))
         print(f"  wrote {gif} ({len(frames)} frames)")
+    env.close()
+    if args.team:
+        team_episode(args.team, args.seed, args.steps, args.out)
+
+
+def team_episode(n: int, seed: int, steps: int, out: Path) -> None:
+    """One episode of ``n`` Frontier explorers with an 8 m communication range; prints who
+    merged with whom and writes the last frame to ``out/team.png``."""
+    import imageio.v3 as iio
+
+    env = multi_robot_explore_v0.parallel_env(n_robots=n, comm={"range": 8.0},
+                                              max_cycles=steps, render_mode="rgb_array")
+    obs, infos = env.reset(seed=seed)
+    team = {a: Frontier() for a in env.possible_agents}
+    for (agent, explorer), s in zip(team.items(), np.random.SeedSequence(seed).spawn(n),
+                                    strict=True):
+        explorer.reset(int(s.generate_state(1)[0]))
+        explorer.bind(env, agent)
+    k = 0
+    while env.agents:
+        obs, _, _, _, infos = env.step({a: team[a].act(obs[a], infos[a]) for a in env.agents})
+        k += 1
+    state = env.merge_state()
+    info = infos["robot_0"]
+    print(f"multi_robot_explore_v0, {n} robots, 8 m range, seed {seed}: {k} steps")
+    print(f"  true coverage      {info['true_coverage']:.1%}; robot 0's fused map "
+          f"{info['shared_area_m2']:.1f} m² of robots {list(state.fused[0])}")
+    for (i, j), pair in sorted(state.pairs.items()):
+        if pair.transform is not None:
+            err = math.degrees(pair.transform.rotation_error(env.true_transform(i, j)))
+            print(f"  pair ({i}, {j})        merged, rotation error {err:.2f}°, kept by the "
+                  f"cycle check: {pair.kept}")
+    png = out / "team.png"
+    atomic_write(png, lambda fh: iio.imwrite(fh, env.render(), extension=".png"))
+    print(f"  wrote {png}")
     env.close()
 
 

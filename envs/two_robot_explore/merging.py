@@ -48,7 +48,8 @@ class PairState:
         method, source: what supplied the transform in use (as :class:`MergeState`).
         calls, drops: merge calls of this pair; transforms dropped (the grids refuted them).
         kept: the transform in use passes the team's cycle check (with everything the team
-            knows; ``False`` without a transform).
+            knows: not disputed by triangles, not contradicted by the forest; ``False``
+            without a transform).
     """
 
     transform: Rigid2D | None
@@ -353,10 +354,10 @@ class TeamMerging:
 
     def state(self, views: TeamViews, transform: Rigid2D | None) -> MergeState:
         """A :class:`MergeState` (``transform``: robot 1 → robot 0 in robot 0's fused map)."""
-        kept = set() if self.check is None else set(self.check.kept)
+        out = set() if self.check is None else {*self.check.disputed, *self.check.rejected}
         pairs = {k: PairState(p.transform, float(getattr(p.result, "confidence", 0.0))
                               if p.result is not None else 0.0, p.method, p.source, p.calls,
-                              p.drops, k in kept)
+                              p.drops, p.transform is not None and k not in out)
                  for k, p in self.pairs.items()}
         p01 = self.pair01
         return MergeState(transform, p01.method, p01.source, self.result, self.calls,
