@@ -22,8 +22,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agents.team import make_team  # noqa: E402
 from agents.scripted import Frontier  # noqa: E402
+from agents.team import make_team  # noqa: E402
 from envs import multi_robot_explore_v0, two_robot_explore_v0  # noqa: E402
 from topo.fileio import atomic_write  # noqa: E402
 

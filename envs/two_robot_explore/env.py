@@ -46,8 +46,8 @@ the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size
 | ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
 | ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
 | ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
-| ``teammate`` | (5,) f32 | teammate's estimated pose (c; ``two_robot_explore_v0``) | -2R, -1, 0 | 2R, 1, 1 |
-| ``teammates`` | (N−1, 7) f32 | per teammate (``multi_robot_explore_v0``) (h) | -2R, -1, 0 | 2R, 1, 1 |
+| ``teammate`` | (5,) f32 | teammate's estimated pose (c; two robots) | -2R, -1, 0 | 2R, 1, 1 |
+| ``teammates`` | (N−1, 7) f32 | per teammate (h; teams) | -2R, -1, 0 | 2R, 1, 1 |
 
 (a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
 one-hot (junction, dead end, corner, gateway; 0–1), degree (0–16), clearance (m, 0–10), frontier
@@ -161,7 +161,8 @@ The shared map is robot 0's fused map: its known cells plus robot 1's moved by t
 accepted merge transform (in a team, plus every teammate's in robot 0's fused map, each by its
 frame: a teammate's cells count once it merges into robot 0's component, as robot 1's do with
 two robots; unmerged components do not count until they do, and with limited communication
-robot 0 counts what it knows, so bringing maps back to robot 0 pays). When a new merge changes the transform, or the transform is dropped, the shared map
+robot 0 counts what it knows, so bringing maps back to robot 0 pays).
+When a new merge changes the transform, or the transform is dropped, the shared map
 is rebuilt and the change of its area (possibly negative: a wrong merge overlaps what it should
 not, a dropped one takes robot 1's cells out) enters the reward.
 ``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
@@ -183,11 +184,12 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 
 ## Starting State
 
-``N`` random drivable cells (two for ``two_robot_explore_v0``) at least ``world.start_clearance`` (0.45 m) from any wall and
-``world.min_start_separation`` (2 m) apart, in the same connected region, random headings;
-each robot's odometry starts at ``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first
-scan is taken at reset. A ``reset`` that raises (bad ``start_poses``) leaves no episode:
-``agents`` is empty and ``step()`` raises until a ``reset`` succeeds.
+``N`` random drivable cells (two for ``two_robot_explore_v0``) at least
+``world.start_clearance`` (0.45 m) from any wall and ``world.min_start_separation`` (2 m)
+apart, in the same connected region, random headings; each robot's odometry starts at
+``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first scan is taken at reset. A
+``reset`` that raises (bad ``start_poses``) leaves no episode: ``agents`` is empty and
+``step()`` raises until a ``reset`` succeeds.
 
 ## Episode End
 
