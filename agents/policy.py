@@ -6,7 +6,10 @@ Three encoders, concatenated:
   then one strided 3 × 3 conv);
 * ``sonar``, ``odometry``, ``teammate`` (and ``frontiers`` when the observation has it:
   :class:`agents.goals.FrontierGoalEnv`) → one MLP layer, each input divided by its space's
-  bound so every feature lies in [-1, 1];
+  bound so every feature lies in [-1, 1]; a team of ``N`` robots (``multi_robot_explore_v0``)
+  has ``teammates`` (N − 1 rows) instead of ``teammate``: each row goes through one shared
+  layer and the rows' mean and max join that MLP's input (Deep Sets), so the weights do not
+  depend on ``N`` or on the teammates' order;
 * the padded graph (``graph_nodes`` N × F, ``graph_mask``, ``graph_adjacency``) → a per-node
   MLP, one round of mean-neighbour message passing, then masked mean- and max-pooling: a
   permutation-invariant summary (Deep Sets with one graph-convolution step) that ignores
@@ -34,6 +37,8 @@ from topo.validation import check_real
 
 VECTOR_KEYS = ("sonar", "odometry", "teammate")
 OPTIONAL_VECTOR_KEYS = ("frontiers",)
+TEAM_KEY = "teammates"
+"""A team's observation of its ``N − 1`` teammates, one row each; replaces ``teammate``."""
 GRAPH_KEYS = ("graph_nodes", "graph_mask", "graph_adjacency")
 
 
@@ -54,15 +59,20 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
             global state, :class:`agents.goals.FrontierGoalEnv`'s ``global_state``), placed
             between the three encodings and the pass-through keys; 0 (the default) ignores
             ``state``. :class:`SectorPolicy` gives it to the critic only.
+        team_features: width of the per-teammate layer when the observation has
+            ``teammates`` (ignored with ``teammate``).
     """
 
     def __init__(self, observation_space: spaces.Dict, map_features: int = 128,
                  vector_features: int = 64, graph_features: int = 64,
-                 pass_through: tuple[str, ...] = (), state_features: int = 0) -> None:
+                 pass_through: tuple[str, ...] = (), state_features: int = 0,
+                 team_features: int = 16) -> None:
         if not isinstance(observation_space, spaces.Dict):
             raise TypeError("TopoExplorerExtractor needs a Dict observation space, got "
                             f"{type(observation_space).__name__}")
-        missing = [k for k in ("local_map", *VECTOR_KEYS, *GRAPH_KEYS)
+        team = TEAM_KEY in observation_space.spaces and "teammate" not in observation_space.spaces
+        vector_keys = tuple(k for k in VECTOR_KEYS if not (team and k == "teammate"))
+        missing = [k for k in ("local_map", *vector_keys, *GRAPH_KEYS)
                    if k not in observation_space.spaces]
         missing += [k for k in pass_through if k not in observation_space.spaces]
         if state_features and "state" not in observation_space.spaces:
@@ -95,10 +105,19 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
             n_flat = self.cnn(torch.zeros(1, *sp["local_map"].shape)).shape[1]
         self.map_head = nn.Sequential(nn.Linear(n_flat, map_features), nn.ReLU())
 
-        self.vector_keys = VECTOR_KEYS + tuple(k for k in OPTIONAL_VECTOR_KEYS if k in sp)
+        self.vector_keys = vector_keys + tuple(k for k in OPTIONAL_VECTOR_KEYS if k in sp)
         self.register_buffer("vector_scale", torch.cat([_bound(sp[k]).flatten()
                                                         for k in self.vector_keys]))
         n_vec = int(sum(np.prod(sp[k].shape) for k in self.vector_keys))
+        self.team = team
+        if team:
+            rows = sp[TEAM_KEY]
+            if len(rows.shape) != 2:
+                raise ValueError(f"observation space {TEAM_KEY!r} must be (teammates, features), "
+                                 f"got shape {rows.shape}")
+            self.register_buffer("team_scale", _bound(rows).amax(dim=0))
+            self.team_in = nn.Sequential(nn.Linear(rows.shape[1], team_features), nn.ReLU())
+            n_vec += 2 * team_features
         self.vector = nn.Sequential(nn.Linear(n_vec, vector_features), nn.ReLU())
 
         node_space = sp["graph_nodes"]
@@ -111,6 +130,9 @@ class TopoExplorerExtractor(BaseFeaturesExtractor):
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         m = self.map_head(self.cnn(obs["local_map"]))
         vec = torch.cat([obs[k].flatten(1) for k in self.vector_keys], dim=1) / self.vector_scale
+        if self.team:
+            rows = self.team_in(obs[TEAM_KEY] / self.team_scale)  # (B, N - 1, T)
+            vec = torch.cat([vec, rows.mean(1), rows.amax(1)], dim=1)
         v = self.vector(vec)
 
         mask = obs["graph_mask"].unsqueeze(-1)  # (B, N, 1)

@@ -1,14 +1,15 @@
 """Stable-Baselines3 adapter: PettingZoo ``ParallelEnv`` → SB3 ``VecEnv`` with parameter sharing.
 
-Every agent of every env is one sub-environment of the ``VecEnv``: with ``n`` envs of two robots,
-``num_envs = 2 n`` and one policy drives all robots (parameter sharing).
+Every agent of every env is one sub-environment of the ``VecEnv``: with ``n`` envs of ``N`` robots
+(two for ``two_robot_explore_v0``, 2–8 for ``multi_robot_explore_v0``), ``num_envs = N n`` and one
+policy drives all robots (parameter sharing).
 
 Why not SuperSuit (``pettingzoo_env_to_vec_env_v1`` + ``concat_vec_envs_v1``): with SB3 2.9 its
 wrapper has no ``seed()``, so ``PPO(seed=...)`` fails, and making its episode-end bookkeeping
 match SB3's is more work than this adapter. The semantics here are exactly those of SB3's
 ``DummyVecEnv.step_wait``:
 
-* when an env's episode ends (all its agents terminated or truncated — the two robots always end
+* when an env's episode ends (all its agents terminated or truncated — the robots always end
   together), each of its sub-environments reports ``done=True``, its info gets
   ``"terminal_observation"`` (the last observation) and ``"TimeLimit.truncated"`` (truncated and
   not terminated), and the returned observation is already the first of the next episode

@@ -182,3 +182,58 @@ def test_central_critic_reads_the_global_state_and_the_actor_does_not():
     assert policy.mlp_extractor.n_state == 16
     plain = SectorPolicy(goal_space(), spaces.Discrete(8), lambda _: 3e-4)
     assert plain.mlp_extractor.n_state == 0 and plain.features_extractor.state_features == 0
+
+
+def team_space(n_robots: int) -> spaces.Dict:
+    """``obs_space`` as ``multi_robot_explore_v0`` lays it out: ``teammates`` (N - 1, 7)."""
+    sp = {k: v for k, v in obs_space().spaces.items() if k != "teammate"}
+    lo = np.array([-60, -60, -1, -1, 0, 0, 0], np.float32)
+    hi = np.array([60, 60, 1, 1, 1, 1, 1], np.float32)
+    return spaces.Dict({**sp, "teammates": spaces.Box(np.tile(lo, (n_robots - 1, 1)),
+                                                      np.tile(hi, (n_robots - 1, 1)))})
+
+
+def team_batch(n_robots: int, seed: int) -> dict[str, torch.Tensor]:
+    sp = team_space(n_robots)
+    sp.seed(seed)
+    return {k: torch.as_tensor(np.stack([s.sample() for _ in range(3)]), dtype=torch.float32)
+            for k, s in sp.spaces.items()}
+
+
+def test_two_robot_layout_keeps_its_parameters():
+    """A ``teammate`` observation builds exactly the modules it always did (saved policies
+    load): no teammate-set encoder, and the vector MLP reads the 17 values as before."""
+    torch.manual_seed(0)
+    ex = TopoExplorerExtractor(obs_space())
+    assert not ex.team and ex.vector_keys == ("sonar", "odometry", "teammate")
+    assert not any(k.startswith("team") for k in ex.state_dict())
+    assert ex.vector[0].in_features == 8 + 4 + 5
+
+
+@pytest.mark.parametrize("n_robots", [3, 4])
+def test_teammates_rows_are_encoded_as_a_set(n_robots):
+    """With ``teammates`` the features have the two-robot width, do not depend on the
+    teammates' order, and the weights are the same shapes for every team size."""
+    torch.manual_seed(0)
+    ex = TopoExplorerExtractor(team_space(n_robots))
+    assert ex.features_dim == TopoExplorerExtractor(obs_space()).features_dim
+    obs = team_batch(n_robots, 1)
+    base = ex(obs)
+    assert base.shape == (3, ex.features_dim) and torch.isfinite(base).all()
+    reordered = {**obs, "teammates": obs["teammates"].flip(1)}
+    torch.testing.assert_close(ex(reordered), base, atol=1e-5, rtol=1e-5)
+    moved = obs["teammates"].clone()
+    moved[:, 0, :2] += 20.0
+    assert not torch.allclose(ex({**obs, "teammates": moved}), base)
+    other = TopoExplorerExtractor(team_space(2 if n_robots == 4 else 5))
+    other.load_state_dict(ex.state_dict())  # one set of weights serves any team size
+
+
+def test_teammates_needs_rows_of_features():
+    sp = {**team_space(3).spaces, "teammates": spaces.Box(0, 1, (14,), np.float32)}
+    with pytest.raises(ValueError, match=r"'teammates' must be \(teammates, features\), "
+                                         r"got shape \(14,\)"):
+        TopoExplorerExtractor(spaces.Dict(sp))
+    sp = {k: v for k, v in team_space(3).spaces.items() if k != "teammates"}
+    with pytest.raises(ValueError, match=r"lacks keys \['teammate'\]"):
+        TopoExplorerExtractor(spaces.Dict(sp))

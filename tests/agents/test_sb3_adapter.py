@@ -138,3 +138,46 @@ def test_bad_arguments():
         ParallelVecEnv([])
     with pytest.raises(ValueError, match="n_workers must be >= 1, got 0"):
         ParallelVecEnv([make()], n_workers=0)
+
+
+TEAM = {"world": {"size": (12.0, 12.0)}, "max_cycles": 6, "sonar": {"rays": 1},
+        "comm": {"range": 5.0}}
+"""A small, fast ``multi_robot_explore_v0`` setting."""
+
+
+@pytest.mark.parametrize("n_robots", [3, 4])
+def test_a_team_of_n_robots_trains_one_shared_policy(n_robots):
+    """Every robot of every team is a slot (``N`` per env, ``teammates`` batched), seeded per
+    env, ending together; one PPO policy learns on all of them (parameter sharing)."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.policy import TopoExplorerExtractor
+    from envs import multi_robot_explore_v0
+
+    torch.set_num_threads(1)
+    fns = [functools.partial(multi_robot_explore_v0.parallel_env, n_robots=n_robots, **TEAM)
+           for _ in range(2)]
+    venv = ParallelVecEnv(fns)
+    assert venv.n_agents == n_robots and venv.num_envs == 2 * n_robots
+    assert venv.seed(4)[n_robots] == 4 + n_robots
+    obs = venv.reset()
+    assert obs["teammates"].shape == (2 * n_robots, n_robots - 1, 7)
+    assert obs["sonar"].shape == (2 * n_robots, 8)
+    model = PPO("MultiInputPolicy", venv, n_steps=3, batch_size=2 * n_robots, n_epochs=1,
+                seed=0, device="cpu",
+                policy_kwargs={"features_extractor_class": TopoExplorerExtractor,
+                               "net_arch": {"pi": [16], "vf": [16]}})
+    model.learn(total_timesteps=3 * venv.num_envs)
+    assert model.num_timesteps == 3 * venv.num_envs
+    assert model.policy.features_extractor.team
+    ended = []
+    for _ in range(TEAM["max_cycles"]):  # learn stopped 3 steps into the episodes
+        actions, _ = model.predict(obs, deterministic=True)
+        obs, rewards, dones, infos = venv.step(actions)
+        assert rewards.shape == (2 * n_robots,) and dones.all() == dones.any()
+        ended.append(bool(dones.all()))
+        if dones.all():
+            assert all(i["TimeLimit.truncated"] and "terminal_observation" in i for i in infos)
+    assert ended == [False, False, True, False, False, False]
+    venv.close()
