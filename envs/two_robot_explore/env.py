@@ -231,7 +231,11 @@ TorchRL turns every entry into a tensor). Per robot:
 robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
 dropped echo that "sees through" a wall, or odometry drift, does not count. (e) it includes
 walls, phantom free space behind dropped echoes and mis-merged area. (f) against ground
-truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare).
+truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare). With
+odometry noise the truth is drift-aware: the transform right at the robots' current places
+(each robot's current odometry frame, ``Robot.odometry_frame()``), the translation error the
+larger at the two robots' positions (``envs.two_robot_explore.drift``); in a team, the largest
+over robot 0's fused teammates.
 
 The maps are read through the env, not handed out every step (a grid is megabytes; explorers
 need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
@@ -377,6 +381,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from envs.two_robot_explore.actions import DISCRETE_ACTIONS, action_space, parse_actions
 from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import EnvConfig
+from envs.two_robot_explore.drift import drift_aware_error
 from envs.two_robot_explore.global_state import (
     STATE_MAP_SIZE,
     STATE_SAMPLES,
@@ -1006,12 +1011,19 @@ class MultiRobotExploreEnv(ParallelEnv):
     def merge_errors(self) -> tuple[float, float]:
         """Rotation error (degrees) and translation error (metres, at the centroid of the
         teammate's map) of the merge transforms in use in robot 0's fused map against ground
-        truth, the largest over its teammates; NaN when it has none."""
+        truth, the largest over its teammates; NaN when it has none. With odometry noise the
+        truth is drift-aware (``envs.two_robot_explore.drift.drift_aware_error``: the
+        transform that is right at the robots' current places, errors measured there)."""
         worst = (math.nan, math.nan)
+        robot = self.config.robot
+        drifts = any(robot.odometry_noise) or any(robot.odometry_alphas)
         for j, (to_0, _) in sorted(self.shared.members.items()):
-            rot, trans = self._merging.errors(j, to_0, self.views.view(0, j).topomap,
-                                              self.true_transform(0, j),
-                                              self.robots[j].odometry[:2])
+            if drifts:
+                rot, trans = drift_aware_error(to_0, self.robots[0], self.robots[j])
+            else:
+                rot, trans = self._merging.errors(j, to_0, self.views.view(0, j).topomap,
+                                                  self.true_transform(0, j),
+                                                  self.robots[j].odometry[:2])
             worst = (rot, trans) if math.isnan(worst[0]) else (max(worst[0], rot),
                                                                max(worst[1], trans))
         return worst
