@@ -29,6 +29,12 @@ cross-validation. ``--write`` stores the model fitted on all pairs, with the dat
 data, in ``fusion/calibration.json``; ``--plot PNG`` writes the cross-validated reliability
 diagram; ``--cache`` keeps the features (a JSON file) so that a refit with other settings does
 not re-run the merges.
+
+Odometry drift: ``--pairs`` may name the drift-aware sets of ``benchmarks/env_pairs.py
+--odometry-noise`` (``data/env_pairs/drift/tune/sigma_<σ>``, whose truth is the robots' current
+odometry frames at the snapshot); the report then adds, per set, the cross-validated reliability
+table and its largest gap, and the gap of the model stored now (``--drift`` adds every
+``data/env_pairs/drift/tune`` set to the default ones).
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ import fusion.merge as fm  # noqa: E402
 from fusion.calibration import (  # noqa: E402
     brier_score,
     fit_logistic,
+    load_model,
     max_calibration_gap,
     plot_reliability,
     reliability_table,
@@ -67,6 +74,8 @@ DATA = ROOT / "data" / "env_pairs"
 L2 = 2.0
 """Ridge penalty of the fit (in pairs)."""
 TUNE = DATA / "tune"
+DRIFT = DATA / "drift" / "tune"
+"""The drift-aware tuning sets (``benchmarks/env_pairs.py --odometry-noise``)."""
 """The tuning sets: every dataset folder in it (``frontier``, ``coordinated_frontier`` — seed 0 —
 and ``real_*``), never those of ``DATA / "test"``. The model of 2026-12-02 was also fitted on
 two more made for it with the dataset CLI at commit 146727a, from seeds other than the test
@@ -307,8 +316,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="store the model in fusion/calibration.json")
     parser.add_argument("--plot", type=Path, default=None,
                         help="write the cross-validated reliability diagram to this PNG")
+    parser.add_argument("--drift", action="store_true",
+                        help="add the drift-aware sets of data/env_pairs/drift/tune")
     args = parser.parse_args(argv)
     dirs = args.pairs or default_dirs()
+    if args.drift:
+        dirs = [*dirs, *sorted(p for p in DRIFT.glob("*") if (p / "dataset.json").exists())]
     collect = {"grid": lambda: alignment_rows(dirs),
                "structural": lambda: structural_rows(dirs, args.synthetic),
                "ranking": lambda: ranking_rows(dirs, args.synthetic)}[args.model]
@@ -338,6 +351,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['low']:.1f}–{r['high']:.1f} | {r['n']} | {r['predicted']:.3f} | "
               f"{r['observed']:.3f} |")
     print(f"largest gap in bins of ≥ 20: {max_calibration_gap(table):.3f}")
+    per_set_report(rows, p, names, args.model)
     if args.plot is not None:
         out = plot_reliability({f"{args.model} (cross-validated)": (p, y)}, args.plot,
                                title=f"{args.model} model, leave-one-world-out on the "
@@ -363,6 +377,30 @@ def main(argv: list[str] | None = None) -> int:
     if args.write:
         print(f"wrote {write_model(args.model, model)}")
     return 0
+
+
+def per_set_report(rows: list[dict], p: np.ndarray, names, model_name: str) -> None:
+    """Per dataset of ``rows``: the cross-validated reliability table (predictions ``p``) and
+    its largest gap in bins of ≥ 20, and the largest gap of the model stored now."""
+    sets = sorted({r["set"] for r in rows})
+    if len(sets) < 2:
+        return
+    try:
+        stored = load_model(model_name)
+    except ValueError:
+        stored = None
+    X, y = matrix(rows, names)
+    for name in sets:
+        sel = np.array([r["set"] == name for r in rows])
+        table = reliability_table(p[sel], y[sel])
+        line = " ".join(f"{r['low']:.1f}–{r['high']:.1f}: {r['n']} {r['predicted']:.2f}/"
+                        f"{r['observed']:.2f}" for r in table)
+        gap_now = math.nan
+        if stored is not None and list(stored.names) == list(names):
+            gap_now = max_calibration_gap(reliability_table(stored.predict(X[sel]), y[sel]))
+        print(f"{name}: {int(sel.sum())} alignments, {int(y[sel].sum())} right; cross-validated "
+              f"gap {max_calibration_gap(table):.3f}, stored model's gap {gap_now:.3f}; "
+              f"bins (n predicted/observed): {line}")
 
 
 def _ranking(rows: list[dict], l2: float) -> int:
