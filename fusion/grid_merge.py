@@ -65,6 +65,9 @@ DEFAULT_ACCEPT_THRESHOLD = 0.9
 cross-validated tuning alignments of ``benchmarks/calibrate_merge.py`` had at most 1 % false
 accepts on no-overlap pairs and 1 % wrong accepts of all pairs."""
 
+DEFAULT_DROP_MARGIN = 0.3
+"""Default :attr:`GridMergeConfig.drop_margin` (``benchmarks/drift.md``)."""
+
 
 @dataclass(frozen=True, slots=True)
 class GridMergeConfig:
@@ -81,7 +84,10 @@ class GridMergeConfig:
     ``native_refine``: refine the alignment on the grids' own cells (finer than
     ``resolution``: 0.03–0.1 m). The confidence model was fitted with the default search
     settings (``resolution`` … ``refine_top``): other values change the evidence it reads, so
-    refit it (``benchmarks/calibrate_merge.py``) before trusting its probabilities."""
+    refit it (``benchmarks/calibrate_merge.py``) before trusting its probabilities.
+    ``drop_margin``: :func:`fusion.hybrid.recheck` drops the transform in use when the grids'
+    alignment of it has a confidence below ``accept_threshold − drop_margin`` (a margin, so
+    that a merge is not dropped and re-accepted as the confidence wavers at the threshold)."""
 
     resolution: float = 0.2
     step_deg: float = 3.0
@@ -96,6 +102,7 @@ class GridMergeConfig:
     refine_top: int = 3
     accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     native_refine: bool = True
+    drop_margin: float = DEFAULT_DROP_MARGIN
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -103,8 +110,8 @@ class GridMergeConfig:
                 if not isinstance(self.native_refine, bool):
                     raise TypeError(f"GridMergeConfig.native_refine must be a bool, got "
                                     f"{type(self.native_refine).__name__}")
-            elif f.name == "accept_threshold":
-                check_real(self.accept_threshold, "GridMergeConfig.accept_threshold", low=0.0,
+            elif f.name in ("accept_threshold", "drop_margin"):
+                check_real(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=0.0,
                            low_inclusive=True, high=1.0)
             elif f.name in ("coarse_factor", "refine_top"):
                 check_int(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=1)

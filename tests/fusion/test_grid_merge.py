@@ -420,3 +420,38 @@ def _pair_of_room_views():
     sb[ok] = states[ij[ok, 1], ij[ok, 0]]
     b = GridSnapshot(sb.reshape(h, w), RES, (-3.0, -3.0))
     return a, b, truth
+
+
+def test_recheck_drops_a_transform_in_use_whose_confidence_fell_by_the_margin(monkeypatch):
+    """Drift bends the maps: the grids still align them where the transform in use does, but
+    no longer trust it. Below accept_threshold − drop_margin the merge is dropped; within the
+    margin it stays (no drop-and-accept flicker at the threshold)."""
+    import dataclasses
+
+    import fusion.grid_merge as gm
+
+    a, b, truth = overlapping_views(90.0)
+    cfg = GridMergeConfig()
+    real = gm.merge_grids
+    for confidence, dropped in ((0.2, True), (cfg.accept_threshold - cfg.drop_margin - 0.01, True),
+                                (cfg.accept_threshold - cfg.drop_margin + 0.01, False)):
+        monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None, c=confidence:
+                            dataclasses.replace(real(ga, gb, config), accepted=False,
+                                                confidence=c, reason="low confidence"))
+        res, why = recheck(TINY, TINY, a, b, truth)
+        assert not res.accepted and res.grid.margin > gm.TIE_MARGIN
+        assert (why is not None) is dropped, confidence
+        if dropped:
+            assert why.startswith(f"the grids no longer trust the transform in use: their "
+                                  f"alignment of it has confidence {confidence:.2f} < "
+                                  f"accept_threshold - drop_margin = 0.60")
+            assert why in res.reason
+    # the same low confidence from a tie of look-alikes (a symmetric room) keeps it
+    monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
+        real(ga, gb, config), accepted=False, confidence=0.2, margin=1.0, reason="a tie"))
+    assert recheck(TINY, TINY, a, b, truth)[1] is None
+
+
+def test_drop_margin_is_checked():
+    with pytest.raises(ValueError, match="GridMergeConfig.drop_margin must be <= 1.0, got 1.5"):
+        GridMergeConfig(drop_margin=1.5)
