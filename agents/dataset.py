@@ -2,11 +2,19 @@
 
     python -m agents.dataset generate --explorer frontier --pairs 60 --out data/pairs \\
         [--world procedural|PATH] [--snapshots 3] [--workers 2] [--backend process|ray] \\
-        [--address ADDR] [--seed 0]
+        [--address ADDR] [--seed 0] [--robots 2]
     python -m agents.dataset info data/pairs
 
-Each **episode** ``e`` of a run is seeded from ``(seed, e)`` alone and yields ``snapshots`` pairs
-(ids ``e · snapshots + k``): snapshot ``k`` is taken the first time the true coverage reaches
+Each **episode** ``e`` of a run is seeded from ``(seed, e)`` alone and yields ``snapshots``
+snapshots of a team of ``robots`` robots (``two_robot_explore_v0`` for 2, the default, else
+``multi_robot_explore_v0``); each snapshot gives one pair per two robots ``i < j``, ``P = N (N −
+1) / 2`` of them, in the order (0, 1), (0, 2), ..., (1, 2), ...: pair ids ``(e · snapshots + k)
+· P + p`` (``e · snapshots + k`` with two robots). A pair's map A is robot ``i``'s, map B robot
+``j``'s, its transform the true one from ``j``'s frame into ``i``'s (the env's
+``true_transform(i, j)``; ``true_merge`` for (0, 1)), its overlap the share of the smaller of
+the two robots' true sweeps that the other also swept, and ``extra["robots"]`` is ``[i, j]``
+(pairs written before this key existed are (0, 1)). Snapshot ``k`` is taken the first time the
+true coverage reaches
 ``coverage_levels[k]`` (spread over 15–85 % so that overlaps vary) or, for an explorer too slow
 to get there, at step ``(k + 1) / snapshots · max_cycles``, whichever comes first (so the
 snapshots of an episode are taken at distinct moments); an episode that terminates early gives
@@ -130,18 +138,22 @@ class GenerateArgs:
     """Seed of the whole run (episode e uses a seed derived from (seed, e))."""
     max_cycles: int = 600
     """Env steps per episode at most."""
+    robots: int = 2
+    """Robots in the team (2–8): every two of them make a pair of each snapshot."""
     progress: bool = True
     """Show a progress bar."""
 
     def __post_init__(self) -> None:
         """Check every setting; a bad one is a :class:`SettingsError` (a ``ValueError``)
         naming it."""
-        from envs.two_robot_explore.config import WorldConfig
+        from envs.two_robot_explore.config import EnvConfig, WorldConfig
 
         for name, low in (("pairs", 1), ("snapshots", 1), ("workers", 1), ("seed", 0),
                           ("max_cycles", 10)):
             with _setting(name):
                 check_int(getattr(self, name), name, low=low)
+        with _setting("robots"):
+            EnvConfig(n_robots=self.robots)  # names n_robots and the value
         if self.backend not in BACKENDS:
             raise SettingsError("backend", f"backend must be one of {list(BACKENDS)}, got "
                                            f"{self.backend!r}")
@@ -169,13 +181,22 @@ class GenerateArgs:
 
     @property
     def n_episodes(self) -> int:
-        return math.ceil(self.pairs / self.snapshots)
+        return math.ceil(self.pairs / (self.snapshots * len(robot_pairs(self.robots))))
 
     def settings(self) -> dict[str, Any]:
-        """What determines the pairs (stored in ``dataset.json``; a resume must match)."""
+        """What determines the pairs (stored in ``dataset.json``; a resume must match).
+        ``robots`` only for teams of more than two, so that two-robot datasets made before it
+        existed resume."""
         return {"explorer": self.explorer, "world": self.world, "snapshots": self.snapshots,
                 "seed": self.seed, "max_cycles": self.max_cycles,
-                "world_size": [float(v) for v in self.world_size]}
+                "world_size": [float(v) for v in self.world_size],
+                **({"robots": self.robots} if self.robots != 2 else {})}
+
+
+def robot_pairs(robots: int) -> np.ndarray:
+    """``(P, 2)`` robot indices ``i < j`` of a team of ``robots``, (0, 1) first: the pairs of
+    every snapshot, in pair-id order."""
+    return np.argwhere(np.triu(np.ones((robots, robots), dtype=bool), k=1))
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -193,51 +214,69 @@ def env_kwargs(settings: dict[str, Any]) -> dict[str, Any]:
     world: dict[str, Any] = {"source": settings["world"]}
     if settings["world"] == "procedural":
         world["size"] = tuple(settings["world_size"])
-    return {"max_cycles": settings["max_cycles"], "world": world}
+    robots = settings.get("robots", 2)
+    return {"max_cycles": settings["max_cycles"], "world": world,
+            **({"n_robots": robots} if robots != 2 else {})}
 
 
-def _snapshot(env: Any, infos: dict, pair_id: int, episode: int, k: int, seed: int,
-              step: int, settings: dict[str, Any]) -> MapPair:
+def pair_overlap(swept_a: np.ndarray, swept_b: np.ndarray) -> float:
+    """The share of the smaller of two true sweeps (world-cell masks) the other also swept:
+    the env's ``overlap`` info for two robots."""
+    small = min(int(np.count_nonzero(swept_a)), int(np.count_nonzero(swept_b)))
+    return int(np.count_nonzero(swept_a & swept_b)) / small if small else 0.0
+
+
+def _snapshot(env: Any, infos: dict, first_id: int, episode: int, k: int, seed: int,
+              step: int, settings: dict[str, Any]) -> list[MapPair]:
+    """Every robot pair of one snapshot (module docstring), ids from ``first_id`` on."""
     raw = env.unwrapped
     a = infos["robot_0"]
-    snap_a, snap_b = raw.robot_map("robot_0"), raw.robot_map("robot_1")
+    snaps = [raw.robot_map(agent) for agent in raw.possible_agents]
 
     def grid(snap: Any) -> GridSnapshot:
         g = snap.grid
         return GridSnapshot(np.asarray(g.states(), dtype=np.int8).copy(), float(g.resolution),
                             tuple(float(v) for v in g.origin))
 
+    grids = [grid(snap) for snap in snaps]
     world = settings["world"]
     world_id = f"procedural:{seed}" if world == "procedural" else Path(world).name
-    truth: Rigid2D = raw.true_merge
-    return MapPair(
-        pair_id=pair_id, map_a=snap_a.topomap, map_b=snap_b.topomap, grid_a=grid(snap_a),
-        grid_b=grid(snap_b), transform=truth, overlap=float(a["overlap"]), world_id=world_id,
-        seed=seed, explorer=settings["explorer"], step=step, episode=episode, snapshot=k,
-        extra={"true_coverage": float(a["true_coverage"])},
-    )
+    out = []
+    for p, (i, j) in enumerate(robot_pairs(len(snaps)).tolist()):
+        truth: Rigid2D = raw.true_transform(i, j)
+        out.append(MapPair(
+            pair_id=first_id + p, map_a=snaps[i].topomap, map_b=snaps[j].topomap,
+            grid_a=grids[i], grid_b=grids[j], transform=truth,
+            overlap=pair_overlap(raw.oracle.swept[i], raw.oracle.swept[j]), world_id=world_id,
+            seed=seed, explorer=settings["explorer"], step=step, episode=episode, snapshot=k,
+            extra={"true_coverage": float(a["true_coverage"]), "robots": [i, j]},
+        ))
+    return out
 
 
 def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, Any]) -> int:
     """Run episode ``episode`` and write its pairs (ids ``episode · snapshots + k`` below
     ``n_pairs``) into dataset ``root``. Returns how many pairs it wrote. Top-level and
     argument-only so that process pools and Ray can ship it."""
-    from agents.team import make_team
-    from envs.two_robot_explore_v0 import parallel_env
+    from agents.evaluation import team_for
+    from envs import parallel_env_for
 
     snapshots = settings["snapshots"]
-    ids = [episode * snapshots + k for k in range(snapshots)]
+    per = len(robot_pairs(settings.get("robots", 2)))
+    # snapshot k's pairs are ids[k], ids[k] + 1, ... (those below n_pairs are written)
+    ids = [(episode * snapshots + k) * per for k in range(snapshots)]
     ids = [i for i in ids if i < n_pairs]
     seed = episode_seed(settings["seed"], episode)
-    env = parallel_env(**env_kwargs(settings))
-    team = make_team(settings["explorer"])
+    env = parallel_env_for(env_kwargs(settings))
+    team = team_for(settings["explorer"], env)
+    n_agents = len(env.possible_agents)
     levels = coverage_levels(snapshots)[: len(ids)]
     deadlines = [math.ceil((k + 1) / snapshots * settings["max_cycles"]) for k in range(len(ids))]
-    taken: list[MapPair] = []
+    taken: list[list[MapPair]] = []
     state = {"infos": None, "step": 0}
 
     def callback(step: int, _obs: dict, _rew: dict, infos: dict) -> None:
-        if len(infos) < 2:
+        if len(infos) < n_agents:
             return
         state["infos"], state["step"] = infos, step
         cov = float(infos["robot_0"]["true_coverage"])
@@ -254,9 +293,10 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
                                    state["step"], settings))
     finally:
         env.close()
-    for pair in taken:
+    pairs = [pair for snapshot in taken for pair in snapshot if pair.pair_id < n_pairs]
+    for pair in pairs:
         write_pair(root, pair)
-    return len(taken)
+    return len(pairs)
 
 
 Runner = Callable[[list[int]], Iterator[int]]
@@ -329,15 +369,16 @@ def _ray_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
 def _preflight(args: GenerateArgs) -> None:
     """Build once what every episode builds — the env (a map file is loaded and checked) and
     an ``sb3:`` explorer's model — so that a bad setting stops the run before it writes."""
-    from envs.two_robot_explore_v0 import parallel_env
+    from envs import parallel_env_for
 
     with _setting("world"):
-        parallel_env(**env_kwargs(args.settings())).close()
+        env = parallel_env_for(env_kwargs(args.settings()))
+        env.close()
     if args.explorer.startswith("sb3:"):
-        from agents.team import make_team
+        from agents.evaluation import team_for
 
         try:
-            make_team(args.explorer)
+            team_for(args.explorer, env)
         except Exception as exc:  # whatever SB3/torch raise on a file that is not a model
             raise SettingsError("explorer", f"explorer {args.explorer!r}: cannot load the "
                                             f"model ({type(exc).__name__}: {exc})") from exc
@@ -443,9 +484,10 @@ def generate(args: GenerateArgs) -> dict[str, Any]:
 
 def _run(args: GenerateArgs, root: Path, settings: dict[str, Any]) -> dict[str, Any]:
     existing = pair_files(root, clean_temp=True)
+    per_episode = args.snapshots * len(robot_pairs(args.robots))
     todo = [e for e in range(args.n_episodes)
             if any(i not in existing and i < args.pairs
-                   for i in range(e * args.snapshots, (e + 1) * args.snapshots))]
+                   for i in range(e * per_episode, (e + 1) * per_episode))]
     before = sum(1 for i in existing if i < args.pairs)
     runner = (_ray_runner if args.backend == "ray" else _process_runner)(args, str(root),
                                                                         settings)

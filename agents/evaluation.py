@@ -52,15 +52,50 @@ def eval_worlds(env_config: Mapping[str, Any], seed: int, episodes: int,
     return config, seeds, {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
 
 
-def run_explorer(team: Mapping[str, Explorer], config: Mapping[str, Any],
+def team_for(name: str, env: Any) -> dict[str, Explorer]:
+    """``agents.team.make_team(name)`` for the robots of ``env`` (a PettingZoo env of any team
+    size), bound to them: one explorer per agent of ``env.possible_agents``.
+
+    Raises:
+        ValueError: an unknown ``name``; or ``name`` is ``"coordinated_frontier"``, which
+            ``agents.team`` makes for two robots only.
+    """
+    from agents.team import make_team
+
+    raw = env.unwrapped
+    agents = list(raw.possible_agents)
+    action_type = raw.config.action_type
+    if name.startswith("sb3:"):
+        from agents.sb3_explorer import SB3Explorer, sb3_team
+
+        team = sb3_team(SB3Explorer.load_policy(name[4:]), action_type=action_type,
+                        n_robots=len(agents))
+    else:
+        team = make_team(name, action_type=action_type, env=env)
+    if list(team) != agents:
+        # until agents.team sizes its teams by the env: explorers that need no teammate
+        if name == "coordinated_frontier":
+            raise ValueError(f"explorer {name!r} drives teams of {len(team)} robots; this env "
+                             f"has {len(agents)}")
+        team = {a: type(team["robot_0"])(action_type=action_type) for a in agents}
+    for agent, explorer in team.items():
+        explorer.bind(env, agent)
+    return team
+
+
+def run_explorer(team: Mapping[str, Explorer] | str, config: Mapping[str, Any],
                  seeds: Sequence[int]) -> list[dict[str, Any]]:
     """Metrics (:meth:`agents.metrics.EpisodeRecorder.summary`) of ``team`` (one explorer per
-    robot) on a ``two_robot_explore_v0`` env built from ``config``, one episode per seed."""
-    from envs.two_robot_explore_v0 import parallel_env
+    robot, or an explorer's name for :func:`team_for`) on the env ``config`` describes
+    (``two_robot_explore_v0``, or ``multi_robot_explore_v0`` for its ``n_robots`` > 2:
+    :func:`envs.parallel_env_for`), one episode per seed."""
+    from envs import parallel_env_for
 
     out = []
     for seed in seeds:
-        env = parallel_env(**config)
+        env = parallel_env_for(config)
+        if isinstance(team, str):
+            team = team_for(team, env)
         rec = EpisodeRecorder()
         try:
             run_episode(env, team, seed=seed, callback=rec)
@@ -102,7 +137,8 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
     :func:`eval_worlds`; write the files of the module docstring into ``run_dir``.
 
     Args:
-        team: ``{"robot_0": Explorer, "robot_1": Explorer}`` driving the policy's robots.
+        team: ``{"robot_0": Explorer, "robot_1": Explorer, ...}`` driving the policy's robots
+            (one per robot of ``env_config``'s team).
         run_dir: the run folder (created if missing).
         step: agent-steps trained so far (for the titles and ``eval.json``).
         env_config, seed, episodes, max_cycles: the worlds (:func:`eval_worlds`).
@@ -112,7 +148,6 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
     Returns:
         ``{"step", "seeds", "rows", "max_cycles"}`` (what ``eval.json`` holds).
     """
-    from agents.team import make_team
     from topo.fileio import atomic_write_bytes, atomic_write_json
 
     run_dir = Path(run_dir)
@@ -123,7 +158,7 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
     cached: dict[str, list[dict]] = stored["explorers"] if stored.get("key") == key else {}
     for baseline in baselines:
         if baseline not in cached:
-            cached[baseline] = _jsonable(run_explorer(make_team(baseline), config, seeds))
+            cached[baseline] = _jsonable(run_explorer(baseline, config, seeds))
     atomic_write_json(cache, {"key": key, "explorers": cached})
 
     curves = {name: _jsonable(run_explorer(team, config, seeds)),

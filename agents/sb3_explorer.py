@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import Explorer
+from topo.validation import check_int
 
 
 class SB3Explorer(Explorer):
@@ -144,13 +145,20 @@ def sample_action(dist: Any, rng: np.random.Generator, space: Any) -> int | np.n
     return np.clip(action, space.low, space.high).astype(space.dtype)
 
 
-def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "continuous"
-             ) -> dict[str, SB3Explorer]:
-    """``{"robot_0": ..., "robot_1": ...}``: both robots driven by ``policy`` (parameter
-    sharing, as trained), their goal-level planners sharing one
-    :class:`~agents.scripted.Blackboard` as in :class:`agents.goals.FrontierGoalEnv`."""
-    from agents.scripted import Blackboard
+def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "continuous",
+             n_robots: int = 2) -> dict[str, SB3Explorer]:
+    """``{"robot_0": ..., "robot_1": ..., ...}``: the ``n_robots`` robots all driven by
+    ``policy`` (parameter sharing, as trained), their goal-level planners sharing one
+    :class:`~agents.scripted.Blackboard` as in :class:`agents.goals.FrontierGoalEnv`.
 
+    Raises:
+        ValueError: ``n_robots`` is not an integer from 2 to 8 (the env's team sizes).
+    """
+    from agents.scripted import Blackboard
+    from envs.two_robot_explore.config import MAX_ROBOTS
+
+    if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
+        raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")
     board = Blackboard()
     return {f"robot_{i}": SB3Explorer(policy, deterministic, action_type, blackboard=board)
-            for i in range(2)}
+            for i in range(n_robots)}

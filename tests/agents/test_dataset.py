@@ -1,5 +1,6 @@
 """Map-pair dataset generation: round trip with ground truth, resume, workers, Ray, CLI."""
 
+import json
 import os
 import re
 import signal
@@ -51,11 +52,16 @@ def wall_agreement(pair, transform) -> float:
     return float(walls[ia[known, 1], ia[known, 0]].mean()) if known.sum() > 30 else float("nan")
 
 
+def made(tmp_path_factory, name: str, pairs: int, kw: dict):
+    """A dataset of ``pairs`` pairs generated into a new folder, and its pairs."""
+    out = tmp_path_factory.mktemp(name)
+    generate(GenerateArgs(out=out, pairs=pairs, **kw))
+    return out, load_pairs(out)
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ref")
-    generate(GenerateArgs(out=out, pairs=4, **KW))
-    return out, load_pairs(out)
+    return made(tmp_path_factory, "ref", 4, KW)
 
 
 def test_round_trip_and_ground_truth(reference):
@@ -268,3 +274,79 @@ def test_a_failed_new_dataset_leaves_the_folder_as_it_was(tmp_path, monkeypatch)
     monkeypatch.setattr(dataset, "generate_episode", real)
     generate(GenerateArgs(out=out, pairs=1, **{**KW, "explorer": "random_walk"}))
     assert sorted(pair_files(out)) == [0]
+
+
+# ------------------------------------------------------------------------ teams of N robots
+TEAM_KW = {**KW, "robots": 3, "world_size": (12.0, 12.0)}
+
+
+@pytest.fixture(scope="module")
+def team_reference(tmp_path_factory):
+    return made(tmp_path_factory, "team", 6, TEAM_KW)
+
+
+def test_a_team_of_three_gives_every_pair_of_a_snapshot(team_reference):
+    out, pairs = team_reference
+    assert [p.pair_id for p in pairs] == list(range(6))
+    assert [p.extra["robots"] for p in pairs] == [[0, 1], [0, 2], [1, 2]] * 2
+    assert [p.snapshot for p in pairs] == [0, 0, 0, 1, 1, 1]
+    assert {p.episode for p in pairs} == {0} and {p.seed for p in pairs} == {episode_seed(0, 0)}
+    # robot 0's map is the same one in the snapshot's (0, 1) and (0, 2) pairs, robot 2's in
+    # (0, 2) and (1, 2)
+    for s in (pairs[:3], pairs[3:]):
+        assert len({p.step for p in s}) == 1
+        np.testing.assert_array_equal(s[0].grid_a.states, s[1].grid_a.states)
+        np.testing.assert_array_equal(s[1].grid_b.states, s[2].grid_b.states)
+        np.testing.assert_array_equal(s[0].grid_b.states, s[2].grid_a.states)
+        # the truths compose: 2 -> 0 is 2 -> 1 then 1 -> 0
+        assert (s[0].transform @ s[2].transform).allclose(s[1].transform, atol=1e-9)
+    manifest = json.loads((out / "dataset.json").read_text())
+    assert manifest["settings"]["robots"] == 3
+    assert "6 pairs" in info(out)
+
+
+def test_team_truths_take_robot_j_start_pose_into_robot_i_frame(team_reference):
+    """Each stored transform maps robot j's frame onto robot i's: the world through robot j's
+    true start pose, then back through robot i's."""
+    from envs import parallel_env_for
+
+    _, pairs = team_reference
+    env = parallel_env_for(dataset.env_kwargs(GenerateArgs(out=Path("x"), **TEAM_KW).settings()))
+    env.reset(seed=pairs[0].seed)
+    starts = [env.unwrapped.frames[i] for i in range(3)]
+    points = np.array([[0.0, 0.0], [1.0, 0.5], [-2.0, 3.0]])
+    for p in pairs:
+        i, j = p.extra["robots"]
+        world = starts[j].apply(points)  # points of robot j's frame, in the world
+        np.testing.assert_allclose(p.transform.apply(points), starts[i].inverse().apply(world),
+                                   atol=1e-9)
+    env.close()
+
+
+def test_team_overlap_is_per_pair():
+    a = np.zeros((4, 4), bool)
+    b = np.zeros((4, 4), bool)
+    a[:2] = True  # 8 cells
+    b[1:] = True  # 12 cells, 4 of them a's
+    assert dataset.pair_overlap(a, b) == dataset.pair_overlap(b, a) == 0.5
+    assert dataset.pair_overlap(a, np.zeros_like(a)) == 0.0
+
+
+def test_team_resume_rewrites_the_same_pairs(team_reference, tmp_path):
+    generate(GenerateArgs(out=tmp_path, pairs=4, **TEAM_KW))  # stops inside snapshot 1
+    assert sorted(pair_files(tmp_path)) == [0, 1, 2, 3]
+    summary = generate(GenerateArgs(out=tmp_path, pairs=6, **TEAM_KW))
+    assert summary["already_there"] == 4 and summary["written"] == 6  # the episode re-ran
+    assert [fields(p) for p in load_pairs(tmp_path)] == [fields(p) for p in team_reference[1]]
+    with pytest.raises(SettingsError, match=r"--robots 3 \(this run: \(unset\)\)"):
+        generate(GenerateArgs(out=tmp_path, pairs=6, **{**TEAM_KW, "robots": 2}))
+
+
+@pytest.mark.parametrize("robots", [1, 9])
+def test_bad_team_size_names_the_flag(tmp_path, capsys, robots):
+    with pytest.raises(SettingsError, match=f"n_robots must be between 2 and 8, got {robots}"
+                       ) as exc:
+        GenerateArgs(out=tmp_path, robots=robots)
+    assert exc.value.field == "robots"
+    err = cli_error(capsys, ["generate", "--out", str(tmp_path / "d"), "--robots", str(robots)])
+    assert f"error: --robots: n_robots must be between 2 and 8, got {robots}" in err

@@ -46,3 +46,50 @@ def test_evaluate_writes_the_run_files_and_caches_baselines(tmp_path):
     assert len(cached["explorers"]["random_walk"][0]["coverage"]) == 25
     again = evaluate(make_team("frontier"), tmp_path, 8, name="policy", **kwargs)
     assert again["rows"] == report["rows"]  # same worlds, same seeds, baselines from the cache
+
+
+def test_evaluate_a_team_of_three(tmp_path):
+    """With ``n_robots`` 3 every explorer drives three robots of ``multi_robot_explore_v0``, the
+    baselines too."""
+    from agents.evaluation import run_explorer, team_for
+    from envs import parallel_env_for
+
+    config = {"max_cycles": 20, "world": {"size": (12.0, 12.0)}, "n_robots": 3,
+              "sonar": {"rays": 1}}
+    env = parallel_env_for(config)
+    team = team_for("frontier", env)
+    assert list(team) == ["robot_0", "robot_1", "robot_2"]
+    assert all(e.bound_env() is env.unwrapped for e in team.values())
+    report = evaluate(team, tmp_path, 3, env_config=config, seed=0, episodes=1, max_cycles=15,
+                      baselines=("random_walk",))
+    assert [r["explorer"] for r in report["rows"]] == ["ppo", "random_walk"]
+    (episode,) = run_explorer("random_walk", {**config, "max_cycles": 15}, [0])
+    assert sorted(episode["path_length_m"]) == ["robot_0", "robot_1", "robot_2"]
+    with pytest.raises(ValueError, match="n_robots must be between 2 and 8, got 9"):
+        run_explorer("random_walk", {**config, "n_robots": 9}, [0])
+
+
+class _Policy:
+    """The least a policy needs for ``SB3Explorer``: ``predict``."""
+
+    def predict(self, observation, deterministic=True):
+        return [0.0, 0.0], None
+
+
+@pytest.mark.parametrize("n_robots", [2, 4])
+def test_sb3_team_drives_every_robot_with_one_policy(n_robots):
+    from agents.sb3_explorer import sb3_team
+
+    policy = _Policy()
+    team = sb3_team(policy, n_robots=n_robots)
+    assert list(team) == [f"robot_{i}" for i in range(n_robots)]
+    assert {id(e.policy) for e in team.values()} == {id(policy)}
+
+
+@pytest.mark.parametrize(("n_robots", "error"), [(1, ValueError), (9, ValueError),
+                                                 (2.0, TypeError)])
+def test_sb3_team_size_is_checked(n_robots, error):
+    from agents.sb3_explorer import sb3_team
+
+    with pytest.raises(error, match="n_robots must be"):
+        sb3_team(_Policy(), n_robots=n_robots)
