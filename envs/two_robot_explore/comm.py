@@ -104,29 +104,34 @@ class TeamViews:
         return self._odometry[i][j]
 
     def update(self, step: int, positions: np.ndarray, odometry: Sequence[np.ndarray],
-               space: pymunk.Space | None) -> list[tuple[int, int]]:
+               space: pymunk.Space | None) -> tuple[list[tuple[int, int]], bool]:
         """Contacts at ``step`` from the robots' world ``positions`` ``(N, 2)``, taken before
         this step's odometry and scans enter the maps (``odometry`` and the maps are still
-        those of the last step): copies the maps and poses of contacts that end now. Returns
-        the ``(i, j)`` (``i != j``) that came into contact."""
-        n = len(self.maps)
+        those of the last step): copies the maps and poses of contacts that end now.
+
+        Returns:
+            the ``(i, j)`` (``i != j``) that came into contact (at step 0: every pair in
+            contact), and whether any contact began or ended (always at step 0).
+        """
         old = self.groups
         new = old if self._unlimited else contact_groups(positions, self.config, space)
         same = new[:, None] == new[None, :]
-        was = old[:, None] == old[None, :]
-        if step > 0:
-            lost = np.argwhere(was & ~same)
-            made: dict[int, RobotMap] = {}
-            for i, j in lost.tolist():
-                if j not in made:
-                    made[j] = self.maps[j].copy()
-                self._copies[i][j] = made[j]
-                self._odometry[i][j] = np.array(odometry[j], dtype=np.float64)
-        gained = [] if step == 0 else [tuple(p) for p in np.argwhere(same & ~was).tolist()]
-        self.groups = new
         self.seen[same] = step
+        if step == 0:
+            self.groups = new
+            n = len(self.maps)
+            return [(i, j) for i in range(n) for j in range(n) if i != j and same[i, j]], True
+        was = old[:, None] == old[None, :]
+        if np.array_equal(same, was):
+            return [], False
+        made: dict[int, RobotMap] = {}
+        for i, j in np.argwhere(was & ~same).tolist():
+            if j not in made:
+                made[j] = self.maps[j].copy()
+            self._copies[i][j] = made[j]
+            self._odometry[i][j] = np.array(odometry[j], dtype=np.float64)
+        gained = [(i, j) for i, j in np.argwhere(same & ~was).tolist()]
         for i, j in gained:
             self._copies[i][j] = None
-        if step == 0:
-            gained = [(i, j) for i in range(n) for j in range(n) if i != j and same[i, j]]
-        return gained
+        self.groups = new
+        return gained, True

@@ -879,10 +879,10 @@ class MultiRobotExploreEnv(ParallelEnv):
     def _contact(self, step: int) -> None:
         """Who is in contact now (before this step's odometry and scans enter the maps);
         robot 0's fused map takes in what a merged teammate met again mapped meanwhile."""
-        gained = self.views.update(step, np.array([r._pose()[:2] for r in self.robots]),
-                                   [r.odometry for r in self.robots], self.space)
-        if gained or not self.config.comm.unlimited:
-            self._contacts_changed = True
+        gained, changed = self.views.update(
+            step, np.array([r._pose()[:2] for r in self.robots]),
+            [r.odometry for r in self.robots], self.space)
+        self._contacts_changed |= changed
         for i, j in gained:
             if i == 0 and j in self.shared.members:
                 self._shared_delta += self.shared.add(j, self.maps[j],
