@@ -460,17 +460,20 @@ class MultiRobotExploreEnv(ParallelEnv):
     """The sonar exploration env for a team of ``n_robots``; the module docstring is its
     manual.
 
-    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`merge_state`; the global
-    state for centralised critics: :meth:`state`, :attr:`state_space`.
+    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`teammate_map`,
+    :meth:`merge_state`; ground truth: :meth:`true_transform`; the global state for
+    centralised critics: :meth:`state`, :attr:`state_space`.
 
     Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
     every step; read, never modify): ``world``
     (:class:`~envs.two_robot_explore.worlds.World`), ``robots``, ``sonars``, ``maps``
-    (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared``
-    (:class:`~envs.two_robot_explore.mapping.SharedMap`), ``oracle``
+    (per-robot :class:`~envs.two_robot_explore.mapping.RobotMap`), ``shared`` (robot 0's
+    fused map, :class:`~envs.two_robot_explore.mapping.SharedMap`), ``views`` (who is in
+    contact and what each robot holds of the others' maps,
+    :class:`~envs.two_robot_explore.comm.TeamViews`), ``oracle``
     (:class:`~envs.two_robot_explore.mapping.OracleCoverage`), ``frames`` (each robot's map
     frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
-    transform), ``merge`` (the last ``MergeResult``), ``steps``.
+    transform), ``merge`` (the last ``MergeResult``), ``steps``, ``n_robots``.
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
     the original would. A copy replays the episode since ``reset`` (manual, Copies), so
