@@ -1,9 +1,13 @@
 """Train an exploration policy with PPO, map fusion inside the RL loop, on Stable-Baselines3
 (default) or RLlib (``--backend rllib``, sampling scaled out over a Ray cluster).
 
-Both robots share one policy (parameter sharing): with SB3 each robot of each env is one
-sub-environment of a :class:`agents.sb3.ParallelVecEnv`; with RLlib both robots map to one
-RLModule through ``ParallelPettingZooEnv`` (:mod:`agents.rllib`). The policy acts at one of two
+All robots share one policy (parameter sharing): with SB3 each robot of each env is one
+sub-environment of a :class:`agents.sb3.ParallelVecEnv`; with RLlib every robot maps to one
+RLModule through ``ParallelPettingZooEnv`` (:mod:`agents.rllib`). ``--n-robots N`` trains a team
+of ``N`` robots (2, the default, is ``two_robot_explore_v0`` exactly; more is
+``multi_robot_explore_v0``, whose ``teammates`` observation the policy encodes as a set:
+:class:`agents.policy.TopoExplorerExtractor`), ``--comm-range R`` limits their contact to
+``R`` metres (the env's ``comm.range``). The policy acts at one of two
 levels (``--level``): ``goals`` (default) picks which frontier sector to explore next every
 ``--hold`` steps and a frontier planner drives there (:mod:`agents.goals`); ``motion`` outputs
 the env's velocity commands every step. The reward is the env's team reward — the growth of the
@@ -18,10 +22,12 @@ true union instead, for ablations).
     python train.py --central-critic --world-size-max 20    # goal level, MAPPO-style critic
     python train.py --backend rllib --num-env-runners 2            # a local Ray cluster
     python train.py --backend rllib --address auto --num-env-runners 8   # joins `ray start`'s
+    python train.py --level motion --n-robots 4 --comm-range 5     # a team of four robots
     python train.py --help
     tensorboard --logdir runs
 
-A run writes ``runs/<env>__<seed>__<time>/``: ``tb/`` (TensorBoard: reward, true and shared
+A run writes ``runs/<env>__<seed>__<time>/`` (``<env>`` is ``two_robot_explore_v0``, or
+``multi_robot_explore_v0_n<N>`` for a team of ``N``): ``tb/`` (TensorBoard: reward, true and shared
 coverage, merge acceptance and errors, episode length, agent-steps/s), ``checkpoints/`` (atomic,
 resumable with ``--resume RUN_DIR``), ``eval.json`` / ``eval.md`` / ``eval_coverage.png``
 (periodic evaluation of the policy against ``Frontier`` and ``RandomWalk`` on fixed seeds,
@@ -56,7 +62,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm.auto import tqdm
 
 from agents import evaluation
-from agents.goals import default_hold, make_env
+from agents.goals import default_hold
+from agents.motion import team_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import sb3_team
@@ -64,18 +71,32 @@ from topo.fileio import atomic_write, atomic_write_dir, atomic_write_json
 from topo.validation import check_real
 
 ENV_ID = "two_robot_explore_v0"
+"""The env of a two-robot run (:func:`run_env_id` names any team's)."""
+
+
+def run_env_id(n_robots: int) -> str:
+    """The env part of a run's folder name: :data:`ENV_ID` for two robots,
+    ``multi_robot_explore_v0_n<N>`` for a team of ``N``."""
+    return ENV_ID if n_robots == 2 else f"multi_robot_explore_v0_n{n_robots}"
 
 
 @dataclass
 class Args:
-    """PPO on two_robot_explore_v0 with parameter sharing (both robots, one policy)."""
+    """PPO on two_robot_explore_v0 (or a team of N robots) with parameter sharing (all robots,
+    one policy)."""
 
     backend: Literal["sb3", "rllib"] = "sb3"
     """PPO implementation: Stable-Baselines3 (worker processes on this machine) or RLlib
     (env runners on a Ray cluster; needs the ``rllib`` extra)."""
     total_timesteps: int = 200_000
-    """Agent-steps to train for (each env step gives two: one per robot; at the goals level
-    a decision counts its ``hold`` env steps)."""
+    """Agent-steps to train for (each env step gives one per robot; at the goals level a
+    decision counts its ``hold`` env steps)."""
+    n_robots: int = 2
+    """Robots in the team, 2–8: 2 trains on ``two_robot_explore_v0`` (as before), more on
+    ``multi_robot_explore_v0``; one policy drives them all."""
+    comm_range: float | None = None
+    """Robots closer than this many metres are in contact and exchange maps (the env's
+    ``comm.range``, multi-hop); default: always in contact."""
     level: Literal["goals", "motion"] = "goals"
     """What the policy decides: a frontier sector every ``hold`` steps (a planner drives), or
     the velocity command every step."""
@@ -105,7 +126,8 @@ class Args:
     seed: int = 1
     """Seed of everything: envs, policy initialisation, evaluation worlds."""
     n_envs: int = 4
-    """Envs run in parallel (2 robots each, so 2 × n_envs policy sub-environments)."""
+    """Envs run in parallel (``n_robots`` each, so ``n_robots × n_envs`` policy
+    sub-environments)."""
     n_workers: int | None = None
     """``--backend sb3``: worker processes stepping the envs (1: in this process); default one
     per CPU core, at
@@ -196,6 +218,11 @@ class Args:
             if get_origin(hints[f.name]) is Literal and value not in choices:
                 raise ValueError(f"{f.name} must be one of {list(choices)}, got {value!r}")
         goals = self.level == "goals"
+        from envs.two_robot_explore.config import CommConfig, EnvConfig
+
+        EnvConfig(n_robots=self.n_robots)  # n_robots: an integer, 2 to 8 (names the value)
+        if self.comm_range is not None:
+            CommConfig(range=self.comm_range)  # comm.range: a real > 0 (names the value)
         if self.hold is None:
             self.hold = default_hold(self.level)
         if self.n_steps is None:
@@ -293,8 +320,12 @@ class Args:
 
     def env_config(self) -> dict[str, Any]:
         """The env's ``EnvConfig`` fields for training (``env_kwargs`` merged in)."""
-        cfg = {"max_cycles": self.max_cycles, "reward_mode": self.reward_mode,
-               "world": {"size": tuple(self.world_size)}}
+        cfg: dict[str, Any] = {"max_cycles": self.max_cycles, "reward_mode": self.reward_mode,
+                               "world": {"size": tuple(self.world_size)}}
+        if self.n_robots != 2:  # a two-robot run's config (and evaluation cache) as before
+            cfg["n_robots"] = self.n_robots
+        if self.comm_range is not None:
+            cfg["comm"] = {"range": float(self.comm_range)}
         for key, value in self.env_kwargs.items():
             if isinstance(value, dict) and isinstance(cfg.get(key), dict):
                 cfg[key] = {**cfg[key], **value}
@@ -304,14 +335,14 @@ class Args:
 
 
 class _EnvFactory:
-    """Builds one training env (:func:`agents.goals.make_env`); picklable for workers."""
+    """Builds one training env (:func:`agents.motion.team_env`); picklable for workers."""
 
     def __init__(self, config: dict[str, Any], args: Args) -> None:
         self.config, self.args = config, args
 
     def __call__(self) -> Any:
         a = self.args
-        return make_env(self.config, a.level, a.hold, a.frontier_shaping, a.central_critic,
+        return team_env(self.config, a.level, a.hold, a.frontier_shaping, a.central_critic,
                         a.motion_commands)
 
 
@@ -451,7 +482,7 @@ def evaluate(policy: Any, args: Args, run_dir: Path, step: int) -> dict[str, Any
     """Evaluate ``policy`` (an SB3 model or an :class:`agents.rllib.RLlibPolicy`) against
     ``args.eval_baselines`` on the run's fixed worlds (:func:`agents.evaluation.evaluate`):
     writes ``eval.json``, ``eval.md`` and ``eval_coverage.png`` into ``run_dir``."""
-    team = sb3_team(policy, deterministic=args.eval_deterministic)
+    team = sb3_team(policy, deterministic=args.eval_deterministic, n_robots=args.n_robots)
     return evaluation.evaluate(team, run_dir, step, env_config=args.env_config(),
                                seed=args.seed, episodes=args.eval_episodes,
                                max_cycles=args.eval_max_cycles, baselines=args.eval_baselines)
@@ -657,7 +688,8 @@ def main(args: Args) -> Path:
         run_dir, checkpoint = _resume_checkpoint(args.resume, args.backend)
     else:
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(args.runs_dir) / (args.run_name or f"{ENV_ID}__{args.seed}__{stamp}")
+        run_dir = Path(args.runs_dir) / (
+            args.run_name or f"{run_env_id(args.n_robots)}__{args.seed}__{stamp}")
         checkpoint = None
         # an overwritten run folder's best policy is another run's
         (run_dir / BEST_FILE).unlink(missing_ok=True)

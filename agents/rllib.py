@@ -1,10 +1,12 @@
-"""RLlib (new API stack) for ``two_robot_explore``: PPO with parameter sharing through RLlib's
+"""RLlib (new API stack) for ``two_robot_explore`` and teams of ``N`` robots
+(``multi_robot_explore``): PPO with parameter sharing through RLlib's
 ``ParallelPettingZooEnv``, sampling scaled out over Ray env runners (``train.py --backend
 rllib``). Needs the ``rllib`` extra (``pip install 'topomerge[rllib]'``); importing this module
 without it raises an ``ImportError`` that says so.
 
 * **Env** — :func:`env_creator` (registered as :data:`ENV_NAME`) builds
-  :func:`agents.goals.make_env` (goal or motion level), wraps it in :class:`LightInfoEnv` and
+  :func:`agents.motion.team_env` (goal or motion level, ``agents.goals.make_env`` for two
+  robots; the config's ``n_robots`` is the team size), wraps it in :class:`LightInfoEnv` and
   then in ``ParallelPettingZooEnv``. ``LightInfoEnv`` keeps only finite numbers in the infos:
   ``two_robot_explore``'s infos also carry the robots' live occupancy grids and maps (and NaN
   merge errors before a merge), which RLlib would store in every episode step and ship from
@@ -18,7 +20,7 @@ without it raises an ``ImportError`` that says so.
   ``Dict`` of an image, vectors and a graph, and its ``FlattenObservations`` connector would
   feed the 64 × 64 map to an MLP as 4096 unrelated inputs; reusing the SB3 network keeps the
   image's 2-D structure and makes the two backends differ in the algorithm's implementation
-  only. One module id (:data:`POLICY_ID`) serves both robots: parameter sharing.
+  only. One module id (:data:`POLICY_ID`) serves every robot: parameter sharing.
 * **Metrics** — :class:`ExploreMetrics` logs true/shared coverage, overlap, merges and merge
   errors at every episode end (``env_runners/explore/...`` in the training results).
 * **Evaluation** — :class:`RLlibPolicy` gives a trained module SB3's ``predict``, so
@@ -43,8 +45,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from torch import nn
 
-from agents.goals import LEVELS, default_hold, make_env
-from agents.motion import COMMANDS
+from agents.goals import LEVELS, default_hold
+from agents.motion import COMMANDS, team_env
 from agents.policy import SectorLatent, SectorScorer, TopoExplorerExtractor
 from agents.sb3_explorer import sample_action
 from topo.fileio import atomic_write_dir
@@ -70,7 +72,7 @@ ENV_NAME = "topomerge_two_robot_explore"
 """The name :func:`register` gives :func:`env_creator` in Ray's registry."""
 
 POLICY_ID = "shared"
-"""The one RLModule both robots map to (parameter sharing)."""
+"""The one RLModule every robot maps to (parameter sharing)."""
 
 POLICY_FILE = "topomerge_policy.json"
 """Written into every checkpoint folder: the level and hold the policy was trained with."""
@@ -155,14 +157,14 @@ class LightInfoEnv(ParallelEnv):
 
 def env_creator(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
     """RLlib's env factory: ``env_config`` holds ``config`` (the env's ``EnvConfig`` fields),
-    ``level``, ``hold``, ``frontier_shaping`` and ``commands`` (:func:`agents.goals.make_env`);
+    ``level``, ``hold``, ``frontier_shaping`` and ``commands`` (:func:`agents.motion.team_env`);
     RLlib's ``EnvContext`` adds the env runner's ``worker_index`` (the :class:`LightInfoEnv`
     stream)."""
     allowed = ["commands", "config", "frontier_shaping", "hold", "level"]
     unknown = set(env_config) - set(allowed)
     if unknown:
         raise ValueError(f"env_config has unknown keys {sorted(unknown)}; allowed: {allowed}")
-    env = make_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
+    env = team_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
                    env_config.get("hold"), env_config.get("frontier_shaping", 0.0),
                    commands=env_config.get("commands", "continuous"))
     stream = int(getattr(env_config, "worker_index", 0) or 0)
@@ -343,8 +345,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
     """RLlib's ``PPOConfig`` on the new API stack for ``two_robot_explore`` (module docstring).
 
     Args:
-        env_config: the env's ``EnvConfig`` fields.
-        level, hold, frontier_shaping, commands: :func:`agents.goals.make_env`'s (``gamma``
+        env_config: the env's ``EnvConfig`` fields (``n_robots``: the team size).
+        level, hold, frontier_shaping, commands: :func:`agents.motion.team_env`'s (``gamma``
             is per decision: pass ``gamma ** hold`` for a per-step discount; ``commands="arcs"``
             at the motion level: a categorical policy over :data:`agents.motion.ARCS`).
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).
@@ -354,8 +356,8 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
         seed: RLlib's seed (env runner ``k`` seeds its envs from ``seed + k``).
         num_env_runners: Ray actors sampling in parallel (``0``: sample in the driver).
         envs_per_runner: envs each runner steps in turn.
-        train_batch_size: env steps (decisions of both robots) per PPO update; each gives one
-            transition per robot to the shared policy.
+        train_batch_size: env steps (decisions of every robot) per PPO update; each gives
+            one transition per robot to the shared policy.
         minibatch_size: transitions per gradient step.
         num_epochs, lr, gae_lambda, entropy_coeff, clip_param: PPO's (as SB3's defaults
             elsewhere: value loss weight 0.5, gradient norm clipped at 0.5, no KL penalty).
@@ -404,7 +406,7 @@ def _shared_policy(agent_id: str, episode: Any = None, **kwargs: Any) -> str:
 
 
 def agent_steps(algo: Any) -> int:
-    """Agent decisions (both robots) an RLlib ``Algorithm`` has sampled so far, restored
+    """Agent decisions (every robot's) an RLlib ``Algorithm`` has sampled so far, restored
     checkpoints included."""
     per_agent = algo.metrics.peek(("env_runners", "num_agent_steps_sampled_lifetime"),
                                   default={})

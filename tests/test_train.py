@@ -259,3 +259,81 @@ def test_rllib_defaults_split_the_envs_between_runners():
 def test_resume_folder_without_checkpoints(tmp_path):
     with pytest.raises(ValueError, match="has no checkpoints"):
         main(Args(runs_dir=tmp_path, resume=tmp_path, **TINY))
+
+
+# ------------------------------------------------------------------------ teams of N robots
+TEAM_TINY = {**TINY, "n_robots": 3, "comm_range": 5.0, "total_timesteps": 48, "n_steps": 16,
+             "batch_size": 24, "checkpoint_every": 0, "max_cycles": 20,
+             "world_size": (12.0, 12.0), "env_kwargs": {"sonar": {"rays": 1}}}
+"""One rollout of 16 decisions of a team of three in one env: 48 agent-steps."""
+
+
+def test_team_env_config_and_two_robot_config_unchanged():
+    two = Args().env_config()
+    assert "n_robots" not in two and "comm" not in two  # a two-robot run as before
+    team = Args(n_robots=4, comm_range=5.0).env_config()
+    assert team["n_robots"] == 4 and team["comm"] == {"range": 5.0}
+    assert Args(comm_range=3).env_config()["comm"] == {"range": 3.0}
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"n_robots": 1}, ValueError, "n_robots must be between 2 and 8, got 1"),
+    ({"n_robots": 9}, ValueError, "n_robots must be between 2 and 8, got 9"),
+    ({"n_robots": 2.5}, TypeError, "n_robots must be an integer, got"),
+    ({"comm_range": -1.0}, ValueError, "comm.range must be"),
+])
+def test_bad_team_arguments_name_the_field(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        Args(**kwargs)
+
+
+def test_motion_level_team_of_three_trains_one_policy(tmp_path):
+    """SB3 at the motion level with three robots: one policy over the 3 robots' slots, which
+    then drives a team of three through SB3Explorer; the evaluation ran three robots too."""
+    import json
+
+    from stable_baselines3 import PPO
+
+    from agents.base import run_episode
+    from agents.sb3_explorer import sb3_team
+    from envs import multi_robot_explore_v0
+
+    run = main(Args(runs_dir=tmp_path, seed=4, **TEAM_TINY))
+    assert run.name.startswith("multi_robot_explore_v0_n3__4__")
+    model = PPO.load(run / "model.zip", device="cpu")
+    assert model.observation_space["teammates"].shape == (2, 7)
+    assert model.num_timesteps == 48 and model.n_envs == 3
+    report = json.loads((run / "eval.json").read_text())
+    assert [r["explorer"] for r in report["rows"]] == ["ppo", "random_walk"]
+    cached = json.loads((run / "eval_baselines.json").read_text())
+    assert cached["key"]["config"]["n_robots"] == 3
+    assert cached["key"]["config"]["comm"] == {"range": 5.0}
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, max_cycles=10,
+                                              world={"size": (12.0, 12.0)})
+    out = run_episode(env, sb3_team(model, n_robots=3), seed=1)
+    assert out["steps"] == 10 and sorted(out["infos"]) == ["robot_0", "robot_1", "robot_2"]
+
+
+def _goal_frontier_binds_a_third_robot() -> bool:
+    from agents.goals import GoalFrontier
+    from envs import multi_robot_explore_v0
+
+    try:
+        GoalFrontier().bind(multi_robot_explore_v0.parallel_env(n_robots=3), "robot_2")
+    except ValueError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _goal_frontier_binds_a_third_robot(),
+                    reason="agents.goals.GoalFrontier binds robot_0 and robot_1 only (its "
+                           "owner generalises it to N robots)")
+def test_goal_level_team_of_three_trains_one_policy(tmp_path):
+    from stable_baselines3 import PPO
+
+    run = main(Args(runs_dir=tmp_path, seed=4, **{**TEAM_TINY, "level": "goals", "hold": 2,
+                                                   "n_steps": 8, "batch_size": 12,
+                                                   "total_timesteps": 48}))
+    model = PPO.load(run / "model.zip", device="cpu")
+    assert model.observation_space["teammates"].shape == (2, 7) and model.goal_hold == 2
+    assert "| ppo |" in (run / "eval.md").read_text()

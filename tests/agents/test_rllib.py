@@ -189,3 +189,53 @@ def test_one_ppo_iteration_on_a_ray_env_runner_then_resume(tmp_path):
 def test_missing_rllib_checkpoint(tmp_path):
     with pytest.raises(FileNotFoundError, match="no RLlib checkpoint of train.py"):
         rllib.RLlibPolicy.load(tmp_path)
+
+
+# ------------------------------------------------------------------------ teams of N robots
+TEAM_CONFIG = {"max_cycles": 12, "world": {"size": (12.0, 12.0)}, "sonar": {"rays": 1},
+               "comm": {"range": 5.0}}
+
+
+@pytest.mark.parametrize(("n_robots", "level"), [(3, "motion"), (4, "goals")])
+def test_env_creator_and_module_serve_a_team(n_robots, level):
+    """The env runners' env is the team's (every robot an agent of the one shared module),
+    and the module reads the ``teammates`` rows."""
+    config = rllib.ppo_config(env_config={**TEAM_CONFIG, "n_robots": n_robots}, level=level,
+                              hold=3)
+    env = rllib.env_creator(config.env_config)
+    agents = [f"robot_{i}" for i in range(n_robots)]
+    assert sorted(env.get_agent_ids()) == agents
+    obs, infos = env.reset(seed=2)
+    assert sorted(obs) == agents and obs["robot_1"]["teammates"].shape == (n_robots - 1, 7)
+    space = env.observation_space["robot_0"]
+    mod = rllib.TopoExplorerModule(observation_space=space,
+                                   action_space=env.action_space["robot_0"],
+                                   model_config={"sector_head": level == "goals"})
+    batch = {"obs": {k: torch.as_tensor(np.stack([obs[a][k] for a in agents]))
+                     for k in obs["robot_0"]}}
+    out = mod.forward_train(batch)
+    assert out["action_dist_inputs"].shape[0] == n_robots
+    assert torch.isfinite(out["action_dist_inputs"]).all()
+    assert mod.compute_values(batch).shape == (n_robots,)
+    action, _ = rllib.RLlibPolicy(mod, hold=3).predict(obs["robot_2"])
+    obs, rewards, terms, truncs, infos = env.step({a: action for a in agents})
+    assert sorted(rewards) == agents
+
+
+def test_train_rllib_motion_level_team_of_three(tmp_path):
+    """``train.py --backend rllib --n-robots 3``: one PPO iteration sampled in the driver, the
+    policy evaluated on teams of three."""
+    from train import Args, main
+
+    args = Args(backend="rllib", num_env_runners=0, n_envs=1, level="motion", n_robots=3,
+                comm_range=5.0, total_timesteps=40, n_steps=16, batch_size=16, n_epochs=1,
+                max_cycles=12, world_size=(12.0, 12.0), env_kwargs={"sonar": {"rays": 1}},
+                eval_every=0, eval_episodes=1, eval_max_cycles=12, checkpoint_every=0,
+                eval_baselines=("random_walk",), progress=False, runs_dir=tmp_path, seed=3)
+    run = main(args)
+    assert run.name.startswith("multi_robot_explore_v0_n3__3__")
+    report = json.loads((run / "eval.json").read_text())
+    assert report["step"] >= 40 and [r["explorer"] for r in report["rows"]] == [
+        "ppo", "random_walk"]
+    policy = rllib.RLlibPolicy.load(run / "rllib")
+    assert policy.observation_space["teammates"].shape == (2, 7)
