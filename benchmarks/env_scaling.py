@@ -1,7 +1,8 @@
 """Env cost against team size: per-robot step cost of ``multi_robot_explore_v0`` at N = 2, 4, 8.
 
     python benchmarks/env_scaling.py [--quick] [--ns 2 4 8] [--steps 1000] [--rounds 2]
-        [--seed 0] [--size 20] [--comm-range R] [--profile] [--out FILE.json]
+        [--seed 0] [--size 20] [--comm-range R] [--driver random|frontier] [--profile]
+        [--out FILE.json]
 
 The env alone, no explorers: for each N one episode of ``--steps`` steps (``max_cycles``;
 at least 1000, so that the merges, every 25 steps, and the grid alignments, every 100, are
@@ -11,6 +12,13 @@ for every N), every robot driven by fixed random commands: robot i draws a new `
 every 10 steps from ``default_rng([seed, i])`` (forward 0.2–1, turn −1–1, as
 ``benchmarks/_actions.py``), so robots 0 and 1 get the same commands at every N. An episode
 that ends early (95 % coverage) is reset with the next seed and continued.
+
+Randomly driven robots map too little for a merge to be accepted, so robot 0's fused map stays
+its own and the cost of fused maps (rebuilding them, sampling every fused teammate's grid into
+each ``local_map``) is not paid. ``--driver frontier`` drives with the commands a
+:class:`agents.scripted.Frontier` team of N took in the same episode instead (recorded first,
+untimed; the env is deterministic, so the timed replay is that episode, merges included); use a
+building large enough (40 m) that the team does not finish (95 %) within ``--steps``.
 
 Timed by this process's CPU time (steadier than wall time on a shared machine) and wall time;
 the Ns alternate in order (2, 4, 8, then 8, 4, 2, …) over ``--rounds`` rounds and each N's
@@ -49,12 +57,12 @@ TARGET = 1.3
 """Largest ratio of ms per robot-step at N = 8 to N = 2 the issue asks for."""
 HOLD = 10
 """Steps a command is held for."""
-WARMUP = 60
+WARMUP = 120
 """Steps of the untimed warm-up episode of each N."""
 
 
 def commands(n: int, steps: int, seed: int) -> list[dict[str, np.ndarray]]:
-    """The actions of ``steps`` steps for ``n`` robots (module docstring)."""
+    """The random actions of ``steps`` steps for ``n`` robots (module docstring)."""
     rngs = [np.random.default_rng([seed, i]) for i in range(n)]
     out: list[dict[str, np.ndarray]] = []
     held: dict[str, np.ndarray] = {}
@@ -63,6 +71,30 @@ def commands(n: int, steps: int, seed: int) -> list[dict[str, np.ndarray]]:
             held = {f"robot_{i}": np.array([rng.uniform(0.2, 1.0), rng.uniform(-1.0, 1.0)],
                                            dtype=np.float32) for i, rng in enumerate(rngs)}
         out.append(held)
+    return out
+
+
+def frontier_commands(n: int, steps: int, seed: int, size: float,
+                      comm_range: float | None) -> list[dict[str, np.ndarray]]:
+    """The actions a :class:`agents.scripted.Frontier` team of ``n`` takes in the episode of
+    ``seed`` (``--driver frontier``; recorded, untimed; shorter if the episode ends)."""
+    from agents.scripted import Frontier
+    from envs import multi_robot_explore_v0
+
+    env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps,
+                                              world={"size": (size, size)},
+                                              comm={"range": comm_range})
+    team = {a: Frontier() for a in env.possible_agents}
+    obs, infos = env.reset(seed=seed)
+    for k, (a, x) in enumerate(team.items()):
+        x.bind(env, a)
+        x.reset(seed + 1000 * k)
+    out = []
+    while env.agents:
+        acts = {a: np.asarray(team[a].act(obs[a], infos[a]), dtype=np.float32)
+                for a in env.agents}
+        out.append(acts)
+        obs, _, _, _, infos = env.step(acts)
     return out
 
 
@@ -89,16 +121,19 @@ class _StageClock:
 
 
 def run(n: int, steps: int, seed: int, size: float, comm_range: float | None,
-        stages: bool = True, prof: cProfile.Profile | None = None) -> dict[str, Any]:
+        stages: bool = True, prof: cProfile.Profile | None = None,
+        acts: list[dict[str, np.ndarray]] | None = None) -> dict[str, Any]:
     """One timed episode of ``n`` robots: CPU and wall seconds, per-stage CPU seconds (the
-    steps only: not the reset that builds the world; ``prof`` profiles the same)."""
+    steps only: not the reset that builds the world; ``prof`` profiles the same), driven by
+    ``acts`` (default: :func:`commands`)."""
     from envs import multi_robot_explore_v0
 
     env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps,
                                               world={"size": (size, size)},
                                               comm={"range": comm_range})
     clock = _StageClock(env) if stages else None
-    acts = commands(n, steps, seed)
+    acts = commands(n, steps, seed) if acts is None else acts
+    steps = len(acts)
     env.reset(seed=seed)
     resets = 0
     if prof is not None:
@@ -119,11 +154,11 @@ def run(n: int, steps: int, seed: int, size: float, comm_range: float | None,
 
 
 def profile(n: int, steps: int, seed: int, size: float, comm_range: float | None,
-            top: int) -> str:
+            top: int, acts: list[dict[str, np.ndarray]] | None = None) -> str:
     """The ``top`` entries by own time of one run's steps under ``cProfile`` (no stage
     clock)."""
     prof = cProfile.Profile()
-    run(n, steps, seed, size, comm_range, stages=False, prof=prof)
+    run(n, steps, seed, size, comm_range, stages=False, prof=prof, acts=acts)
     buf = io.StringIO()
     pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(top)
     lines = buf.getvalue().splitlines()
@@ -165,6 +200,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--size", type=float, default=20.0, help="building side, m")
     parser.add_argument("--comm-range", type=float, default=None,
                         help="comm.range in m (default unlimited)")
+    parser.add_argument("--driver", choices=("random", "frontier"), default="random",
+                        help="the commands: fixed random ones, or a Frontier team's recorded")
     parser.add_argument("--profile", action="store_true",
                         help="cProfile the largest N and the smallest even if on target")
     parser.add_argument("--top", type=int, default=25, help="cProfile entries printed")
@@ -183,14 +220,20 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     ns = sorted(set(args.ns))
     print(f"# env cost against team size: {args.steps} steps, {args.size:g} m building of seed "
-          f"{args.seed}, comm.range {args.comm_range}, fixed random commands, {args.rounds} "
+          f"{args.seed}, comm.range {args.comm_range}, {args.driver} commands, {args.rounds} "
           f"round(s)\n", flush=True)
+    acts: dict[int, list | None] = dict.fromkeys(ns)
+    if args.driver == "frontier":
+        for n in ns:
+            acts[n] = frontier_commands(n, args.steps, args.seed, args.size, args.comm_range)
+            print(f"recorded a Frontier team of {n}: {len(acts[n])} steps", flush=True)
     for n in ns:  # warm-up: compiled kernels load from their caches on first use
         run(n, min(WARMUP, args.steps), args.seed, args.size, args.comm_range)
     results: dict[int, list[dict[str, Any]]] = defaultdict(list)
     for k in range(args.rounds):
         for n in (ns if k % 2 == 0 else ns[::-1]):
-            results[n].append(run(n, args.steps, args.seed, args.size, args.comm_range))
+            results[n].append(run(n, args.steps, args.seed, args.size, args.comm_range,
+                                  acts=acts[n]))
             r = results[n][-1]
             print(f"round {k}, N = {n}: {1e3 * r['cpu_s'] / r['steps']:.2f} ms/step CPU",
                   flush=True)
@@ -205,7 +248,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.profile or ratio > TARGET:
         for n in (hi, lo):
             profiles[n] = profile(n, args.steps, args.seed, args.size, args.comm_range,
-                                  args.top)
+                                  args.top, acts[n])
             print(f"\ncProfile, N = {n}, {args.steps} steps, top {args.top} by own time:\n")
             print(profiles[n])
     if args.out is not None:

@@ -73,9 +73,10 @@ def test_team_merge_in_loop_runs_both_checks(tmp_path, capsys):
     assert "| cycle check | episodes | merged robot-steps |" in capsys.readouterr().out
 
 
-def test_env_scaling_runs_and_reports_per_robot_cost(capsys, tmp_path):
+@pytest.mark.parametrize("driver", ["random", "frontier"])
+def test_env_scaling_runs_and_reports_per_robot_cost(capsys, tmp_path, driver):
     es.main(["--ns", "2", "3", "--steps", "15", "--rounds", "1", "--size", "10", "--profile",
-             "--top", "3", "--out", str(tmp_path / "scaling.json")])
+             "--top", "3", "--driver", driver, "--out", str(tmp_path / "scaling.json")])
     text = capsys.readouterr().out
     assert "ms per robot-step, N = 3 / N = 2" in text and "cProfile, N = 3" in text
     assert (tmp_path / "scaling.json").exists()
