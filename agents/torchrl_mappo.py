@@ -1,12 +1,15 @@
-"""MAPPO on ``two_robot_explore_v0`` with TorchRL: a short, complete example of the env in
-TorchRL's multi-agent stack (the ``torchrl`` extra).
+"""MAPPO on ``two_robot_explore_v0`` (or a team of ``N`` robots, ``multi_robot_explore_v0``)
+with TorchRL: a short, complete example of the env in TorchRL's multi-agent stack (the
+``torchrl`` extra).
 
     python -m agents.torchrl_mappo --frames 20000 --world-size 10 10
+    python -m agents.torchrl_mappo --n-robots 4 --comm-range 5
 
-TorchRL's ``PettingZooWrapper`` groups both robots as ``"robot"`` (observations, actions,
-rewards and dones of shape ``(..., 2, ...)``) and adds the env's global ``state``. The actor is
+TorchRL's ``PettingZooWrapper`` groups the robots as ``"robot"`` (observations, actions,
+rewards and dones of shape ``(..., N, ...)``) and adds the env's global ``state``. The actor is
 decentralised with shared parameters (``MultiAgentMLP``): each robot sees the concatenation of
-its ``sonar``, ``odometry``, ``teammate`` and ``graph_mask`` observations (49 numbers) and
+its ``sonar``, ``odometry``, ``teammate`` and ``graph_mask`` observations (49 numbers; a team
+has ``teammates``, ``N − 1`` rows of 7 flattened in their place: ``44 + 7 (N − 1)``) and
 outputs a ``TanhNormal`` over its ``(v, ω)`` command. The critic is MAPPO's centralised value:
 an MLP of the env's ``state()`` (true poses, coverage, world maps; manual, State), one value
 per robot. The loss is ``ClipPPOLoss`` with GAE, trained on each collected batch for a few
@@ -34,27 +37,36 @@ import torch
 from tensordict.nn import NormalParamExtractor, TensorDictModule
 from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
-from torchrl.envs import CatTensors, RewardSum, TransformedEnv
+from torchrl.envs import CatTensors, FlattenObservation, RewardSum, TransformedEnv
 from torchrl.envs.libs.pettingzoo import PettingZooWrapper
 from torchrl.modules import MLP, MultiAgentMLP, ProbabilisticActor, TanhNormal
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
-from envs import two_robot_explore_v0
+from envs import parallel_env_for
 from topo.validation import check_int, check_real
 
 GROUP = "robot"
-"""TorchRL's group of the two robots (``PettingZooWrapper`` groups agents by name prefix)."""
+"""TorchRL's group of the robots (``PettingZooWrapper`` groups agents by name prefix)."""
 
 ACTOR_KEYS = ("sonar", "odometry", "teammate", "graph_mask")
-"""Observation keys the actor reads (concatenated)."""
+"""Observation keys the actor of two robots reads (concatenated)."""
+
+
+def actor_keys(n_robots: int) -> tuple[str, ...]:
+    """The observation keys the actor reads: :data:`ACTOR_KEYS`, with ``teammates`` (flattened)
+    for ``teammate`` in a team of more than two."""
+    if n_robots == 2:
+        return ACTOR_KEYS
+    return tuple("teammates" if k == "teammate" else k for k in ACTOR_KEYS)
 
 
 @dataclass
 class MappoArgs:
-    """MAPPO on two_robot_explore_v0 with TorchRL (``python -m agents.torchrl_mappo --help``)."""
+    """MAPPO on two_robot_explore_v0 or a team of N robots with TorchRL (``python -m
+    agents.torchrl_mappo --help``)."""
 
     frames: int = 20_000
-    """Total env steps collected (each step is one frame of both robots)."""
+    """Total env steps collected (each step is one frame of every robot)."""
     frames_per_batch: int = 2_000
     """Env steps per collected batch (one PPO iteration)."""
     epochs: int = 4
@@ -79,8 +91,15 @@ class MappoArgs:
     """Procedural building size, metres."""
     seed: int = 0
     """Seed of the env, the networks and the sampling."""
+    n_robots: int = 2
+    """Robots in the team, 2–8 (2: ``two_robot_explore_v0``, more: ``multi_robot_explore_v0``)."""
+    comm_range: float | None = None
+    """The env's ``comm.range``, metres (default: always in contact)."""
 
     def __post_init__(self) -> None:
+        from envs.two_robot_explore.config import EnvConfig
+
+        EnvConfig.from_kwargs(**self.env_config())  # n_robots, comm.range: named when bad
         for name in ("frames", "frames_per_batch", "epochs", "minibatch", "cells", "max_cycles"):
             check_int(getattr(self, name), name, low=1)
         check_int(self.seed, "seed", low=0)
@@ -93,17 +112,34 @@ class MappoArgs:
             raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of "
                              f"minibatch, got minibatch={self.minibatch}")
 
+    def env_config(self) -> dict[str, Any]:
+        """The env's ``EnvConfig`` fields (``n_robots`` and ``comm`` only when set)."""
+        cfg: dict[str, Any] = {"max_cycles": self.max_cycles,
+                               "world": {"size": tuple(self.world_size)}}
+        if self.n_robots != 2:
+            cfg["n_robots"] = self.n_robots
+        if self.comm_range is not None:
+            cfg["comm"] = {"range": self.comm_range}
+        return cfg
+
 
 def make_env(args: MappoArgs) -> Any:
     """The env wrapped for TorchRL: ``PettingZooWrapper`` with the state, the actor's input
-    concatenated under ``(GROUP, "observation_vector")``, episode rewards summed."""
-    base = PettingZooWrapper(
-        env=two_robot_explore_v0.parallel_env(max_cycles=args.max_cycles,
-                                              world={"size": tuple(args.world_size)}),
-        return_state=True, seed=args.seed)
-    return TransformedEnv(base, CatTensors(
-        in_keys=[(GROUP, "observation", k) for k in ACTOR_KEYS],
-        out_key=(GROUP, "observation_vector"), del_keys=False)).append_transform(
+    concatenated under ``(GROUP, "observation_vector")`` (a team's ``teammates`` rows
+    flattened first), episode rewards summed."""
+    base = PettingZooWrapper(env=parallel_env_for(args.env_config()), return_state=True,
+                             seed=args.seed)
+    env = TransformedEnv(base)
+    keys = actor_keys(args.n_robots)
+    if "teammates" in keys:
+        env.append_transform(FlattenObservation(
+            -2, -1, in_keys=[(GROUP, "observation", "teammates")],
+            out_keys=[(GROUP, "observation", "teammates_flat")]))
+        keys = tuple("teammates_flat" if k == "teammates" else k for k in keys)
+    env.append_transform(CatTensors(
+        in_keys=[(GROUP, "observation", k) for k in keys],
+        out_key=(GROUP, "observation_vector"), del_keys=False))
+    return env.append_transform(
         RewardSum(in_keys=[(GROUP, "reward")], out_keys=[(GROUP, "episode_reward")]))
 
 

@@ -33,3 +33,29 @@ def test_bad_arguments_name_the_problem():
         MappoArgs(frames_per_batch=100, minibatch=30)
     with pytest.raises(ValueError, match="gamma must be <= 1.0"):
         MappoArgs(gamma=1.5)
+
+
+def test_tiny_mappo_run_of_a_team_of_three():
+    """Three robots: the actor reads the flattened ``teammates`` (44 + 7 · 2 inputs), one value
+    per robot."""
+    from agents.torchrl_mappo import make_env
+
+    args = MappoArgs(**{**TINY, "frames": 60, "frames_per_batch": 60, "minibatch": 30,
+                        "max_cycles": 20, "world_size": (12.0, 12.0)}, n_robots=3,
+                     comm_range=5.0)
+    env = make_env(args)
+    assert env.group_map == {"robot": ["robot_0", "robot_1", "robot_2"]}
+    assert env.observation_spec["robot", "observation_vector"].shape == (3, 44 + 7 * 2)
+    env.close()
+    (row,) = main(args)["iterations"]
+    assert row["frames"] == 60 and math.isfinite(row["loss"])
+    assert not math.isnan(row["episode_reward"])  # 20-step episodes end within the batch
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"n_robots": 9}, "n_robots must be between 2 and 8, got 9"),
+    ({"comm_range": -2.0}, "comm.range must be"),
+])
+def test_bad_team_arguments_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        MappoArgs(**kwargs)

@@ -45,3 +45,25 @@ def test_rollout_resets_across_episode_ends():
     done = td["next", "done"].squeeze(-1)
     assert done.tolist() == [False] * 4 + [True] + [False] * 4 + [True] + [False] * 2
     env.close()
+
+
+@pytest.mark.parametrize("n_robots", [3, 4])
+def test_pettingzoo_wrapper_groups_a_team(n_robots):
+    from envs import multi_robot_explore_v0
+    from envs.two_robot_explore.env import state_scalars
+
+    env = PettingZooWrapper(
+        env=multi_robot_explore_v0.parallel_env(
+            n_robots=n_robots, world={"size": (12.0, 12.0)}, max_cycles=6,
+            sonar={"rays": 1}, comm={"range": 5.0}),
+        return_state=True, seed=0)
+    assert env.group_map == {"robot": [f"robot_{i}" for i in range(n_robots)]}
+    check_env_specs(env)
+    td = env.rollout(8, break_when_any_done=False)
+    obs = td["robot", "observation"]
+    assert obs["teammates"].shape == (8, n_robots, n_robots - 1, 7)
+    assert td["state"].shape == (8, state_scalars(n_robots) + 3 * STATE_MAP_SIZE ** 2)
+    info = td["next", "robot", "info"]
+    assert info["contacts"].shape == (8, n_robots) and info["pose"].shape == (8, n_robots, 3)
+    assert td["next", "done"].squeeze(-1).tolist() == [False] * 5 + [True] + [False] * 2
+    env.close()
