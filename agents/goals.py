@@ -41,7 +41,7 @@ from pettingzoo import ParallelEnv
 
 from agents.base import Explorer, odometry_pose
 from agents.frontier_planning import FrontierConfig, FrontierMap
-from agents.scripted import Blackboard, CoordinatedFrontier
+from agents.scripted import Blackboard, CoordinatedFrontier, robot_index
 from topo.validation import check_int
 
 SECTORS = 8
@@ -75,7 +75,7 @@ def sector_of(xy: np.ndarray, pose: np.ndarray) -> int:
 class GoalFrontier(CoordinatedFrontier):
     """A :class:`~agents.scripted.CoordinatedFrontier` explorer whose goals lie in a chosen
     sector (module docstring). Without a sector (``sector is None``) it is plain
-    ``CoordinatedFrontier``; its robot (``robot_0`` or ``robot_1``) is the one it is bound to.
+    ``CoordinatedFrontier``; its robot (any ``robot_<k>``) is the one it is bound to.
 
     Args:
         config: see :class:`~agents.scripted.Frontier`.
@@ -95,9 +95,7 @@ class GoalFrontier(CoordinatedFrontier):
         self._cached: tuple[tuple[int, int], FrontierMap | None] | None = None
 
     def bind(self, env: Any, agent: str) -> None:
-        if agent not in ("robot_0", "robot_1"):
-            raise ValueError(f"agent must be 'robot_0' or 'robot_1', got {agent!r}")
-        self.index = int(agent[-1])
+        self.index = robot_index(agent)
         super().bind(env, agent)
 
     def reset(self, seed: int | None = None) -> None:
@@ -133,8 +131,7 @@ class GoalFrontier(CoordinatedFrontier):
         if not clusters:
             return out
         cheapest = min(c["cost"] for c in clusters)
-        mates = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
-                 if p is not None]
+        mates = self._near_points()
         for c in clusters:
             k = sector_of(c["centroid"], pose)
             out[k, 0] = 1.0
@@ -146,12 +143,19 @@ class GoalFrontier(CoordinatedFrontier):
                 out[k, 5] = max(out[k, 5], near)
         return out
 
-    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
+    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray,
+                      radius: float | None = None) -> FrontierMap | None:
         cached, self._cached = self._cached, None
         if cached is not None and cached[0] == (len(self.given_up), self._steps):
             self._fmap = cached[1]
             return cached[1]
-        return super()._frontier_map(info, pose)
+        return super()._frontier_map(info, pose, radius)
+
+    def _select(self, info: Mapping[str, Any], pose: np.ndarray
+                ) -> tuple[FrontierMap | None, dict[str, Any] | None]:
+        if self.sector is None:
+            return super()._select(info, pose)
+        return self._select_among_all(info, pose)
 
     def _choose(self, clusters: list[dict[str, Any]], info: Mapping[str, Any],
                 pose: np.ndarray) -> dict[str, Any]:

@@ -137,6 +137,8 @@ class Frontier(CommandExplorer):
         self._idle = 0
         self._steps = 0
         self._track: dict[str, Any] = {}
+        self._seen: list[float] | None = None
+        self._reach = 0.0
         self.events: dict[str, int] = {}
         """Counts of this episode's plans, blocks, fallback steps and goals given up (by
         reason), for diagnosis."""
@@ -153,11 +155,13 @@ class Frontier(CommandExplorer):
         self._idle = 0
         self._steps = 0
         self._track = {}
+        self._seen = None
         self.events = {}
 
     def command(self, observation, info) -> np.ndarray:
         self._steps += 1
         pose = odometry_pose(info)
+        self._note(pose)
         ring = self.sonar_ring()
         if self._backoff > 0:
             self._backoff -= 1
@@ -200,33 +204,86 @@ class Frontier(CommandExplorer):
     def bind(self, env: Any, agent: str) -> None:
         super().bind(env, agent)
         self._fallback.bind(env, agent)
+        # the grid knows cells within this of the poses its robot drove through
+        self._reach = float(self.env.config.sonar.max_range + self.env.config.robot.radius)
 
     def _grid(self, agent: str | None = None) -> Any:
         """The occupancy grid of robot ``agent`` (default: this explorer's) now, a snapshot
         read from the bound env."""
         return self.bound_env().robot_map(agent or self.agent).grid
 
-    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray) -> FrontierMap | None:
-        exclude = np.array(self.given_up) if self.given_up else None
-        return frontier_map(self._grid(), pose[:2], self.cfg, exclude=exclude)
+    def _note(self, pose: np.ndarray) -> None:
+        """Widen the box of the poses driven through (what the grid can know lies within the
+        sensing range of it)."""
+        x, y = float(pose[0]), float(pose[1])
+        if self._seen is None:
+            self._seen = [x, y, x, y]
+        else:
+            seen = self._seen
+            seen[0], seen[1] = min(seen[0], x), min(seen[1], y)
+            seen[2], seen[3] = max(seen[2], x), max(seen[3], y)
 
-    def _make_plan(self, info: Mapping[str, Any], pose: np.ndarray) -> Plan | None:
-        self._count("plans")
+    def _within(self, grid: Any) -> tuple[int, int, int, int] | None:
+        """Rows and columns of ``grid`` within sensing range of the poses driven through."""
+        if self._seen is None:
+            return None
+        res, (ox, oy) = float(grid.resolution), grid.origin
+        x0, y0, x1, y1 = self._seen
+        reach = self._reach + 2 * res
+        return (int(math.floor((y0 - reach - oy) / res)), int(math.ceil((y1 + reach - oy) / res)),
+                int(math.floor((x0 - reach - ox) / res)), int(math.ceil((x1 + reach - ox) / res)))
+
+    def _frontier_map(self, info: Mapping[str, Any], pose: np.ndarray,
+                      radius: float | None = None) -> FrontierMap | None:
+        self._note(pose)
+        exclude = np.array(self.given_up) if self.given_up else None
+        grid = self._grid()
+        return frontier_map(grid, pose[:2], self.cfg, exclude=exclude,
+                            within=self._within(grid), radius=radius)
+
+    def _select(self, info: Mapping[str, Any], pose: np.ndarray
+                ) -> tuple[FrontierMap | None, dict[str, Any] | None]:
+        """The map planned on and the chosen cluster (``None``: none reachable): the nearest
+        by path cost (Yamauchi), the current goal's ``hysteresis`` metres cheaper. Searched
+        in a window of ``search_radius`` around the robot, doubled until its answer is the
+        whole map's (:attr:`FrontierMap.exact_below`)."""
+        radius = self.cfg.search_radius
+        goal = self._track.get("goal")
+        while True:
+            fmap = self._frontier_map(info, pose, radius)
+            if fmap is None:
+                return None, None
+            best = fmap.nearest(self.cfg.min_cluster_cells, goal, self.cfg.give_up_radius,
+                                self.cfg.hysteresis)
+            slack = self.cfg.hysteresis if goal is not None else 0.0
+            if math.isinf(fmap.exact_below) or (
+                    best is not None and best["cost"] + slack < fmap.exact_below):
+                return fmap, best
+            radius *= 2.0
+
+    def _select_among_all(self, info: Mapping[str, Any], pose: np.ndarray
+                          ) -> tuple[FrontierMap | None, dict[str, Any] | None]:
+        """:meth:`_select` over every reachable cluster of the whole map, by :meth:`_choose`
+        (the current goal's cluster: the one whose cheapest cell is within
+        ``give_up_radius`` of it)."""
         fmap = self._frontier_map(info, pose)
-        if fmap is None:
-            return None
-        clusters = fmap.clusters(self.cfg.min_cluster_cells)
-        if not clusters and self.given_up:
-            self.given_up = []  # everything given up: try them all again, once
-            fmap = self._frontier_map(info, pose)
-            clusters = fmap.clusters(self.cfg.min_cluster_cells) if fmap is not None else []
+        clusters = fmap.clusters(self.cfg.min_cluster_cells) if fmap is not None else []
         if not clusters:
-            return None
+            return fmap, None
         current = self._track.get("goal")
         for c in clusters:
             c["current"] = bool(current is not None and np.linalg.norm(
                 fmap.cell_to_xy(np.array([c["cell"]]))[0] - current) < self.cfg.give_up_radius)
-        best = self._choose(clusters, info, pose)
+        return fmap, self._choose(clusters, info, pose)
+
+    def _make_plan(self, info: Mapping[str, Any], pose: np.ndarray) -> Plan | None:
+        self._count("plans")
+        fmap, best = self._select(info, pose)
+        if best is None and self.given_up:
+            self.given_up = []  # everything given up: try them all again, once
+            fmap, best = self._select(info, pose)
+        if best is None:
+            return None
         path = fmap.path_to(best["cell"])
         self._follow(path[-1], best["cost"])
         return Plan(path=path, goal=path[-1], cost=best["cost"])
@@ -252,44 +309,66 @@ class Frontier(CommandExplorer):
 
 @dataclass
 class Blackboard:
-    """What two :class:`CoordinatedFrontier` robots share: each robot's current goal in its
-    own frame, and the merge transform in use (robot 1's frame → robot 0's; ``None`` when
-    none is). Each robot reads its teammate's grid from the env when it plans."""
+    """What the :class:`CoordinatedFrontier` robots of a team share: each robot's current goal
+    in its own frame (``goals[k]`` for ``robot_k``), and what each robot knows of the team
+    from the env's merge state (``frames[k][j]``: robot j's frame → robot k's, for the robots
+    of robot k's fused map, itself included; ``contacts[k]``: the teammates it is in contact
+    with). Each robot reads its teammates' grids from the env when it plans."""
 
     goals: dict[int, np.ndarray] = field(default_factory=dict)
-    transform: Rigid2D | None = None
+    frames: dict[int, dict[int, Rigid2D]] = field(default_factory=dict)
+    contacts: dict[int, tuple[int, ...]] = field(default_factory=dict)
 
     def clear(self) -> None:
         self.goals.clear()
-        self.transform = None
+        self.frames.clear()
+        self.contacts.clear()
+
+
+def robot_index(agent: Any) -> int:
+    """``k`` of an agent name ``"robot_<k>"``.
+
+    Raises:
+        ValueError: ``agent`` is not of that form.
+    """
+    name, sep, k = str(agent).partition("_") if isinstance(agent, str) else ("", "", "")
+    if name != "robot" or not sep or not k.isdigit() or (len(k) > 1 and k[0] == "0"):
+        raise ValueError(f"agent must be 'robot_<k>' (k = 0, 1, ...), got {agent!r}")
+    return int(k)
 
 
 class CoordinatedFrontier(Frontier):
-    """Frontier exploration for a team (Burgard et al. 2005 style).
+    """Frontier exploration for a team of any size (Burgard et al. 2005 style).
 
-    While no merge transform is in use it is :class:`Frontier`. With one in use (the env's
+    While no teammate is in its fused map it is :class:`Frontier`. With teammates in it (the
+    env's ``merge_state().frames``; on an env without them, the two-robot
     ``merge_state().transform``), each robot:
 
-    * plans on the shared map: its teammate's grid evidence is added to its own, so frontiers
-      the teammate has already explored are not goals;
-    * with the teammate's estimated position (the ``teammate`` observation) on that map,
-      assigns the two robots to distinct frontier clusters: the pair minimising its own path
-      cost plus the teammate's, plus ``mate_penalty · (1 − d / R)`` for clusters ``d`` apart
-      within ``R = coordination_radius`` (one target in all but name) — Burgard's utility with
-      the frontier going to the robot it is cheaper for;
-    * otherwise (``assign=False``, a single cluster, or the teammate off the map) scores a
-      cluster by path cost plus ``mate_penalty · (1 − d / R)`` for ``d``, its distance to the
-      teammate's announced goal (on the :class:`Blackboard`) and position.
+    * plans on the fused map: its fused teammates' grid evidence (``teammate_map``, the maps
+      as this robot knows them) is added to its own, so frontiers they have explored are not
+      goals;
+    * with the estimated positions (the ``teammates`` / ``teammate`` observation) of the
+      fused teammates it is in contact with, assigns the robots to distinct frontier
+      clusters. With one such teammate: the pair minimising its own path cost plus the
+      teammate's, plus ``mate_penalty · (1 − d / R)`` for clusters ``d`` apart within
+      ``R = coordination_radius`` (one target in all but name) — Burgard's utility with the
+      frontier going to the robot it is cheaper for. With more: sequentially, the cheapest
+      (robot, cluster) pair first, every cluster near a taken one costing that penalty more,
+      until this robot has its cluster;
+    * otherwise (``assign=False``, a single cluster, or no teammate's position on the map)
+      scores a cluster by path cost plus ``mate_penalty · (1 − d / R)`` for each ``d``, its
+      distance to a fused teammate's announced goal (on the :class:`Blackboard`, while in
+      contact) and position.
 
     Args:
-        index: 0 for ``robot_0`` (frame A), 1 for ``robot_1`` (frame B).
-        blackboard: shared by the two robots of a team (:func:`agents.make_team` wires it).
+        index: ``k`` of the robot ``robot_k`` it drives (frame of its own map).
+        blackboard: shared by the robots of a team (:func:`agents.team.make_team` wires it).
         config: see :class:`Frontier`.
-        mate_penalty: metres of path cost added to a frontier at the teammate's goal or
-            position, or between the two robots' targets (less farther out, none beyond
+        mate_penalty: metres of path cost added to a frontier at a teammate's goal or
+            position, or between two robots' targets (less farther out, none beyond
             ``coordination_radius``).
         coordination_radius: metres.
-        assign: the joint assignment above (else the penalty alone).
+        assign: the assignment above (else the penalty alone).
         action_type: see :class:`Explorer`.
     """
 
@@ -300,38 +379,46 @@ class CoordinatedFrontier(Frontier):
                  assign: bool = True, action_type: str = "continuous") -> None:
         super().__init__(config, action_type)
         self.assign = bool(assign)
-        if index not in (0, 1):
-            raise ValueError(f"index must be 0 or 1, got {index!r}")
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+            raise ValueError(f"index must be an int >= 0, got {index!r}")
         if not isinstance(blackboard, Blackboard):
             raise TypeError(f"blackboard must be a Blackboard, got {type(blackboard).__name__}")
-        self.index = index
+        self.index = int(index)
         self.board = blackboard
         self.mate_penalty = check_real(mate_penalty, "mate_penalty", low=0.0,
                                        low_inclusive=True)
         self.coordination_radius = check_real(coordination_radius, "coordination_radius",
                                               low=0.0)
-        self._mate_xy: np.ndarray | None = None
+        self._mate_xy: dict[int, np.ndarray] = {}
         self._fmap: FrontierMap | None = None
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self.board.clear()
-        self._mate_xy = None
+        self._mate_xy = {}
         self._fmap = None
 
-    def _to_mate(self) -> Rigid2D | None:
-        """Transform from this robot's frame into the teammate's (``None`` before a merge)."""
-        t = self.board.transform
-        if t is None:
-            return None
-        return t.inverse() if self.index == 0 else t
+    def _fused(self) -> dict[int, Rigid2D]:
+        """``{j: robot j's frame → this robot's}`` for the teammates in its fused map."""
+        return {j: t for j, t in sorted(self.board.frames.get(self.index, {}).items())
+                if j != self.index}
 
-    def _teammate_goal(self) -> np.ndarray | None:
-        goal = self.board.goals.get(1 - self.index)
-        to_mate = self._to_mate()
-        if goal is None or to_mate is None:
-            return None
-        return to_mate.inverse().apply(goal)
+    def _in_contact(self, j: int) -> bool:
+        return j in self.board.contacts.get(self.index, ())
+
+    def _teammate_goals(self) -> dict[int, np.ndarray]:
+        """The announced goals (this robot's frame) of the fused teammates in contact."""
+        return {j: t.apply(self.board.goals[j]) for j, t in self._fused().items()
+                if j in self.board.goals and self._in_contact(j)}
+
+    def _near_points(self) -> list[np.ndarray]:
+        """What a frontier is penalised near: each fused teammate's goal (in contact) and
+        position (own frame)."""
+        goals = self._teammate_goals()
+        out = []
+        for j in self._fused():
+            out += [p for p in (goals.get(j), self._mate_xy.get(j)) if p is not None]
+        return out
 
     def bind(self, env: Any, agent: str) -> None:
         if agent != f"robot_{self.index}":
@@ -339,66 +426,137 @@ class CoordinatedFrontier(Frontier):
                              f"'robot_{self.index}', got {agent!r}")
         super().bind(env, agent)
 
+    def _read_team(self) -> None:
+        """This robot's fused frames and contacts from the env's merge state, onto the
+        board."""
+        state = self.bound_env().merge_state()
+        i = self.index
+        frames = getattr(state, "frames", ())
+        if frames:
+            self.board.frames[i] = dict(frames[i])
+            self.board.contacts[i] = tuple(state.contacts[i])
+            return
+        # an env without teams: two robots always in contact, robot 1's frame -> robot 0's
+        mine = {i: Rigid2D.identity()}
+        if state.transform is not None:
+            mine[1 - i] = state.transform if i == 0 else state.transform.inverse()
+        self.board.frames[i] = mine
+        self.board.contacts[i] = (1 - i,)
+
+    def _teammate_order(self) -> list[int]:
+        """Teammate indices in the order of the ``teammates`` observation's rows."""
+        n = len(self.bound_env().possible_agents)
+        return [j for j in range(n) if j != self.index]
+
     def command(self, observation, info) -> np.ndarray:
-        self.board.transform = self.bound_env().merge_state().transform
-        mate = np.asarray(observation["teammate"], dtype=np.float64)
-        if mate[4] > 0.5:  # valid: robot-frame offset of the teammate -> own frame
-            pose = odometry_pose(info)
-            c, s = math.cos(pose[2]), math.sin(pose[2])
-            self._mate_xy = pose[:2] + np.array([c * mate[0] - s * mate[1],
-                                                 s * mate[0] + c * mate[1]])
+        self._read_team()
+        rows = observation.get("teammates")
+        if rows is None:
+            rows = np.asarray(observation["teammate"], dtype=np.float64)[None]
+        rows = np.asarray(rows, dtype=np.float64)
+        pose = odometry_pose(info)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        for row, j in zip(rows, self._teammate_order(), strict=False):
+            if row[4] > 0.5:  # valid: robot-frame offset of the teammate -> own frame
+                self._mate_xy[j] = pose[:2] + np.array([c * row[0] - s * row[1],
+                                                        s * row[0] + c * row[1]])
         return super().command(observation, info)
 
-    def _frontier_map(self, info, pose):
-        to_mate = self._to_mate()
-        if to_mate is None:
-            return super()._frontier_map(info, pose)
+    def _teammate_grid(self, j: int) -> Any:
+        """Teammate j's grid as this robot knows it (``None`` if it never did)."""
+        env = self.bound_env()
+        if hasattr(env, "teammate_map"):
+            snap = env.teammate_map(self.agent, f"robot_{j}")
+            return None if snap is None else snap.grid
+        return env.robot_map(f"robot_{j}").grid
+
+    def _frontier_map(self, info, pose, radius=None):
+        fused = self._fused()
+        if not fused:
+            return super()._frontier_map(info, pose, radius)
+        self._note(pose)
         exclude = np.array(self.given_up) if self.given_up else None
-        self._fmap = frontier_map(self._grid(), pose[:2], self.cfg, exclude=exclude,
-                                  teammate=(self._grid(f"robot_{1 - self.index}"), to_mate))
+        grid = self._grid()
+        mates = [(g, t.inverse()) for g, t in ((self._teammate_grid(j), t)
+                                               for j, t in fused.items()) if g is not None]
+        self._fmap = frontier_map(grid, pose[:2], self.cfg, exclude=exclude, teammates=mates,
+                                  within=self._within(grid))
         return self._fmap
 
-    def _mate_costs(self, clusters, pose) -> np.ndarray | None:
-        """Path cost (m) from the teammate's estimated position to each cluster on this
-        robot's shared map (``None`` if unknown or the teammate is off the map)."""
+    def _select(self, info, pose):
+        if not self._fused():  # alone: Frontier's choice, announced
+            fmap, best = super()._select(info, pose)
+            if best is not None:
+                self.board.goals[self.index] = best["centroid"]
+            return fmap, best
+        return self._select_among_all(info, pose)
+
+    def _mate_costs(self, clusters, pose) -> dict[int, np.ndarray]:
+        """Path cost (m) from each fused teammate in contact, at its estimated position, to
+        each cluster on this robot's fused map (those off the map or reaching no cluster
+        left out)."""
         fmap = self._fmap
-        if fmap is None or self._mate_xy is None or self._to_mate() is None:
-            return None
+        out: dict[int, np.ndarray] = {}
+        if fmap is None:
+            return out
         shape = np.array(fmap.labels.shape)
-        mate_rc = np.floor((self._mate_xy - fmap.origin) / fmap.resolution).astype(int)[::-1]
-        own_rc = np.floor((pose[:2] - fmap.origin) / fmap.resolution).astype(int)[::-1]
-        own_rc = np.clip(own_rc, 0, shape - 1)
-        if np.any(mate_rc < 0) or np.any(mate_rc >= shape):
-            return None
-        mate_cost, _ = fmap.mcp.find_costs([tuple(mate_rc)])
-        mate_cost = mate_cost.copy()
-        fmap.mcp.find_costs([tuple(own_rc)])  # the own paths' traceback again
         idx = np.arange(1, fmap.n_clusters + 1)
-        per_label = np.asarray(ndimage.minimum(mate_cost, fmap.labels, idx), dtype=np.float64)
-        out = np.array([per_label[fmap.labels[c["cell"]] - 1] for c in clusters])
-        return out if np.isfinite(out).any() else None
+        for j in self._fused():
+            xy = self._mate_xy.get(j)
+            if xy is None or not self._in_contact(j):
+                continue
+            rc = np.floor((xy - fmap.origin) / fmap.resolution).astype(int)[::-1]
+            if np.any(rc < 0) or np.any(rc >= shape):
+                continue
+            cost = fmap.costs_from(tuple(rc))
+            per_label = np.asarray(ndimage.minimum(cost, fmap.labels, idx), dtype=np.float64)
+            costs = np.array([per_label[fmap.labels[c["cell"]] - 1] for c in clusters])
+            if np.isfinite(costs).any():
+                out[j] = costs
+        return out
 
     def _choose(self, clusters, info, pose):
         radius = self.coordination_radius
         own = np.array([c["cost"] - self.cfg.hysteresis * c["current"] for c in clusters])
-        mate = self._mate_costs(clusters, pose) if self.assign and len(clusters) > 1 else None
-        if mate is not None:
-            # joint assignment of the two robots to distinct clusters (the teammate taking
-            # whatever is cheaper for it), frontiers close together counting as one target
+        mates = self._mate_costs(clusters, pose) if self.assign and len(clusters) > 1 else {}
+        if mates:
+            # frontiers close together count as one target
             xy = np.array([c["centroid"] for c in clusters])
             d = np.linalg.norm(xy[:, None] - xy[None, :], axis=-1)
-            total = own[:, None] + np.where(np.isfinite(mate), mate, 1e6)[None, :]
-            total = total + self.mate_penalty * np.clip(1.0 - d / radius, 0.0, None)
-            np.fill_diagonal(total, np.inf)
-            best = clusters[int(np.unravel_index(np.argmin(total), total.shape)[0])]
+            near = self.mate_penalty * np.clip(1.0 - d / radius, 0.0, None)
+            costs = [np.where(np.isfinite(m), m, 1e6) for m in mates.values()]
+            best = clusters[_assign(own, costs, near)]
             self._count("assigned")
         else:
-            near = [p for p in (self._teammate_goal(), self._mate_xy if self._to_mate() else None)
-                    if p is not None]
             score = own.copy()
-            for p in near:
-                dist = np.linalg.norm(np.array([c["centroid"] for c in clusters]) - p, axis=1)
+            centroids = np.array([c["centroid"] for c in clusters])
+            for p in self._near_points():
+                dist = np.linalg.norm(centroids - p, axis=1)
                 score += self.mate_penalty * np.clip(1.0 - dist / radius, 0.0, None)
             best = clusters[int(np.argmin(score))]
         self.board.goals[self.index] = best["centroid"]
         return best
+
+
+def _assign(own: np.ndarray, mates: list[np.ndarray], near: np.ndarray) -> int:
+    """The cluster this robot takes: costs ``own`` (its own, per cluster) and ``mates`` (each
+    teammate's), ``near[a, b]`` the penalty of targets ``a`` and ``b`` taken together. One
+    teammate: the pair of distinct clusters of least total cost. More: sequential assignment,
+    the cheapest (robot, cluster) pair first, each taken cluster adding its ``near`` row to
+    every robot's costs, until this robot has its cluster."""
+    if len(mates) == 1:
+        total = own[:, None] + mates[0][None, :] + near
+        np.fill_diagonal(total, np.inf)
+        return int(np.unravel_index(np.argmin(total), total.shape)[0])
+    costs = np.stack([own, *mates])  # row 0: this robot
+    free = np.ones(len(own), dtype=bool)
+    while True:
+        if not free.any():  # more robots than clusters: this one takes the best left
+            return int(np.argmin(costs[0]))
+        masked = np.where(free[None, :], costs, np.inf)
+        r, c = np.unravel_index(np.argmin(masked), masked.shape)
+        if r == 0:
+            return int(c)
+        free[c] = False
+        costs = np.delete(costs, r, axis=0)
+        costs = costs + near[c][None, :]

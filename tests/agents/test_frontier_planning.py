@@ -10,7 +10,7 @@ import pytest
 
 from agents.frontier_planning import FrontierConfig, frontier_map
 from agents.scripted import Blackboard, CoordinatedFrontier, Frontier
-from envs.two_robot_explore.config import SonarConfig
+from envs.two_robot_explore.config import RobotConfig, SonarConfig
 from fusion import Rigid2D
 from topo.grid import OccupancyGrid
 
@@ -54,7 +54,7 @@ def test_teammate_evidence_moved_by_the_transform_removes_explored_frontiers():
     # p_mate = R(90°) p_own, so (x, y) lands at (-y, x)
     to_mate = Rigid2D(math.pi / 2, (0.0, 0.0))
     mate = grid_with([(-3.0, 0.0, 3.0, 4.0)], [(3.0, 0.0, 3.3, 4.0), (-3.3, 0.0, -3.0, 4.0)])
-    fmap = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammate=(mate, to_mate))
+    fmap = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammates=[(mate, to_mate)])
     xy = frontier_xy(fmap)
     # the opening at x = 0 is explored by the teammate; the shared map's frontier is at x ≈ 4,
     # reached through the teammate's free cells
@@ -62,7 +62,7 @@ def test_teammate_evidence_moved_by_the_transform_removes_explored_frontiers():
     (cluster,) = fmap.clusters(CFG.min_cluster_cells)
     assert 6.0 < cluster["cost"] < 10.0
     # a wrong transform (no rotation) puts the teammate's evidence elsewhere: opening stays
-    wrong = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammate=(mate, Rigid2D()))
+    wrong = frontier_map(OWN, np.array([-3.0, 0.0]), CFG, teammates=[(mate, Rigid2D())])
     assert np.any(np.abs(frontier_xy(wrong)[:, 0]) < 0.3)
 
 
@@ -85,7 +85,7 @@ class Maps:
     transform in use (``None``: not merged)."""
 
     possible_agents = ("robot_0", "robot_1")
-    config = SimpleNamespace(sonar=SonarConfig())
+    config = SimpleNamespace(sonar=SonarConfig(), robot=RobotConfig())
 
     def __init__(self, grids, transform=None):
         self.grids, self.transform = grids, transform
@@ -162,3 +162,100 @@ def test_coordinated_robot_leaves_the_end_nearer_its_teammate_to_the_teammate():
                  agent="robot_1", transform=Rigid2D())
     lone.act(seen, info_at(0.0))
     assert lone.plan.goal[0] < -2.5 and "assigned" not in lone.events
+
+
+# ---------------------------------------------------------------------------- teams of N
+# a T of corridors: y in [-1, 1) from x = -3 to 5, and x in [0, 2) from y = 1 up to 5; open
+# at its three ends (left x = -3, right x = 5, top y = 5). From (0.5, 0) the left end is the
+# nearest, the top the farthest.
+TEE = grid_with([(-3.0, -1.0, 5.0, 1.0), (0.0, 1.0, 2.0, 5.0)],
+                [(-3.0, -1.3, 5.0, -1.0), (-3.0, 1.0, 0.0, 1.3), (2.0, 1.0, 5.0, 1.3),
+                 (-0.3, 1.3, 0.0, 5.0), (2.0, 1.3, 2.3, 5.0)])
+START = (0.5, 0.0)
+
+
+class TeamMaps(Maps):
+    """A bound env of ``n`` robots with the team interface: every robot in every robot's
+    fused map (identity frames), in contact as ``contacts`` says; teammates know nothing."""
+
+    def __init__(self, n, contacts):
+        super().__init__({f"robot_{i}": TEE if i == 0 else grid_with([]) for i in range(n)})
+        self.possible_agents = tuple(f"robot_{i}" for i in range(n))
+        self.contacts = contacts
+
+    def teammate_map(self, agent, teammate):
+        return self.robot_map(teammate)
+
+    def merge_state(self):
+        frames = tuple({j: Rigid2D() for j in range(len(self.possible_agents))}
+                       for _ in self.possible_agents)
+        return SimpleNamespace(transform=Rigid2D(), frames=frames, contacts=self.contacts)
+
+
+def seen_at(*teammates, valid=True):
+    """A ``teammates`` observation of robot 0 at :data:`START` facing +x: teammates at these
+    points (own frame), all in contact."""
+    rows = np.zeros((len(teammates), 7), np.float32)
+    for k, (x, y) in enumerate(teammates):
+        rows[k] = (x - START[0], y - START[1], 1.0, 0.0, float(valid), 1.0, 0.0)
+    return {"sonar": np.ones(8, np.float32), "teammates": rows}
+
+
+def end_of(goal) -> str:
+    x, y = goal
+    return "top" if y > 3.0 else ("left" if x < 0.0 else "right")
+
+
+def test_alone_the_robot_takes_the_nearest_end_of_the_tee():
+    robot = Frontier()
+    robot.bind(TeamMaps(3, ((), (), ())), "robot_0")
+    robot.reset(0)
+    robot.act(seen_at((-2.0, 0.0), (1.0, 4.0)), info_at(*START))
+    assert end_of(robot.plan.goal) == "left"
+
+
+@pytest.mark.parametrize(("contacts", "expected"), [
+    (((1, 2), (0, 2), (0, 1)), "right"),  # both teammates: each takes the end it is at
+    (((1,), (0,), ()), "right"),  # robot 1 only: the joint pair, robot 1 keeps the left
+])
+def test_robots_in_contact_are_assigned_distinct_ends(contacts, expected):
+    robot = CoordinatedFrontier(0, Blackboard())
+    robot.bind(TeamMaps(3, contacts), "robot_0")
+    robot.reset(0)
+    robot.act(seen_at((-2.0, 0.0), (1.0, 4.0)), info_at(*START))
+    assert robot.events["assigned"] == 1
+    assert end_of(robot.plan.goal) == expected
+
+
+def test_three_robots_spread_over_the_three_ends():
+    board = Blackboard()
+    env = TeamMaps(3, ((1, 2), (0, 2), (0, 1)))
+    robot = CoordinatedFrontier(0, board)
+    robot.bind(env, "robot_0")
+    robot.reset(0)
+    # robot 1 at the left end, robot 2 at the right end: robot 0 is left the top
+    robot.act(seen_at((-2.0, 0.0), (4.0, 0.0)), info_at(*START))
+    assert end_of(robot.plan.goal) == "top"
+    np.testing.assert_allclose(board.goals[0], robot.plan.goal, atol=1.0)
+
+
+def test_a_teammates_goal_counts_only_while_in_contact():
+    left = np.array([-2.9, 0.0])
+    for contacts, expected in ((((), (), ()), "left"), (((1,), (0,), ()), "right")):
+        board = Blackboard()
+        robot = CoordinatedFrontier(0, board)
+        robot.bind(TeamMaps(3, contacts), "robot_0")
+        robot.reset(0)
+        board.goals[1] = left  # robot 1 heads for the left end (its frame = this one)
+        # positions unknown (invalid rows): no assignment, only the announced goal
+        robot.act(seen_at((0.0, 0.0), (0.0, 0.0), valid=False), info_at(*START))
+        assert "assigned" not in robot.events
+        assert end_of(robot.plan.goal) == expected, contacts
+
+
+def test_coordinated_frontier_names_bad_indices():
+    for bad in (-1, 1.5, True, "0"):
+        with pytest.raises(ValueError, match=rf"index must be an int >= 0, got {bad!r}"):
+            CoordinatedFrontier(bad, Blackboard())
+    with pytest.raises(ValueError, match="must be 'robot_3', got 'robot_1'"):
+        CoordinatedFrontier(3, Blackboard()).bind(TeamMaps(4, ((),) * 4), "robot_1")

@@ -164,7 +164,9 @@ def test_teammate_column_marks_frontiers_near_the_teammates_goal_once_merged():
     me, info = robots["robot_0"], infos["robot_0"]
     before = me.frontier_features(info)
     assert before[:, 5].sum() == 0  # no merge: the teammate's place is unknown
-    board.transform = Rigid2D.identity()  # as if merged, robot 1's frame = robot 0's
+    # as if merged (robot 1's frame = robot 0's) and in contact
+    board.frames[0] = {0: Rigid2D.identity(), 1: Rigid2D.identity()}
+    board.contacts[0] = (1,)
     fmap = me._frontier_map(info, np.asarray(info["odometry"])[:3])
     target = fmap.clusters(me.cfg.min_cluster_cells)[0]["centroid"]
     board.goals[1] = target  # the teammate heads there (its frame = this one)
@@ -172,7 +174,7 @@ def test_teammate_column_marks_frontiers_near_the_teammates_goal_once_merged():
     k = sector_of(target, np.asarray(info["odometry"])[:3])
     assert features[k, 5] == pytest.approx(1.0)
     assert np.all((features[:, 5] >= 0) & (features[:, 5] <= 1))
-    with pytest.raises(ValueError, match="agent must be 'robot_0' or 'robot_1', got 'r2'"):
+    with pytest.raises(ValueError, match=r"agent must be 'robot_<k>' \(k = 0, 1, ...\), got 'r2'"):
         GoalFrontier().bind(env, "r2")
 
 
