@@ -63,6 +63,7 @@ from tqdm.auto import tqdm
 
 from agents import evaluation
 from agents.goals import default_hold
+from agents.metrics import EPISODE_INFO_KEYS
 from agents.motion import team_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
@@ -348,9 +349,9 @@ class _EnvFactory:
 
 # ------------------------------------------------------------------------------- callbacks
 class InfoLogger(BaseCallback):
-    """Logs env infos at episode ends (true/shared coverage, merge acceptance and errors,
-    ``explore/episode_env_steps`` — SB3's ``rollout/ep_len_mean`` counts decisions) and
-    agent-steps/s; drives the progress bar."""
+    """Logs env infos at episode ends (true/shared coverage, a team's contacts and fused
+    robots, merge acceptance and errors, ``explore/episode_env_steps`` — SB3's
+    ``rollout/ep_len_mean`` counts decisions) and agent-steps/s; drives the progress bar."""
 
     def __init__(self, total: int, progress: bool, steps_per_decision: int) -> None:
         super().__init__()
@@ -377,7 +378,7 @@ class InfoLogger(BaseCallback):
                 continue
             self.logger.record_mean("explore/episode_env_steps", float(self.episode_steps[k]))
             self.episode_steps[k] = 0
-            for key in ("true_coverage", "shared_coverage", "overlap", "merges"):
+            for key in EPISODE_INFO_KEYS:
                 if key in info:
                     self.logger.record_mean(f"explore/{key}", float(info[key]))
             if "merge_accepted" in info:

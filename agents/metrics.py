@@ -6,7 +6,7 @@
   (``reached_*`` says which), so averages stay comparable and penalise not finishing.
 * ``overlap``: final fraction of the smaller robot's explored area also explored by the other
   (``info["overlap"]``); duplicated effort.
-* ``path_length_m`` per robot (true poses), ``collisions`` (sum of both robots' contacts).
+* ``path_length_m`` per robot (true poses), ``collisions`` (sum of the robots' contacts).
 * ``merge_first_accept_step``, ``merge_accept_fraction`` (steps with a transform in use),
   final ``merge_rotation_error_deg``/``merge_translation_error_m`` (NaN without a transform
   in use at the end: the infos' ``merge_errors_valid``).
@@ -22,6 +22,12 @@ from typing import Any
 import numpy as np
 
 LEVELS = (0.50, 0.85, 0.95)
+
+EPISODE_INFO_KEYS = ("true_coverage", "shared_coverage", "overlap", "merges", "contacts",
+                     "fused_robots")
+"""Robot 0's infos that training logs at episode ends under ``explore/`` (both backends); the
+last two only a team of more than two robots has (``multi_robot_explore_v0``: robots in
+contact with it, robots in its fused map)."""
 
 
 @dataclass

@@ -46,6 +46,7 @@ from pettingzoo import ParallelEnv
 from torch import nn
 
 from agents.goals import LEVELS, default_hold
+from agents.metrics import EPISODE_INFO_KEYS
 from agents.motion import COMMANDS, team_env
 from agents.policy import SectorLatent, SectorScorer, TopoExplorerExtractor
 from agents.sb3_explorer import sample_action
@@ -295,14 +296,16 @@ class TopoExplorerModule(TorchRLModule, ValueFunctionAPI):
 
 
 # ------------------------------------------------------------------------------- metrics
-EPISODE_KEYS = ("true_coverage", "shared_coverage", "overlap", "merges")
-"""Infos logged (mean over episode ends) under ``explore/``."""
+EPISODE_KEYS = EPISODE_INFO_KEYS
+"""Infos logged (mean over episode ends) under ``explore/``
+(:data:`agents.metrics.EPISODE_INFO_KEYS`)."""
 
 
 class ExploreMetrics(RLlibCallback):
     """At each episode end, logs robot 0's last info: ``explore/`` true and shared coverage,
-    overlap, merges, the episode's env steps; ``merge/`` acceptance and (when a merge exists)
-    its rotation and translation errors. Means over the last 100 episodes."""
+    overlap, merges (a team's contacts and fused robots too), the episode's env steps;
+    ``merge/`` acceptance and (when a merge exists) its rotation and translation errors. Means
+    over the last 100 episodes."""
 
     def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, env_runner: Any = None,
                        **kwargs: Any) -> None:

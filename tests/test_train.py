@@ -263,9 +263,10 @@ def test_resume_folder_without_checkpoints(tmp_path):
 
 # ------------------------------------------------------------------------ teams of N robots
 TEAM_TINY = {**TINY, "n_robots": 3, "comm_range": 5.0, "total_timesteps": 48, "n_steps": 16,
-             "batch_size": 24, "checkpoint_every": 0, "max_cycles": 20,
+             "batch_size": 24, "checkpoint_every": 0, "max_cycles": 12,
              "world_size": (12.0, 12.0), "env_kwargs": {"sonar": {"rays": 1}}}
-"""One rollout of 16 decisions of a team of three in one env: 48 agent-steps."""
+"""One rollout of 16 decisions of a team of three in one env (48 agent-steps), across an
+episode end."""
 
 
 def test_team_env_config_and_two_robot_config_unchanged():
@@ -307,6 +308,12 @@ def test_motion_level_team_of_three_trains_one_policy(tmp_path):
     assert [r["explorer"] for r in report["rows"]] == ["ppo", "random_walk"]
     cached = json.loads((run / "eval_baselines.json").read_text())
     assert cached["key"]["config"]["n_robots"] == 3
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (events,) = {p.parent for p in (run / "tb").rglob("events.out.tfevents.*")}
+    acc = EventAccumulator(str(events))
+    acc.Reload()
+    assert {"explore/contacts", "explore/fused_robots"} <= set(acc.Tags()["scalars"])
     assert cached["key"]["config"]["comm"] == {"range": 5.0}
     env = multi_robot_explore_v0.parallel_env(n_robots=3, max_cycles=10,
                                               world={"size": (12.0, 12.0)})
