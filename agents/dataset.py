@@ -258,7 +258,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     """Run episode ``episode`` and write its pairs (ids ``episode · snapshots + k`` below
     ``n_pairs``) into dataset ``root``. Returns how many pairs it wrote. Top-level and
     argument-only so that process pools and Ray can ship it."""
-    from agents.evaluation import team_for
+    from agents.team import make_team
     from envs import parallel_env_for
 
     snapshots = settings["snapshots"]
@@ -268,7 +268,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     ids = [i for i in ids if i < n_pairs]
     seed = episode_seed(settings["seed"], episode)
     env = parallel_env_for(env_kwargs(settings))
-    team = team_for(settings["explorer"], env)
+    team = make_team(settings["explorer"], env=env)
     n_agents = len(env.possible_agents)
     levels = coverage_levels(snapshots)[: len(ids)]
     deadlines = [math.ceil((k + 1) / snapshots * settings["max_cycles"]) for k in range(len(ids))]
@@ -375,10 +375,10 @@ def _preflight(args: GenerateArgs) -> None:
         env = parallel_env_for(env_kwargs(args.settings()))
         env.close()
     if args.explorer.startswith("sb3:"):
-        from agents.evaluation import team_for
+        from agents.team import make_team
 
         try:
-            team_for(args.explorer, env)
+            make_team(args.explorer, env=env)
         except Exception as exc:  # whatever SB3/torch raise on a file that is not a model
             raise SettingsError("explorer", f"explorer {args.explorer!r}: cannot load the "
                                             f"model ({type(exc).__name__}: {exc})") from exc

@@ -52,50 +52,20 @@ def eval_worlds(env_config: Mapping[str, Any], seed: int, episodes: int,
     return config, seeds, {"seeds": seeds, "config": json.loads(json.dumps(config, default=str))}
 
 
-def team_for(name: str, env: Any) -> dict[str, Explorer]:
-    """``agents.team.make_team(name)`` for the robots of ``env`` (a PettingZoo env of any team
-    size), bound to them: one explorer per agent of ``env.possible_agents``.
-
-    Raises:
-        ValueError: an unknown ``name``; or ``name`` is ``"coordinated_frontier"``, which
-            ``agents.team`` makes for two robots only.
-    """
-    from agents.team import make_team
-
-    raw = env.unwrapped
-    agents = list(raw.possible_agents)
-    action_type = raw.config.action_type
-    if name.startswith("sb3:"):
-        from agents.sb3_explorer import SB3Explorer, sb3_team
-
-        team = sb3_team(SB3Explorer.load_policy(name[4:]), action_type=action_type,
-                        n_robots=len(agents))
-    else:
-        team = make_team(name, action_type=action_type, env=env)
-    if list(team) != agents:
-        # until agents.team sizes its teams by the env: explorers that need no teammate
-        if name == "coordinated_frontier":
-            raise ValueError(f"explorer {name!r} drives teams of {len(team)} robots; this env "
-                             f"has {len(agents)}")
-        team = {a: type(team["robot_0"])(action_type=action_type) for a in agents}
-    for agent, explorer in team.items():
-        explorer.bind(env, agent)
-    return team
-
-
 def run_explorer(team: Mapping[str, Explorer] | str, config: Mapping[str, Any],
                  seeds: Sequence[int]) -> list[dict[str, Any]]:
     """Metrics (:meth:`agents.metrics.EpisodeRecorder.summary`) of ``team`` (one explorer per
-    robot, or an explorer's name for :func:`team_for`) on the env ``config`` describes
+    robot, or an explorer's name for :func:`agents.team.make_team`) on the env ``config`` describes
     (``two_robot_explore_v0``, or ``multi_robot_explore_v0`` for its ``n_robots`` > 2:
     :func:`envs.parallel_env_for`), one episode per seed."""
+    from agents.team import make_team
     from envs import parallel_env_for
 
     out = []
     for seed in seeds:
         env = parallel_env_for(config)
         if isinstance(team, str):
-            team = team_for(team, env)
+            team = make_team(team, env=env)
         rec = EpisodeRecorder()
         try:
             run_episode(env, team, seed=seed, callback=rec)

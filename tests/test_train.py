@@ -321,20 +321,6 @@ def test_motion_level_team_of_three_trains_one_policy(tmp_path):
     assert out["steps"] == 10 and sorted(out["infos"]) == ["robot_0", "robot_1", "robot_2"]
 
 
-def _goal_frontier_binds_a_third_robot() -> bool:
-    from agents.goals import GoalFrontier
-    from envs import multi_robot_explore_v0
-
-    try:
-        GoalFrontier().bind(multi_robot_explore_v0.parallel_env(n_robots=3), "robot_2")
-    except ValueError:
-        return False
-    return True
-
-
-@pytest.mark.skipif(not _goal_frontier_binds_a_third_robot(),
-                    reason="agents.goals.GoalFrontier binds robot_0 and robot_1 only (its "
-                           "owner generalises it to N robots)")
 def test_goal_level_team_of_three_trains_one_policy(tmp_path):
     from stable_baselines3 import PPO
 

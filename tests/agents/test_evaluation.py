@@ -51,13 +51,13 @@ def test_evaluate_writes_the_run_files_and_caches_baselines(tmp_path):
 def test_evaluate_a_team_of_three(tmp_path):
     """With ``n_robots`` 3 every explorer drives three robots of ``multi_robot_explore_v0``, the
     baselines too."""
-    from agents.evaluation import run_explorer, team_for
+    from agents.evaluation import run_explorer
     from envs import parallel_env_for
 
     config = {"max_cycles": 20, "world": {"size": (12.0, 12.0)}, "n_robots": 3,
               "sonar": {"rays": 1}}
     env = parallel_env_for(config)
-    team = team_for("frontier", env)
+    team = make_team("frontier", env=env)
     assert list(team) == ["robot_0", "robot_1", "robot_2"]
     assert all(e.bound_env() is env.unwrapped for e in team.values())
     report = evaluate(team, tmp_path, 3, env_config=config, seed=0, episodes=1, max_cycles=15,
