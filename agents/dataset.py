@@ -50,6 +50,7 @@ import math
 import os
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,7 +120,7 @@ class GenerateArgs:
     pairs: int = 60
     """Number of pairs to store."""
     explorer: str = "frontier"
-    """Explorer driving both robots: random_walk, wall_follower, frontier,
+    """Explorer driving every robot: random_walk, wall_follower, frontier,
     coordinated_frontier, or sb3:PATH (a saved PPO model)."""
     world: str = "procedural"
     """'procedural' (a new seeded building per episode) or a map file (ROS .yaml, DungeonMaps
@@ -520,6 +521,9 @@ def info(root: Path) -> str:
             f"overlap: min {overlap.min():.2f}, median {np.median(overlap):.2f}, "
             f"max {overlap.max():.2f}",
             f"nodes per map: median {np.median(nodes):.0f}, range {nodes.min()}–{nodes.max()}",
+            "robot pairs (i, j): " + ", ".join(
+                f"({i}, {j}) {n}" for (i, j), n in sorted(Counter(
+                    tuple(p.extra.get("robots", (0, 1))) for p in pairs).items())),
         ]
     return "\n".join(lines)
 

@@ -1,11 +1,12 @@
 """Exploration metrics of one episode, recorded step by step from the env's ``infos``.
 
 * ``T50``/``T85``/``T95``: first step at which the **true** coverage (the env's
-  ``info["true_coverage"]``: known fraction of the reachable free area, both robots, world
+  ``info["true_coverage"]``: known fraction of the reachable free area, all robots, world
   frame) reaches 50/85/95 %. An episode that never gets there is *censored* at its length + 1
   (``reached_*`` says which), so averages stay comparable and penalise not finishing.
 * ``overlap``: final fraction of the smaller robot's explored area also explored by the other
-  (``info["overlap"]``); duplicated effort.
+  (``info["overlap"]``; in a team of more than two, the cells swept again by another robot over
+  the most that could be); duplicated effort.
 * ``path_length_m`` per robot (true poses), ``collisions`` (sum of the robots' contacts).
 * ``merge_first_accept_step``, ``merge_accept_fraction`` (steps with a transform in use),
   final ``merge_rotation_error_deg``/``merge_translation_error_m`` (NaN without a transform

@@ -25,7 +25,7 @@ class SB3Explorer(Explorer):
     Args:
         policy: a loaded SB3 model (``BaseAlgorithm``; load once with :meth:`load_policy`) or
             another object with its ``predict`` and ``observation_space`` (an
-            :class:`agents.rllib.RLlibPolicy`); share it between the two robots (parameter
+            :class:`agents.rllib.RLlibPolicy`); share it between the robots (parameter
             sharing, as trained).
         deterministic: use the policy's mode; ``False`` samples the action (from an SB3
             model's distribution, or through a policy's ``sample(observation, rng)`` such as

@@ -303,6 +303,7 @@ def test_a_team_of_three_gives_every_pair_of_a_snapshot(team_reference):
     manifest = json.loads((out / "dataset.json").read_text())
     assert manifest["settings"]["robots"] == 3
     assert "6 pairs" in info(out)
+    assert "robot pairs (i, j): (0, 1) 2, (0, 2) 2, (1, 2) 2" in info(out)
 
 
 def test_team_truths_take_robot_j_start_pose_into_robot_i_frame(team_reference):
