@@ -22,6 +22,14 @@ accepted or not: what a better accept rule could reach with these searches.
 Printed: success per noise level and per overlap band (0.2–0.4, 0.4–0.7, 0.7–1) for every
 method, false accepts and wrong accepts (accepted, not right, of overlapping pairs), and the
 median time. ``--json`` writes every record.
+
+``--calibration-rows FILE`` instead writes the rows ``benchmarks/calibrate_merge.py --model
+structural`` fits the structural confidence on, for its ``--cache``: its own rows (the tune env
+pairs and its synthetic pairs) and, the same way, those of the generic pairs of the tuning
+seeds (``--tune-seeds``, never the reported one)::
+
+    python benchmarks/generic_graphs.py --calibration-rows /tmp/rows.json
+    python benchmarks/calibrate_merge.py --model structural --cache /tmp/rows.json --write
 """
 
 from __future__ import annotations
@@ -41,13 +49,13 @@ from fusion.eval_results import (  # noqa: E402
     oracle_transform,
     transform_errors,
 )
-from fusion.merge import merge_maps  # noqa: E402
+from fusion.merge import MergeConfig, merge_maps  # noqa: E402
 from fusion.synthetic import generic_pairs  # noqa: E402
 from topo.fileio import atomic_write_json  # noqa: E402
 
 PLAIN_MIN_INLIERS = 9
 """``ransac plain`` accepts an alignment with at least this many matched nodes (not collinear):
-the smallest count with at most 5 % false accepts on the tuning seed (500: 2 of 60; 8 gave 12),
+the smallest count with at most 5 % false accepts on the tuning seed (500: 3 of 60; 8 gave 10),
 about the false-accept rate of the RANSAC the issue compared with."""
 BANDS = ((0.2, 0.4), (0.4, 0.7), (0.7, 1.01))
 REPORT_SEED = 900
@@ -85,6 +93,31 @@ def records(seed: int, pairs: int, noise_levels: list[float], methods: list[str]
                                            and not e["collinear"], "right": e["right"]}
             out.append(rec)
     return out
+
+
+def calibration_rows(seeds: list[int], pairs: int, noise_levels: list[float]) -> list[dict]:
+    """``calibrate_merge.structural_rows``' rows of the generic pairs of ``seeds`` (set
+    ``"generic"``, each pair its own cross-validation world)."""
+    gated = MergeConfig()
+    rows = []
+    for seed in seeds:
+        for noise in noise_levels:
+            for p in generic_pairs(pairs, seed, noise):
+                r = merge_maps(p.map_a, p.map_b)
+                if r.evidence is None:
+                    continue
+                ep = EvalPair("", p.map_a, p.map_b, p.transform, None, p.overlap, p.kind, noise)
+                overlap = p.overlap if p.kind == "overlap" else 0.0
+                world = f"generic:{seed}/s{noise:g}/{p.index}"
+                e = r.evidence
+                rows.append({"set": "generic", "world": world, "pair": f"{world}:{overlap}",
+                             "way": "ab", "overlap": overlap,
+                             "features": e.calibration_features(),
+                             "right": p.kind == "overlap"
+                             and is_success(transform_errors(r.transform, ep)),
+                             "gated": bool(e.inliers < gated.min_inliers or e.collinear
+                                           or e.margin < gated.min_margin)})
+    return rows
 
 
 def _pct(k: int, n: int) -> str:
@@ -133,8 +166,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noise", default="0,0.05,0.1,0.15", help="node noise levels (m)")
     parser.add_argument("--methods", default="auto,ransac")
     parser.add_argument("--json", type=Path, default=None, help="write every record here")
+    parser.add_argument("--calibration-rows", type=Path, default=None,
+                        help="write calibrate_merge.py's structural rows and the generic "
+                             "tuning pairs' here instead")
+    parser.add_argument("--tune-seeds", default=str(TUNE_SEED),
+                        help="seeds of the generic pairs in --calibration-rows")
+    parser.add_argument("--synthetic", type=int, default=150,
+                        help="calibrate_merge.py's synthetic pairs per noise level")
     args = parser.parse_args(argv)
     noise = [float(v) for v in args.noise.split(",")]
+    if args.calibration_rows is not None:
+        import calibrate_merge  # benchmarks/ is on sys.path: the script's own folder
+
+        seeds = [int(v) for v in args.tune_seeds.split(",")]
+        if args.seed in seeds or REPORT_SEED in seeds:
+            raise ValueError(f"--tune-seeds must not hold the reported seed, got {seeds}")
+        rows = calibrate_merge.structural_rows(calibrate_merge.default_dirs(), args.synthetic)
+        rows += calibration_rows(seeds, args.pairs, noise)
+        atomic_write_json(args.calibration_rows, rows)
+        print(f"wrote {len(rows)} rows to {args.calibration_rows}")
+        return 0
     methods = [m for m in args.methods.split(",") if m]
     for m in methods:  # compiled kernels load on the first call: not in the times
         p = next(iter(generic_pairs(1, 0, 0.0)))

@@ -109,21 +109,28 @@ def _inliers(tree: cKDTree, pa: Prepared, pb: Prepared, theta: np.ndarray, tx: n
 
 
 def ransac(pa: Prepared, pb: Prepared, cfg: MergeConfig) -> Evaluated | str:
-    """A plain two-point RANSAC: ``ransac_iterations`` minimal sets drawn (``ransac_seed``) from
-    every pair of A nodes and pair of B nodes whose lengths agree within ``pair_tolerance`` and
-    whose end kinds are compatible, each scored by its kind-gated inliers
-    (:data:`RANSAC_NEIGHBOURS`); the ``4`` best distinct by inliers refitted on their inliers
-    (SVD, twice), polished and scored like the other methods (:func:`best_polished`)."""
+    """A plain two-point RANSAC: minimal sets drawn (``ransac_seed``) as a random pair of B
+    nodes and a random pair of A nodes whose length agrees within ``pair_tolerance``, kept when
+    their end kinds are compatible (the first ``ransac_iterations`` of up to four times as many
+    draws), each scored by its kind-gated inliers (:data:`RANSAC_NEIGHBOURS`); the ``8`` best
+    distinct by inliers refitted on their inliers (SVD, twice), polished and scored like the
+    other methods (:func:`best_polished`)."""
     a_i, a_j, a_len = _all_pairs(pa.xy, cfg.min_pair_distance, both=False)
     b_i, b_j, b_len = _all_pairs(pb.xy, cfg.min_pair_distance, both=True)
-    hyp_p, hyp_q, _ = SK.pair_candidates(pa.kinds, a_i, a_j, a_len, pb.kinds, b_i, b_j, b_len,
-                                         cfg.pair_tolerance, pa.compat)
-    if len(hyp_p) == 0:
-        return "no pair of nodes of B matches a pair of A in length and kinds"
+    if len(a_len) == 0 or len(b_len) == 0:
+        return "no pair of nodes is min_pair_distance apart"
     rng = np.random.default_rng(cfg.ransac_seed)
-    if len(hyp_p) > cfg.ransac_iterations:
-        pick = np.sort(rng.choice(len(hyp_p), cfg.ransac_iterations, replace=False))
-        hyp_p, hyp_q = hyp_p[pick], hyp_q[pick]
+    draws = 4 * cfg.ransac_iterations
+    hyp_q = rng.integers(len(b_len), size=draws)
+    lo = np.searchsorted(a_len, b_len[hyp_q] - cfg.pair_tolerance)
+    hi = np.searchsorted(a_len, b_len[hyp_q] + cfg.pair_tolerance, side="right")
+    hyp_p = np.minimum(lo + (rng.random(draws) * (hi - lo)).astype(np.int64), len(a_len) - 1)
+    ok = (hi > lo) & pa.compat[pa.kinds[a_i[hyp_p]], pb.kinds[b_i[hyp_q]]] & \
+        pa.compat[pa.kinds[a_j[hyp_p]], pb.kinds[b_j[hyp_q]]]
+    keep = np.flatnonzero(ok)[:cfg.ransac_iterations]
+    if len(keep) == 0:
+        return "no pair of nodes of B matches a pair of A in length and kinds"
+    hyp_p, hyp_q = hyp_p[keep], hyp_q[keep]
     theta, tx, ty, _, _ = SK.pair_motions(pa.xy, a_i, a_j, pb.xy, b_i, b_j, hyp_p, hyp_q)
     tree = cKDTree(pa.xy)
     counts, _ = _inliers(tree, pa, pb, theta, tx, ty, cfg.eps)
