@@ -222,12 +222,14 @@ def test_env_creator_and_module_serve_a_team(n_robots, level):
     assert sorted(rewards) == agents
 
 
-def test_train_rllib_motion_level_team_of_three(tmp_path):
+@pytest.mark.parametrize("level", ["motion", "goals"])
+def test_train_rllib_team_of_three(tmp_path, level):
     """``train.py --backend rllib --n-robots 3``: one PPO iteration sampled in the driver, the
     policy evaluated on teams of three."""
     from train import Args, main
 
-    args = Args(backend="rllib", num_env_runners=0, n_envs=1, level="motion", n_robots=3,
+    hold = {"hold": 2} if level == "goals" else {}
+    args = Args(backend="rllib", num_env_runners=0, n_envs=1, level=level, n_robots=3, **hold,
                 comm_range=5.0, total_timesteps=40, n_steps=16, batch_size=16, n_epochs=1,
                 max_cycles=12, world_size=(12.0, 12.0), env_kwargs={"sonar": {"rays": 1}},
                 eval_every=0, eval_episodes=1, eval_max_cycles=12, checkpoint_every=0,
@@ -239,3 +241,4 @@ def test_train_rllib_motion_level_team_of_three(tmp_path):
         "ppo", "random_walk"]
     policy = rllib.RLlibPolicy.load(run / "rllib")
     assert policy.observation_space["teammates"].shape == (2, 7)
+    assert ("frontiers" in policy.observation_space.spaces) == (level == "goals")
