@@ -40,6 +40,7 @@ table and its largest gap, and the gap of the model stored now (``--drift`` adds
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import math
@@ -95,16 +96,25 @@ def _centre(topo, result) -> np.ndarray | None:
     return None if result.centre is None else np.asarray(result.centre)
 
 
+def pair_config(pair, config=None) -> gm.GridMergeConfig:
+    """``config`` with the pair's :attr:`GridMergeConfig.drift_prior`: its odometry noise
+    (``extra["odometry_noise"]`` of a drift-aware pair, else 0) over its snapshot's steps."""
+    noise = float(pair.extra.get("odometry_noise", 0.0))
+    return dataclasses.replace(config or gm.GridMergeConfig(),
+                               drift_prior=gm.drift_prior(noise, int(pair.step)))
+
+
 def alignment_rows(dirs, config=None, both_ways: bool = True) -> list[dict]:
     """One row per alignment: set, pair, world, direction, overlap, features, right, errors."""
     rows = []
     for d in dirs:
         for p in load_pairs(d):
+            cfg = pair_config(p, config)
             ways = [(p.grid_a, p.grid_b, p.map_b, p.transform, "ab")]
             if both_ways:
                 ways.append((p.grid_b, p.grid_a, p.map_a, p.transform.inverse(), "ba"))
             for ga, gb, topo_b, truth, way in ways:
-                r = gm.merge_grids(ga, gb, config)
+                r = gm.merge_grids(ga, gb, cfg)
                 centre = _centre(topo_b, r)
                 rot = trans = math.inf
                 if centre is not None:
@@ -116,7 +126,7 @@ def alignment_rows(dirs, config=None, both_ways: bool = True) -> list[dict]:
                              "overlap": p.overlap, "features": r.features(), "right": right,
                              "rotation_error_deg": rot if math.isfinite(rot) else None,
                              "translation_error_m": trans if math.isfinite(trans) else None,
-                             "overlap_m2": r.overlap_m2, "time_s": r.time_s})
+                             "overlap_m2": r.overlap_m2, "time_s": r.time_s, "step": p.step})
     return rows
 
 
@@ -211,13 +221,17 @@ def fit_ranking(rows: list[dict], l2: float) -> dict[str, float]:
             **{n: float(w) for n, w in zip(names, raw, strict=True)}}
 
 
-MODEL_FEATURES = ("log_margin", "log_overlap", "native_agreement", "log_wall_hits")
+MODEL_FEATURES = ("log_margin", "log_overlap", "native_agreement", "log_wall_hits",
+                  "drift_prior")
 """The evidence the ``"grid"`` model weighs (a subset of ``fusion.grid_merge.FEATURES``): in
-leave-one-world-out cross-validation on the tuning pairs (2026-12-02) these four gave the
+leave-one-world-out cross-validation on the tuning pairs (2026-12-02) the first four gave the
 lowest Brier score (0.0663) and calibration gap; adding the correlation score, the pooled
 agreement and conflicts, the native conflict or the rival's agreement did not help (0.0675–
 0.0698), nor did squares, a margin × overlap term, a capped margin or an isotonic (PAV) step
-on top of the logistic output."""
+on top of the logistic output. ``drift_prior`` (2026-12-06, ``benchmarks/drift.md``): with the
+drift-aware pairs no grid feature tells a bent map's alignment 1–5° / 0.3–1 m off the robots'
+current frames from a right one; without the prior the pooled fit's cross-validated Brier was
+0.107 and its largest gap 0.16 (0.15 on ``frontier_seed2``), with it 0.076 and 0.09."""
 THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 MAX_FALSE_ACCEPTS = 0.01
 

@@ -16,7 +16,10 @@ name); the table then adds the steps wrong against the env's start-frame truth
 (``env.merge_errors()``, at robot 1's map centroid), which no rigid transform can match once
 the maps are bent, the accepted merge results more than 5° off (drift-aware) at a confidence
 of 0.9 or more ("confident wrong"), and the robots' odometry drift at the end (metres, the
-larger of the two). Per episode: the first step merged, steps
+larger of the two). ``--drift-prior`` gives every merge the grids' ``drift_prior``
+(``fusion.grid_merge.drift_prior`` of the odometry noise — ``sqrt(α1)`` for the alphas — and
+the env's steps), as the env's merging should: the benchmark wraps ``fusion.hybrid``'s
+``hybrid_merge`` and ``recheck`` to do it. Per episode: the first step merged, steps
 merged, steps wrong (and the first wrong transform's errors), the first step on a right
 transform (not wrong), transforms installed (each accepted merge that changed the one in use),
 merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them (the
@@ -36,6 +39,7 @@ Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import statistics
 import sys
@@ -45,6 +49,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion.grid_merge as grid_merge  # noqa: E402
+import fusion.hybrid as hybrid  # noqa: E402
 from agents.base import run_episode  # noqa: E402
 from agents.team import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
@@ -74,6 +79,36 @@ class _GridClock:
         return out
 
 
+class _DriftPrior:
+    """Wraps ``fusion.hybrid.hybrid_merge`` and ``recheck`` to give their grid config the
+    ``drift_prior`` of odometry noise ``noise`` at the env's current step."""
+
+    def __init__(self, noise: float) -> None:
+        self.env = None
+        self.noise = noise
+        self._hybrid, self._recheck = hybrid.hybrid_merge, hybrid.recheck
+        hybrid.hybrid_merge, hybrid.recheck = self.hybrid_merge, self.recheck
+
+    def _config(self, config):
+        prior = grid_merge.drift_prior(self.noise, int(self.env.steps))
+        return dataclasses.replace(config or grid_merge.GridMergeConfig(), drift_prior=prior)
+
+    def hybrid_merge(self, *args, config=None, **kw):
+        return self._hybrid(*args, config=self._config(config), **kw)
+
+    def recheck(self, map_a, map_b, grid_a, grid_b, in_use, config=None):
+        return self._recheck(map_a, map_b, grid_a, grid_b, in_use, self._config(config))
+
+
+def prior_noise(robot: dict) -> float:
+    """The odometry noise the drift prior reads from the env's ``robot`` settings."""
+    if "odometry_alphas" in robot:
+        from envs.two_robot_explore.config import RobotConfig
+
+        return math.sqrt(RobotConfig(**robot).odometry_alphas[0])
+    return max(robot.get("odometry_noise", (0.0, 0.0)))
+
+
 def robot_kwargs(noise: float, alphas: str | None) -> dict:
     """The env's ``robot`` settings for ``--odometry-noise`` / ``--odometry-alphas``."""
     if alphas is not None:
@@ -83,12 +118,15 @@ def robot_kwargs(noise: float, alphas: str | None) -> dict:
 
 
 def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock,
-            threshold: float | None = None, robot: dict | None = None) -> dict:
+            threshold: float | None = None, robot: dict | None = None,
+            prior: _DriftPrior | None = None) -> dict:
     """One episode's row of the table (module docstring), watched step by step."""
     mapping = {} if threshold is None else {"accept_threshold": threshold}
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
                                             mapping=mapping, robot=robot or {})
     clock.env = env
+    if prior is not None:
+        prior.env = env
     row = {"seed": seed, "first": None, "merged": 0, "wrong": 0, "first_wrong": None,
            "first_right": None, "installs": 0, "t95": None, "structural": 0, "grid": 0,
            "start_wrong": 0, "confident_wrong": 0, "drift": 0.0}
@@ -147,12 +185,16 @@ def main() -> None:
                         help="robot.odometry_noise = (S, S), the 'increment' model")
     parser.add_argument("--odometry-alphas", default=None,
                         help="the 'rot_trans_rot' model: a preset name or a1,a2,a3,a4")
+    parser.add_argument("--drift-prior", action="store_true",
+                        help="give the merges the grids' drift_prior (module docstring)")
     args = parser.parse_args()
     robot = robot_kwargs(args.odometry_noise, args.odometry_alphas)
+    prior = _DriftPrior(prior_noise(robot)) if args.drift_prior else None
     clock = _GridClock()
     print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m "
           f"(seeds {args.first_seed}-{args.first_seed + args.worlds - 1}), {args.steps} steps, "
-          f"accept_threshold {args.accept_threshold or 'default'}, robot {robot or 'default'}\n")
+          f"accept_threshold {args.accept_threshold or 'default'}, robot {robot or 'default'}, "
+          f"drift prior {'on' if prior else 'off'}\n")
     print("| seed | first merged | steps merged | steps wrong | first wrong | first right | "
           "installs | drops | accepted: structural / grids | T95 | wrong (start frame) | "
           "confident wrong | drift m |")
@@ -161,7 +203,7 @@ def main() -> None:
     t0 = time.perf_counter()
     for seed in range(args.first_seed, args.first_seed + args.worlds):
         r = episode(seed, args.explorer, args.steps, args.size, clock, args.accept_threshold,
-                    robot)
+                    robot, prior)
         rows.append(r)
         print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
               f"{r['first_wrong'] or ''} | {r['first_right'] or '-'} | {r['installs']} | "

@@ -69,6 +69,21 @@ DEFAULT_DROP_MARGIN = 0.3
 """Default :attr:`GridMergeConfig.drop_margin` (``benchmarks/drift.md``)."""
 
 
+def drift_prior(odometry_noise: float, steps: int) -> float:
+    """:attr:`GridMergeConfig.drift_prior` of maps made over ``steps`` env steps by robots whose
+    odometry has relative noise ``odometry_noise`` (``RobotConfig.odometry_noise``, the larger
+    of its two; ``0`` for perfect odometry): ``odometry_noise · steps / 1000``. The drift of a
+    frontier robot grows about linearly with the steps (``benchmarks/drift.md``); the confidence
+    model weighs it (fitted on ``benchmarks/env_pairs.py --odometry-noise`` pairs).
+
+    Raises:
+        ValueError: a negative ``odometry_noise`` or ``steps``.
+    """
+    check_real(odometry_noise, "odometry_noise", low=0.0, low_inclusive=True)
+    check_int(steps, "steps", low=0)
+    return float(odometry_noise) * int(steps) / 1000.0
+
+
 @dataclass(frozen=True, slots=True)
 class GridMergeConfig:
     """Settings of :func:`merge_grids` (metres, degrees; validated).
@@ -87,7 +102,12 @@ class GridMergeConfig:
     refit it (``benchmarks/calibrate_merge.py``) before trusting its probabilities.
     ``drop_margin``: :func:`fusion.hybrid.recheck` drops the transform in use when the grids'
     alignment of it has a confidence below ``accept_threshold − drop_margin`` (a margin, so
-    that a merge is not dropped and re-accepted as the confidence wavers at the threshold)."""
+    that a merge is not dropped and re-accepted as the confidence wavers at the threshold).
+    ``drift_prior``: how far the maps' odometry may have drifted, :func:`drift_prior` (``0``:
+    perfect odometry) — evidence of the confidence model, which the grids alone cannot give:
+    drift bends both maps, and how far an alignment of bent maps is from the robots' current
+    frames depends on the drift, not on how well the walls fit (``benchmarks/drift.md``);
+    above 0, :func:`fusion.hybrid.hybrid_merge` also asks the grids about a structural merge."""
 
     resolution: float = 0.2
     step_deg: float = 3.0
@@ -103,6 +123,7 @@ class GridMergeConfig:
     accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     native_refine: bool = True
     drop_margin: float = DEFAULT_DROP_MARGIN
+    drift_prior: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -113,6 +134,9 @@ class GridMergeConfig:
             elif f.name in ("accept_threshold", "drop_margin"):
                 check_real(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=0.0,
                            low_inclusive=True, high=1.0)
+            elif f.name == "drift_prior":
+                check_real(self.drift_prior, "GridMergeConfig.drift_prior", low=0.0,
+                           low_inclusive=True)
             elif f.name in ("coarse_factor", "refine_top"):
                 check_int(getattr(self, f.name), f"GridMergeConfig.{f.name}", low=1)
             else:
@@ -149,6 +173,7 @@ class GridMergeResult:
             known cells that lie within :data:`NATIVE_NEAR_M` of an A wall cell.
         native_conflict: fraction of them landing on A's free cells farther than
             :data:`NATIVE_DEEP_M` from any A wall cell.
+        drift_prior: :attr:`GridMergeConfig.drift_prior` of the call.
     """
 
     transform: Rigid2D
@@ -167,6 +192,7 @@ class GridMergeResult:
     rival_agreement: float = 0.0
     native_agreement: float = 0.0
     native_conflict: float = 0.0
+    drift_prior: float = 0.0
 
     def features(self) -> dict[str, float]:
         """The evidence the calibrated :attr:`confidence` is computed from (names of
@@ -174,12 +200,12 @@ class GridMergeResult:
         return grid_features(self.score, self.margin, self.overlap_m2, self.wall_agreement,
                              self.conflict, self.free_conflict, self.wall_hits,
                              self.rival_agreement, self.native_agreement,
-                             self.native_conflict)
+                             self.native_conflict, self.drift_prior)
 
 
 FEATURES = ("log_score", "log_margin", "log_overlap", "wall_agreement", "conflict",
             "free_conflict", "log_wall_hits", "score_per_hit", "agreement_gain",
-            "native_agreement", "native_conflict")
+            "native_agreement", "native_conflict", "drift_prior")
 """Names of :meth:`GridMergeResult.features`, the inputs of the ``"grid"`` calibration."""
 MAX_MARGIN = 20.0
 """Margins are capped here before their log is taken (no rival at all is ``inf``)."""
@@ -193,7 +219,7 @@ data held; ``benchmarks/fusion.md``)."""
 def grid_features(score: float, margin: float, overlap_m2: float, agreement: float,
                   conflict: float, free_conflict: float, wall_hits: int,
                   rival_agreement: float, native_agreement: float,
-                  native_conflict: float) -> dict[str, float]:
+                  native_conflict: float, drift_prior: float = 0.0) -> dict[str, float]:
     """:meth:`GridMergeResult.features` from its fields."""
     m = min(margin, MAX_MARGIN) if margin == margin else 1.0
     return {"log_score": math.log1p(max(score, 0.0)), "log_margin": math.log(max(m, 1e-3)),
@@ -202,7 +228,8 @@ def grid_features(score: float, margin: float, overlap_m2: float, agreement: flo
             "log_wall_hits": math.log1p(wall_hits),
             "score_per_hit": max(score, 0.0) / max(wall_hits, 1),
             "agreement_gain": agreement - rival_agreement,
-            "native_agreement": native_agreement, "native_conflict": native_conflict}
+            "native_agreement": native_agreement, "native_conflict": native_conflict,
+            "drift_prior": drift_prior}
 
 
 def _rejected(reason: str, t0: float) -> GridMergeResult:
@@ -557,7 +584,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     margin = score / rival if rival > 0 else math.inf
     features = grid_features(score, margin, ev.overlap_m2, ev.wall_agreement, ev.conflict,
                              ev.free_conflict, ev.wall_hits, rival_agreement,
-                             native_agreement, native_conflict)
+                             native_agreement, native_conflict, cfg.drift_prior)
     confidence = grid_calibrator()(features)
     if margin < TIE_MARGIN:
         confidence = min(confidence, 0.5)
@@ -573,7 +600,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                            ev.conflict, margin, time.perf_counter() - t0,
                            "; ".join(reasons) or None, (float(centre[0]), float(centre[1])),
                            confidence, ev.free_conflict, ev.wall_hits, rival_agreement,
-                           native_agreement, native_conflict)
+                           native_agreement, native_conflict, cfg.drift_prior)
 
 
 def grid_calibrator() -> Any:
@@ -707,4 +734,5 @@ def _native(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
 
 
 __all__ = ["FEATURES", "GridAgreement", "GridMergeConfig", "GridMergeResult", "check_with_grids",
-           "distinct", "grid_agreement", "grid_features", "merge_grids", "refine_with_grids"]
+           "distinct", "drift_prior", "grid_agreement", "grid_features", "merge_grids",
+           "refine_with_grids"]

@@ -72,6 +72,11 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     or without grids the structural one, with the reasons; ``score`` is the log-odds of
     ``confidence`` for a grid alignment, the structural score otherwise.
 
+    With ``config.drift_prior > 0`` (odometry that drifts) an accepted structural merge also
+    needs the grids' calibrated confidence, which weighs the drift, to reach
+    ``accept_threshold`` when their best alignment is the same one (one grid alignment more
+    per accepted structural merge).
+
     With ``in_use``, the transform the caller uses now, an accepted result clearly different
     from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
     support ``in_use`` clearly better (:attr:`fusion.grid_merge.GridAgreement.support` more
@@ -151,6 +156,20 @@ def _keeps(grid_a: Any, grid_b: Any, new: Rigid2D, in_use: Rigid2D,
             f"against {then.support:.0f})")
 
 
+def _drifted(grid: gm.GridMergeResult, transform: Rigid2D,
+             cfg: gm.GridMergeConfig) -> str | None:
+    """Why a structural merge's ``transform`` is not trusted on maps that may have drifted
+    (``cfg.drift_prior > 0``): the grids' best alignment is the same one, but its calibrated
+    confidence, which weighs the drift, is below ``accept_threshold``; ``None`` otherwise (the
+    structural merge's own confidence knows nothing of drift)."""
+    if grid.centre is None or gm.distinct(grid.transform, transform, grid.centre, cfg):
+        return None
+    if grid.confidence >= cfg.accept_threshold:
+        return None
+    return (f"with drift_prior {cfg.drift_prior:g} the grids' confidence in it is "
+            f"{grid.confidence:.2f} < accept_threshold={cfg.accept_threshold}")
+
+
 def _log_odds(p: float) -> float:
     p = min(max(p, 1e-12), 1 - 1e-12)
     return math.log(p / (1 - p))
@@ -172,12 +191,16 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
     topo = merge_maps(map_a, map_b, method="auto",
                       config={"accept_threshold": cfg.accept_threshold})
     fields = {f.name: getattr(topo, f.name) for f in dataclasses.fields(MergeResult)}
+    grid: gm.GridMergeResult | None = None
     if topo.accepted:
         # the structural merge is accepted only if the grids agree with it (a hard gate)
         why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
         if why is None:  # and the walls place it to the cells' precision
             refined = gm.refine_with_grids(grid_a, grid_b, topo.transform, cfg)
             why = kept(refined)
+            if why is None and cfg.drift_prior > 0:
+                grid = gm.merge_grids(grid_a, grid_b, cfg)
+                why = _drifted(grid, refined, cfg)
             if why is None:
                 merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
                 return HybridResult(**{**fields, "transform": refined, "merged": merged,
@@ -188,7 +211,7 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
                       reason=f"structural merge refuted by the grids: {why}")
     if not try_grids:
         return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0})
-    grid = gm.merge_grids(grid_a, grid_b, cfg)
+    grid = grid or gm.merge_grids(grid_a, grid_b, cfg)
     why = grid.reason if not grid.accepted else kept(grid.transform)
     if why is not None:
         return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,

@@ -13,6 +13,7 @@ from fusion import Rigid2D
 from fusion.grid_merge import (
     GridMergeConfig,
     check_with_grids,
+    drift_prior,
     grid_agreement,
     merge_grids,
     refine_with_grids,
@@ -455,3 +456,54 @@ def test_recheck_drops_a_transform_in_use_whose_confidence_fell_by_the_margin(mo
 def test_drop_margin_is_checked():
     with pytest.raises(ValueError, match="GridMergeConfig.drop_margin must be <= 1.0, got 1.5"):
         GridMergeConfig(drop_margin=1.5)
+
+
+def test_with_a_drift_prior_a_structural_merge_needs_the_grids_confidence(monkeypatch):
+    """Drifting odometry: the structural merge's confidence knows nothing of drift, so an
+    accepted structural merge also needs the grids' calibrated confidence (which weighs the
+    drift prior) when their best alignment is the same; without a prior it is not asked."""
+    import dataclasses
+
+    import fusion.grid_merge as gm
+    import fusion.hybrid as hy
+
+    a, b, truth = overlapping_views(90.0)
+    real_topo = hy.merge_maps
+    monkeypatch.setattr(hy, "merge_maps", lambda ma, mb, **kw: dataclasses.replace(
+        real_topo(ma, mb, **kw), transform=truth, accepted=True, reason=None))
+    calls = []
+    real = gm.merge_grids
+
+    def low(ga, gb, config=None):
+        calls.append(config.drift_prior if config else 0.0)
+        return dataclasses.replace(real(ga, gb, config), accepted=False, confidence=0.3,
+                                   reason="low confidence")
+
+    monkeypatch.setattr(gm, "merge_grids", low)
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False)
+    assert res.accepted and res.supplied_by == "structural" and not calls
+    drifting = GridMergeConfig(drift_prior=0.04)
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
+    assert not res.accepted and calls == [0.04]
+    assert ("structural merge refuted by the grids: with drift_prior 0.04 the grids' "
+            "confidence in it is 0.30 < accept_threshold=") in res.reason
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=True, config=drifting)
+    assert not res.accepted and calls == [0.04, 0.04]  # the grids aligned once, not twice
+    monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
+        real(ga, gb, config), accepted=True, confidence=0.99, reason=None))
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
+    assert res.accepted and res.supplied_by == "structural"
+
+
+def test_drift_prior_is_the_noise_over_the_steps_and_a_feature():
+    assert drift_prior(0.02, 1500) == pytest.approx(0.03)
+    assert drift_prior(0.0, 3000) == 0.0
+    with pytest.raises(ValueError, match="odometry_noise must be >= 0"):
+        drift_prior(-0.1, 10)
+    with pytest.raises(ValueError, match="steps must be >= 0"):
+        drift_prior(0.1, -1)
+    with pytest.raises(ValueError, match="GridMergeConfig.drift_prior must be >= 0"):
+        GridMergeConfig(drift_prior=-0.5)
+    a, b, _ = overlapping_views(37.0)
+    res = merge_grids(a, b, GridMergeConfig(drift_prior=0.07))
+    assert res.drift_prior == 0.07 and res.features()["drift_prior"] == 0.07
