@@ -57,6 +57,7 @@ import fusion.grid_merge as gm  # noqa: E402
 import fusion.merge as fm  # noqa: E402
 from fusion.calibration import (  # noqa: E402
     brier_score,
+    extend_logistic,
     fit_logistic,
     load_model,
     max_calibration_gap,
@@ -221,8 +222,11 @@ def fit_ranking(rows: list[dict], l2: float) -> dict[str, float]:
             **{n: float(w) for n, w in zip(names, raw, strict=True)}}
 
 
-MODEL_FEATURES = ("log_margin", "log_overlap", "native_agreement", "log_wall_hits",
-                  "drift_prior")
+BASE_FEATURES = ("log_margin", "log_overlap", "native_agreement", "log_wall_hits")
+"""The noise-free evidence of the ``"grid"`` model."""
+DRIFT_FEATURES = ("log_drift_prior", "drift_native_agreement")
+"""The drift terms ``--extend`` adds to the stored noise-free model (0 on perfect odometry)."""
+MODEL_FEATURES = BASE_FEATURES + DRIFT_FEATURES
 """The evidence the ``"grid"`` model weighs (a subset of ``fusion.grid_merge.FEATURES``): in
 leave-one-world-out cross-validation on the tuning pairs (2026-12-02) the first four gave the
 lowest Brier score (0.0663) and calibration gap; adding the correlation score, the pooled
@@ -230,8 +234,17 @@ agreement and conflicts, the native conflict or the rival's agreement did not he
 0.0698), nor did squares, a margin × overlap term, a capped margin or an isotonic (PAV) step
 on top of the logistic output. ``drift_prior`` (2026-12-06, ``benchmarks/drift.md``): with the
 drift-aware pairs no grid feature tells a bent map's alignment 1–5° / 0.3–1 m off the robots'
-current frames from a right one; without the prior the pooled fit's cross-validated Brier was
-0.107 and its largest gap 0.16 (0.15 on ``frontier_seed2``), with it 0.076 and 0.09."""
+current frames from a right one. On the noise-free ``frontier``, ``coordinated_frontier`` and
+``frontier_seed2`` sets with the σ = 0.01 / 0.02 / 0.05 drift sets, without the prior the
+pooled fit's cross-validated Brier is 0.112 (its chosen threshold 0.95: the drifted pairs make
+every confident alignment suspect); with ``drift_prior`` alone 0.0879 (gap 0.151 on
+``frontier_seed2``); with its log
+(``log1p(100·prior)``) and its product with the native agreement, 0.0807, no set's gap above
+0.064, largest pooled gap 0.099 (also tried: the interactions with all four, the square root:
+gaps 0.14 on ``frontier_seed2``). A pooled refit still moves the noise-free weights (the env's
+digests change), so ``--extend`` keeps the stored noise-free model and fits only the two drift
+terms on top of it (:func:`fusion.calibration.extend_logistic`): on perfect odometry the
+confidence is the stored model's, bit for bit."""
 THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 MAX_FALSE_ACCEPTS = 0.01
 
@@ -330,6 +343,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="store the model in fusion/calibration.json")
     parser.add_argument("--plot", type=Path, default=None,
                         help="write the cross-validated reliability diagram to this PNG")
+    parser.add_argument("--table", type=Path, default=None,
+                        help="the calibration table --write stores into (default: the "
+                             "package's fusion/calibration.json)")
+    parser.add_argument("--extend", action="store_true",
+                        help="grid: keep the stored model's noise-free weights and fit only "
+                             "the drift terms on top (see MODEL_FEATURES)")
     parser.add_argument("--drift", action="store_true",
                         help="add the drift-aware sets of data/env_pairs/drift/tune")
     args = parser.parse_args(argv)
@@ -354,7 +373,14 @@ def main(argv: list[str] | None = None) -> int:
     n_all = len(rows)
     rows = unique_rows(rows, "log_score" if args.model == "grid" else "score")
     print(f"{n_all - len(rows)} repeated alignments left out")
-    p = cross_validated(rows, args.l2, names)
+    base = None
+    if args.extend:
+        if args.model != "grid":
+            parser.error("--extend extends the grid model only")
+        base = noise_free_base(load_model("grid"))
+        p = cross_validated_extension(rows, base, args.l2)
+    else:
+        p = cross_validated(rows, args.l2, names)
     _, y = matrix(rows, names)
     print(f"\n{len(rows)} alignments of {len({(r['set'], r.get('pair')) for r in rows})} pairs, "
           f"{int(y.sum())} right; leave-one-world-out Brier {brier_score(p, y):.4f} "
@@ -380,17 +406,48 @@ def main(argv: list[str] | None = None) -> int:
     chosen = choose_threshold(thresholds)
     print(f"\nchosen accept_threshold: {chosen}")
     X, y = matrix(rows, names)
-    model = fit_logistic(X, y, names, l2=args.l2, meta={
-        "fitted": datetime.date.today().isoformat(), "commit": _commit(),
-        "data": sorted({r["set"] for r in rows}), "alignments": len(rows),
-        "right": int(y.sum()), "l2": args.l2, "cv_brier": round(brier_score(p, y), 4),
-        "accept_threshold": chosen, "script": "benchmarks/calibrate_merge.py"})
+    meta = {"fitted": datetime.date.today().isoformat(), "commit": _commit(),
+            "data": sorted({r["set"] for r in rows}), "alignments": len(rows),
+            "right": int(y.sum()), "l2": args.l2, "cv_brier": round(brier_score(p, y), 4),
+            "accept_threshold": chosen, "script": "benchmarks/calibrate_merge.py"}
+    if base is not None:
+        meta.update(extends={k: base.meta.get(k) for k in ("fitted", "commit", "data")},
+                    note="noise-free weights kept; the drift terms fitted on top")
+        model = extend_logistic(base, X, y, DRIFT_FEATURES, l2=args.l2, meta=meta)
+    else:
+        model = fit_logistic(X, y, names, l2=args.l2, meta=meta)
     print("coefficients (standardised):",
           {n: round(c, 3) for n, c in zip(model.names, model.coef, strict=True)},
           f"intercept {model.intercept:.3f}")
     if args.write:
-        print(f"wrote {write_model(args.model, model)}")
+        print(f"wrote {write_model(args.model, model, args.table)}")
     return 0
+
+
+def noise_free_base(model):
+    """The noise-free part of a stored ``"grid"`` model: its :data:`BASE_FEATURES` (those of a
+    model fitted before the drift terms, or the first of an extended one)."""
+    from fusion.calibration import Calibrator
+
+    k = len(BASE_FEATURES)
+    if tuple(model.names[:k]) != BASE_FEATURES:
+        raise ValueError(f"the stored grid model's features {list(model.names)} do not start "
+                         f"with {list(BASE_FEATURES)}")
+    return Calibrator(BASE_FEATURES, model.mean[:k], model.scale[:k], model.low[:k],
+                      model.high[:k], model.coef[:k], model.intercept, dict(model.meta))
+
+
+def cross_validated_extension(rows: list[dict], base, l2: float = L2) -> np.ndarray:
+    """Leave-one-world-out predictions of ``base`` extended by :data:`DRIFT_FEATURES`
+    (``base`` itself is not refitted: on noise-free rows these are its own predictions)."""
+    X, y = matrix(rows, MODEL_FEATURES)
+    groups = np.array([_group(r) for r in rows])
+    p = np.zeros(len(rows))
+    for g in np.unique(groups):
+        test = groups == g
+        p[test] = extend_logistic(base, X[~test], y[~test], DRIFT_FEATURES,
+                                  l2=l2).predict(X[test])
+    return p
 
 
 def per_set_report(rows: list[dict], p: np.ndarray, names, model_name: str) -> None:

@@ -173,6 +173,58 @@ def fit_logistic(X: np.ndarray, y: np.ndarray, names: Sequence[str], *, l2: floa
                       dict(meta or {}))
 
 
+def extend_logistic(base: Calibrator, X: np.ndarray, y: np.ndarray, names: Sequence[str], *,
+                    l2: float = 1.0, meta: Mapping[str, Any] | None = None,
+                    max_iter: int = 100) -> Calibrator:
+    """``base`` with more features ``names``, fitted on data where they matter: the columns of
+    ``X`` are ``base.names`` then ``names``; the new weights are fitted by ridge-penalised
+    Newton/IRLS with ``base``'s log-odds as a fixed offset. The new features are standardised
+    with mean 0 (scale: their root mean square) and clipped from 0, so that wherever they
+    are 0 — e.g. a drift prior on perfect odometry — the extended model's log-odds are
+    ``base``'s exactly: what ``base`` was fitted and tested on keeps its answers.
+
+    Raises:
+        ValueError: shapes that do not match the names, a name already in ``base``, labels
+            other than 0 and 1, NaN/inf, negative new features, ``l2 < 0``.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    names = tuple(names)
+    k = len(base.names)
+    if X.ndim != 2 or X.shape[1] != k + len(names):
+        raise ValueError(f"X must have shape (N, {k + len(names)}) (base.names then names), "
+                         f"got {X.shape}")
+    if set(names) & set(base.names):
+        raise ValueError(f"names must be new features, got {sorted(set(names) & set(base.names))}"
+                         f" already in the base model")
+    if y.shape != (X.shape[0],) or not np.isin(y, (0.0, 1.0)).all():
+        raise ValueError(f"y must be {X.shape[0]} labels of 0 or 1")
+    if not np.isfinite(X).all() or (X[:, k:] < 0).any():
+        raise ValueError("X must be finite, the new features >= 0")
+    if not l2 >= 0:
+        raise ValueError(f"l2 must be >= 0, got {l2}")
+    offset = np.array([base.log_odds(dict(zip(base.names, row, strict=True)))
+                       for row in X[:, :k].tolist()])
+    extra = X[:, k:]
+    scale = np.sqrt(np.mean(extra ** 2, axis=0))
+    scale[scale <= 1e-12] = 1.0
+    Z = extra / scale
+    w = np.zeros(Z.shape[1])
+    for _ in range(max_iter):
+        p = 1.0 / (1.0 + np.exp(-np.clip(offset + Z @ w, -700, 700)))
+        grad = Z.T @ (p - y) + l2 * w
+        hess = (Z * (p * (1 - p))[:, None]).T @ Z + (l2 + 1e-9) * np.eye(len(w))
+        step = np.linalg.solve(hess, grad)
+        w -= step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    n = len(names)
+    return Calibrator(base.names + names, base.mean + (0.0,) * n,
+                      base.scale + tuple(scale.tolist()), base.low + (0.0,) * n,
+                      base.high + tuple(extra.max(axis=0).tolist()),
+                      base.coef + tuple(w.tolist()), base.intercept, dict(meta or {}))
+
+
 # ------------------------------------------------------------------------------ measures
 def brier_score(p: Any, y: Any) -> float:
     """Mean squared difference of the predicted probabilities ``p`` and the 0/1 outcomes ``y``

@@ -205,7 +205,8 @@ class GridMergeResult:
 
 FEATURES = ("log_score", "log_margin", "log_overlap", "wall_agreement", "conflict",
             "free_conflict", "log_wall_hits", "score_per_hit", "agreement_gain",
-            "native_agreement", "native_conflict", "drift_prior")
+            "native_agreement", "native_conflict", "drift_prior", "log_drift_prior",
+            "drift_native_agreement")
 """Names of :meth:`GridMergeResult.features`, the inputs of the ``"grid"`` calibration."""
 MAX_MARGIN = 20.0
 """Margins are capped here before their log is taken (no rival at all is ``inf``)."""
@@ -229,7 +230,8 @@ def grid_features(score: float, margin: float, overlap_m2: float, agreement: flo
             "score_per_hit": max(score, 0.0) / max(wall_hits, 1),
             "agreement_gain": agreement - rival_agreement,
             "native_agreement": native_agreement, "native_conflict": native_conflict,
-            "drift_prior": drift_prior}
+            "drift_prior": drift_prior, "log_drift_prior": math.log1p(100.0 * drift_prior),
+            "drift_native_agreement": drift_prior * native_agreement}
 
 
 def _rejected(reason: str, t0: float) -> GridMergeResult:

@@ -10,6 +10,7 @@ import pytest
 from fusion.calibration import (
     Calibrator,
     brier_score,
+    extend_logistic,
     fit_logistic,
     load_model,
     max_calibration_gap,
@@ -117,3 +118,28 @@ def test_the_shipped_grid_model():
                                            "native_agreement": 0.7, "log_wall_hits": 5.5}
     for name in ("log_margin", "log_overlap", "native_agreement", "log_wall_hits"):
         assert model(base | {name: base[name] * 1.5}) >= model(base)
+
+
+def test_an_extended_model_keeps_the_base_where_the_new_features_are_zero():
+    """extend_logistic fits new weights with the base model's log-odds as an offset: where the
+    new feature is 0 (perfect odometry) the answer is the base's, bit for bit; where it is not,
+    the known extra effect is recovered."""
+    X, y, _ = _sample(3000)
+    base = fit_logistic(X, y, NAMES)
+    rng = np.random.default_rng(5)
+    d = rng.uniform(0.0, 2.0, 20_000)
+    Xb = rng.normal(size=(20_000, 2)) * [1.0, 2.0] + [0.5, 0.0]
+    z = np.array([base.log_odds({"a": a, "b": b}) for a, b in Xb.tolist()]) - 1.5 * d
+    yd = (rng.random(len(d)) < 1 / (1 + np.exp(-z))).astype(float)
+    ext = extend_logistic(base, np.column_stack([Xb, d]), yd, ("d",), l2=0.0,
+                          meta={"note": "test"})
+    assert ext.names == ("a", "b", "d") and ext.meta == {"note": "test"}
+    assert ext.coef[2] / ext.scale[2] == pytest.approx(-1.5, abs=0.1)
+    for a, b in Xb[:50].tolist():
+        assert ext.log_odds({"a": a, "b": b, "d": 0.0}) == base.log_odds({"a": a, "b": b})
+    with pytest.raises(ValueError, match=r"names must be new features, got \['a'\]"):
+        extend_logistic(base, np.column_stack([Xb, d]), yd, ("a",))
+    with pytest.raises(ValueError, match="the new features >= 0"):
+        extend_logistic(base, np.column_stack([Xb, -d]), yd, ("d",))
+    with pytest.raises(ValueError, match=r"X must have shape \(N, 3\)"):
+        extend_logistic(base, Xb, yd, ("d",))
