@@ -35,7 +35,8 @@ class FrontierConfig:
             sensed and are not goals.
         min_unknown_area: unknown pockets smaller than this (m²) are gaps between sonar cones
             inside explored space, not territory: they make no frontier.
-        replan_every: steps between plans while a goal is being followed.
+        replan_every: steps between plans while a goal is being followed (with
+            ``max_plan_age``: between checks of it).
         arrive_distance: the goal counts as reached within this distance.
         lookahead: pure-pursuit look-ahead along the path.
         blocked_distance: a front echo closer than this means "blocked": back off and re-plan.
@@ -71,6 +72,7 @@ class FrontierConfig:
     max_blocks: int = 3
     hysteresis: float = 1.0
     search_radius: float = 6.0
+    max_plan_age: int = 0
 
     def __post_init__(self) -> None:
         for name in ("clearance", "wall_cost_distance", "arrive_distance", "lookahead",
@@ -83,6 +85,7 @@ class FrontierConfig:
         check_int(self.replan_every, "FrontierConfig.replan_every", low=1)
         check_int(self.stall_steps, "FrontierConfig.stall_steps", low=1)
         check_int(self.max_blocks, "FrontierConfig.max_blocks", low=1)
+        check_int(self.max_plan_age, "FrontierConfig.max_plan_age", low=0)
 
 
 @dataclass(slots=True)
@@ -93,6 +96,7 @@ class Plan:
     goal: np.ndarray
     cost: float
     age: int = 0
+    checks: int = 0
 
 
 @dataclass(slots=True)
@@ -446,6 +450,22 @@ def _known_box_in(other: Any, transform: Rigid2D, grid: Any) -> tuple[int, int, 
     h, w = grid.log_odds.shape
     return (int(np.clip(r.min(), 0, h)), int(np.clip(r.max() + 1, 0, h)),
             int(np.clip(c.min(), 0, w)), int(np.clip(c.max() + 1, 0, w)))
+
+
+def is_frontier_cell(grid: Any, xy: np.ndarray) -> bool:
+    """Whether the cell of ``grid`` at ``xy`` or one of its 8 neighbours is known free next
+    to an unknown cell (a frontier cell of :func:`frontier_map`, pockets aside): a look at a
+    5 × 5 block of the grid, not a plan."""
+    res = float(grid.resolution)
+    col = int(math.floor((xy[0] - grid.origin[0]) / res))
+    row = int(math.floor((xy[1] - grid.origin[1]) / res))
+    states = grid.states()
+    h, w = states.shape
+    if not (2 <= row < h - 2 and 2 <= col < w - 2):
+        return False
+    block = states[row - 2:row + 3, col - 2:col + 3]
+    unknown = ndimage.binary_dilation(block == CellState.UNKNOWN, structure=np.ones((3, 3)))
+    return bool((unknown & (block == CellState.FREE))[1:4, 1:4].any())
 
 
 def pure_pursuit(pose: np.ndarray, path: np.ndarray, lookahead: float) -> np.ndarray:

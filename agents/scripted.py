@@ -36,6 +36,7 @@ from agents.frontier_planning import (
     FrontierMap,
     Plan,
     frontier_map,
+    is_frontier_cell,
     pure_pursuit,
 )
 from fusion.rigid import Rigid2D
@@ -193,13 +194,35 @@ class Frontier(CommandExplorer):
         self._track = {}
 
     def _needs_plan(self, pose: np.ndarray) -> bool:
-        if self.plan is None or self.plan.age >= self.cfg.replan_every:
+        if self.plan is None:
             return True
+        if self.plan.age >= self.cfg.replan_every:
+            if not self.cfg.max_plan_age or self._superseded(pose):
+                return True
         if np.linalg.norm(self.plan.goal - pose[:2]) < self.cfg.arrive_distance:
             # reached: if the frontier had gone the goal would not be there to reach
             self._give_up(self.plan.goal, "given_up_reached")
             return True
         return False
+
+    def _superseded(self, pose: np.ndarray) -> bool:
+        """At a check (``max_plan_age``): whether the plan must be re-made — it is
+        ``max_plan_age`` steps old, its goal is no frontier cell any more, or the robot got
+        no nearer (the stall rule, on the plan's cost for the path left)."""
+        plan = self.plan
+        plan.checks += 1
+        if plan.checks * self.cfg.replan_every >= self.cfg.max_plan_age:
+            return True
+        if not is_frontier_cell(self._grid(), plan.goal):
+            self._count("superseded")
+            return True
+        i = int(np.argmin(np.linalg.norm(plan.path - pose[:2], axis=1)))
+        left = float(np.linalg.norm(np.diff(plan.path[i:], axis=0), axis=1).sum())
+        whole = float(np.linalg.norm(np.diff(plan.path, axis=0), axis=1).sum())
+        before = len(self.given_up)
+        self._follow(plan.goal, plan.cost * left / whole if whole > 0 else 0.0)
+        plan.age = 0
+        return len(self.given_up) > before
 
     def bind(self, env: Any, agent: str) -> None:
         super().bind(env, agent)
@@ -247,19 +270,20 @@ class Frontier(CommandExplorer):
         by path cost (Yamauchi), the current goal's ``hysteresis`` metres cheaper. Searched
         in a window of ``search_radius`` around the robot, doubled until its answer is the
         whole map's (:attr:`FrontierMap.exact_below`)."""
-        radius = self.cfg.search_radius
         goal = self._track.get("goal")
+        slack = self.cfg.hysteresis if goal is not None else 0.0
+        # the current goal's cost is a good guess of how far to look
+        radius = max(self.cfg.search_radius, self._track.get("best", 0.0) + slack + 0.5)
         while True:
             fmap = self._frontier_map(info, pose, radius)
             if fmap is None:
                 return None, None
             best = fmap.nearest(self.cfg.min_cluster_cells, goal, self.cfg.give_up_radius,
                                 self.cfg.hysteresis)
-            slack = self.cfg.hysteresis if goal is not None else 0.0
             if math.isinf(fmap.exact_below) or (
                     best is not None and best["cost"] + slack < fmap.exact_below):
                 return fmap, best
-            radius *= 2.0
+            radius = max(2.0 * radius, best["cost"] + slack + 0.5 if best else 0.0)
 
     def _select_among_all(self, info: Mapping[str, Any], pose: np.ndarray
                           ) -> tuple[FrontierMap | None, dict[str, Any] | None]:

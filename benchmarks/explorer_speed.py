@@ -11,7 +11,8 @@ floor: what the env costs without explorers). Columns: team steps/s and ms/step 
 env), the explorers' share of that time, the env floor (steps/s of the replay), the true
 coverage reached, and per robot the planning cost: ``act()`` ms per step, plans, ms per plan
 and the robot's known area at the end (so that cost per plan can be read against the area it
-plans over).
+plans over). The CPU columns are the same from the process's CPU time (``time.process_time``):
+on a machine shared with other jobs they move less than wall time.
 """
 
 from __future__ import annotations
@@ -49,19 +50,24 @@ def measure(explorer: str, size: float, steps: int, seed: int,
                             strict=True):
         explorer_.reset(int(s.generate_state(1)[0]))
     act_s = dict.fromkeys(team, 0.0)
-    env_s = 0.0
+    act_cpu = 0.0
+    env_s = env_cpu = 0.0
     log = []
     coverage = 0.0
     while env.agents:
         actions = {}
+        c0 = time.process_time()
         for a in env.agents:
             t0 = time.perf_counter()
             actions[a] = team[a].act(obs[a], infos[a])
             act_s[a] += time.perf_counter() - t0
+        c1 = time.process_time()
+        act_cpu += c1 - c0
         log.append(actions)
         t0 = time.perf_counter()
         obs, _r, _t, _u, infos = env.step(actions)
         env_s += time.perf_counter() - t0
+        env_cpu += time.process_time() - c1
         if infos:
             coverage = float(next(iter(infos.values()))["true_coverage"])
     raw = env.unwrapped
@@ -74,28 +80,33 @@ def measure(explorer: str, size: float, steps: int, seed: int,
                          "known_m2": snap.known_cells * snap.grid.resolution ** 2}
     replay = _env(size, steps, robots)
     replay.reset(seed=seed)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for actions in log:
         replay.step(actions)
-    floor_s = time.perf_counter() - t0
+    floor_s, floor_cpu = time.perf_counter() - t0, time.process_time() - c0
     total = sum(act_s.values()) + env_s
     return {"explorer": explorer, "size": size, "steps": len(log),
             "steps_per_s": len(log) / total, "ms_per_step": total / len(log) * 1e3,
             "explorer_share": sum(act_s.values()) / total,
             "env_floor_steps_per_s": len(log) / floor_s, "env_in_run_ms": env_s / len(log) * 1e3,
+            "cpu_steps_per_s": len(log) / (act_cpu + env_cpu),
+            "cpu_explorer_ms": act_cpu / len(log) * 1e3,
+            "cpu_env_floor_steps_per_s": len(log) / floor_cpu,
             "coverage": coverage, "robots": robots_out}
 
 
 def print_table(rows: list[dict]) -> None:
     """The speed table and the per-robot planning cost table (markdown)."""
     print("| explorer | building | steps | team steps/s | ms/step | explorer share | "
-          "env floor steps/s | env ms/step in run | true coverage |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "env floor steps/s | env ms/step in run | CPU: team steps/s | CPU: explorers "
+          "ms/step | CPU: env floor steps/s | true coverage |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['explorer']} | {r['size']:g} m | {r['steps']} | {r['steps_per_s']:.0f} | "
               f"{r['ms_per_step']:.2f} | {r['explorer_share']:.0%} | "
               f"{r['env_floor_steps_per_s']:.0f} | {r['env_in_run_ms']:.2f} | "
-              f"{r['coverage']:.2f} |")
+              f"{r['cpu_steps_per_s']:.0f} | {r['cpu_explorer_ms']:.2f} | "
+              f"{r['cpu_env_floor_steps_per_s']:.0f} | {r['coverage']:.2f} |")
     print("\n| explorer | building | robot | act() ms/step | plans | ms/plan | known m² | "
           "ms/plan per 100 m² known |")
     print("|---|---|---|---|---|---|---|---|")

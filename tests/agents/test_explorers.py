@@ -108,3 +108,69 @@ def test_an_unbound_explorer_says_to_bind_it():
     walker.reset(0)
     with pytest.raises(RuntimeError, match=r"RandomWalk reads its robot's sonar layout"):
         walker.act({"sonar": np.ones(8)}, {})
+
+
+# ---------------------------------------------------------------------------- teams of N
+def team_env(n, steps=60, **kwargs):
+    from envs import multi_robot_explore_v0
+
+    return multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps,
+                                               comm={"range": 6.0}, **SMALL, **kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(EXPLORERS))
+def test_make_team_sizes_the_team_by_the_env(name):
+    env = team_env(4)
+    team = make_team(name, env=env)
+    assert list(team) == ["robot_0", "robot_1", "robot_2", "robot_3"]
+    assert all(e.agent == a for a, e in team.items())
+    out = run_episode(env, team, seed=2)
+    assert out["steps"] == 60 and not env.agents
+    assert list(make_team(name, n_robots=3)) == ["robot_0", "robot_1", "robot_2"]
+    assert list(make_team(name)) == ["robot_0", "robot_1"]
+
+
+def test_a_coordinated_team_shares_one_blackboard_and_repeats_with_a_seed():
+    def trace(seed):
+        env = team_env(3, steps=150)
+        team = make_team("coordinated_frontier", env=env)
+        assert len({id(e.board) for e in team.values()}) == 1
+        seen = []
+        run_episode(env, team, seed=seed, callback=lambda _k, _o, _r, infos: seen.append(
+            np.concatenate([infos[a]["pose"] for a in sorted(infos)])))
+        return np.array(seen)
+
+    a = trace(4)
+    assert a.shape[0] == 150
+    np.testing.assert_array_equal(a, trace(4))
+    assert not np.array_equal(a, trace(5))
+
+
+def test_make_team_names_a_bad_team_size():
+    with pytest.raises(ValueError, match="n_robots must be >= 1, got 0"):
+        make_team("frontier", n_robots=0)
+    with pytest.raises(TypeError, match="n_robots must be an integer, got"):
+        make_team("frontier", n_robots=2.5)
+    with pytest.raises(ValueError, match="n_robots must match the env's team of 3 robots, got 2"):
+        make_team("frontier", env=team_env(3), n_robots=2)
+
+
+def test_goal_frontier_drives_any_robot_of_a_team():
+    from agents.goals import GoalFrontier
+    from agents.scripted import robot_index
+
+    env = team_env(4, steps=20)
+    robot = GoalFrontier()
+    robot.bind(env, "robot_3")
+    assert robot.index == 3
+    obs, infos = env.reset(seed=1)
+    robot.reset(0)
+    robot.choose_sector(0)
+    for _ in range(10):
+        action = robot.act(obs["robot_3"], infos["robot_3"])
+        obs, _r, _t, _u, infos = env.step({a: action if a == "robot_3" else np.zeros(2)
+                                           for a in env.agents})
+    assert robot.events["plans"] >= 1
+    for bad in ("robot_x", "robot_", "robot_01", "r2", 3):
+        with pytest.raises(ValueError, match=r"agent must be 'robot_<k>' \(k = 0, 1, ...\)"):
+            robot_index(bad)

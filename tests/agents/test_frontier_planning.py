@@ -7,6 +7,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agents.frontier_planning import FrontierConfig, frontier_map
 from agents.scripted import Blackboard, CoordinatedFrontier, Frontier
@@ -259,3 +261,96 @@ def test_coordinated_frontier_names_bad_indices():
             CoordinatedFrontier(bad, Blackboard())
     with pytest.raises(ValueError, match="must be 'robot_3', got 'robot_1'"):
         CoordinatedFrontier(3, Blackboard()).bind(TeamMaps(4, ((),) * 4), "robot_1")
+
+
+# ------------------------------------------------------------------ windows and the whole map
+# rooms along a corridor with doorways and open ends: frontiers near and far
+ROOMS = grid_with(
+    [(-7.0, -1.0, 7.0, 1.0), (-6.0, 1.0, -2.0, 6.0), (2.0, 1.0, 6.0, 5.0), (-1.0, -6.0, 3.0, -1.0)],
+    [(-7.0, -1.3, -1.0, -1.0), (3.0, -1.3, 7.0, -1.0), (-2.0, 1.0, 2.0, 1.3),
+     (6.0, 1.0, 7.0, 1.3), (-6.3, 1.0, -6.0, 6.0), (-2.0, 1.3, -1.7, 6.0),
+     (1.7, 1.3, 2.0, 5.0), (6.0, 1.3, 6.3, 5.0), (-1.3, -6.0, -1.0, -1.3),
+     (3.0, -6.0, 3.3, -1.3)])
+ROOMS_FREE = np.argwhere(ROOMS.states() == 1)
+
+
+def whole_map_choice(pose, goal):
+    """The cluster Frontier chose before windows: every cluster's cost from one search of the
+    whole map, the current goal's (cheapest cell within give_up_radius) favoured."""
+    clusters = frontier_map(ROOMS, pose, CFG).clusters(CFG.min_cluster_cells)
+    if not clusters:
+        return None
+    fmap = frontier_map(ROOMS, pose, CFG)
+
+    def current(c):
+        xy = fmap.cell_to_xy(np.array([c["cell"]]))[0]
+        return goal is not None and np.linalg.norm(xy - goal) < CFG.give_up_radius
+
+    return min(clusters, key=lambda c: c["cost"] - CFG.hysteresis * current(c))
+
+
+@settings(max_examples=40, deadline=None)
+@given(cell=st.integers(0, len(ROOMS_FREE) - 1), goal_cell=st.none() | st.integers(0, 10**6),
+       radius=st.sampled_from([1.0, 2.0, 4.0]))
+def test_windowed_search_chooses_what_the_whole_map_would(cell, goal_cell, radius):
+    pose = ROOMS.cell_to_world(ROOMS_FREE[cell][None])[0]
+    goal = None
+    if goal_cell is not None:
+        front = frontier_xy(frontier_map(ROOMS, pose, CFG))
+        goal = front[goal_cell % len(front)] + 0.3 if len(front) else None
+    expected = whole_map_choice(pose, goal)
+    # as Frontier._select: widen the window until its answer is exact
+    slack = CFG.hysteresis if goal is not None else 0.0
+    while True:
+        fmap = frontier_map(ROOMS, pose, CFG, radius=radius)
+        got = fmap.nearest(CFG.min_cluster_cells, goal, CFG.give_up_radius, CFG.hysteresis)
+        if math.isinf(fmap.exact_below) or (got is not None
+                                            and got["cost"] + slack < fmap.exact_below):
+            break
+        radius *= 2.0
+    assert (got is None) == (expected is None)
+    if got is not None:
+        assert got["cost"] == pytest.approx(expected["cost"], abs=1e-9)
+        path = fmap.path_to(got["cell"])
+        assert np.linalg.norm(path[0] - pose) < 0.15 and np.allclose(
+            path[-1], fmap.cell_to_xy(np.array([got["cell"]]))[0])
+
+
+def test_a_window_that_holds_every_known_cell_gives_the_same_map():
+    pose = np.array([-3.0, 0.0])
+    full = frontier_map(OWN, pose, CFG)
+    rows, cols = np.nonzero(OWN.states())
+    box = (rows.min() - 5, rows.max() + 5, cols.min() - 5, cols.max() + 5)
+    fast = frontier_map(OWN, pose, CFG, within=box)
+    np.testing.assert_array_equal(fast.labels, full.labels)
+    np.testing.assert_array_equal(fast.cost_to, full.cost_to)
+    # a box cutting through known cells is noticed: the whole grid is searched
+    cut = frontier_map(OWN, pose, CFG, within=(rows.min(), rows.max() - 10, cols.min(),
+                                                cols.max()))
+    np.testing.assert_array_equal(cut.labels, full.labels)
+    with pytest.raises(ValueError, match="radius applies without teammates only"):
+        frontier_map(OWN, pose, CFG, radius=2.0, teammates=[(OWN, Rigid2D())])
+    with pytest.raises(ValueError, match=r"FrontierConfig.search_radius must be > 0.0, got 0.0"):
+        FrontierConfig(search_radius=0.0)
+
+
+def test_with_max_plan_age_a_plan_is_kept_while_its_goal_is_a_frontier():
+    env = Maps({"robot_0": CORRIDOR, "robot_1": grid_with([])})
+    robot = Frontier(FrontierConfig(replan_every=2, max_plan_age=8))
+    robot.bind(env, "robot_0")
+    robot.reset(0)
+    robot.act(NO_ECHO, info_at(0.0))
+    plan = robot.plan
+    assert plan.goal[0] < -2.5
+    for _ in range(5):  # checked at ages 2 and 4: the goal is still a frontier
+        robot.act(NO_ECHO, info_at(0.0))
+    assert robot.plan is plan and robot.events["plans"] == 1
+    # the left end explored: at the next check the goal is no frontier, a new plan is made
+    env.grids["robot_0"] = grid_with([(-6.0, -1.0, 5.0, 1.0)],
+                                     [(-6.0, 1.0, 5.0, 1.3), (-6.0, -1.3, 5.0, -1.0),
+                                      (-6.3, -1.3, -6.0, 1.3)])
+    robot.act(NO_ECHO, info_at(0.0))
+    assert robot.events["superseded"] == 1 and robot.events["plans"] == 2
+    assert robot.plan.goal[0] > 4.0
+    with pytest.raises(ValueError, match="FrontierConfig.max_plan_age must be >= 0, got -1"):
+        FrontierConfig(max_plan_age=-1)
