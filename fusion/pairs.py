@@ -34,6 +34,10 @@ Arrays of a pair file (``X`` is ``a`` or ``b``):
 
 ``meta`` holds: format, version, pair_id, transform ``[theta, tx, ty]`` (B → A), overlap,
 world_id, seed, explorer, step, episode, snapshot, each grid's resolution and origin, extra.
+In a team's dataset (``python -m agents.dataset generate --robots N``) every robot pair
+``i < j`` of a snapshot is a pair: ``extra["robots"] = [i, j]``, map A is robot i's, map B
+robot j's and the transform takes j's frame onto i's; a pair without that key is robots
+``(0, 1)``.
 
 Every file is written to a temporary name in the same folder and renamed into place, so a pair
 file either exists whole or not at all; anything else in ``pairs/`` is an error naming the file.

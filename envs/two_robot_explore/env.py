@@ -18,7 +18,8 @@ topological maps, then an occupancy-grid alignment, see Maps); when a merge is a
 so a wrong merge costs reward. It is a cooperative PettingZoo ``ParallelEnv``; ``env()`` gives
 the AEC version; ``gymnasium.make("topomerge/TwoRobotExplore-v0")`` (after ``import envs``) is
 one Gymnasium agent driving both robots (joint action, both observations, the team reward:
-:mod:`envs.two_robot_explore.centralised`), for Gymnasium's wrappers and vector envs.
+:mod:`envs.two_robot_explore.centralised`), for Gymnasium's wrappers and vector envs;
+``gymnasium.make("topomerge/MultiRobotExplore-v0", n_robots=N)`` is the same for a team.
 
 ## Action Space
 
