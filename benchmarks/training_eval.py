@@ -24,9 +24,14 @@ and once per world ``Frontier``,
 ``RandomWalk`` and the goal-level rules of :class:`agents.goals.SectorRule` (``--rules``; by
 default ``ahead``: always the frontier in front), plus ``--baselines``.
 
+**Teams.** ``--n-robots N`` (and ``--comm-range R``) evaluates every explorer with N robots
+(``multi_robot_explore_v0`` for N > 2) on the same worlds; a run must have been trained with
+the same N (its ``args.json``), or its observations would not fit.
+
 **Statistics** (the practice of ``rliable``, Agarwal et al. 2021): for every explorer and
-world, ratio = T / ``Frontier``'s T on that world; the interquartile mean (IQM, the mean of
-the middle 50 %: robust to the odd stuck episode, less noisy than the median) over all
+world, ratio = T / the reference's T on that world (``--reference``, default ``frontier``);
+the interquartile mean (IQM, the mean of the middle 50 %: robust to the odd stuck episode,
+less noisy than the median) over all
 seed × world ratios, with a 95 % percentile interval from a two-level bootstrap (worlds drawn
 with replacement, then each world's seeds drawn with replacement), so the interval covers
 both which worlds were drawn and which training seeds. Scripted explorers have one run per
@@ -78,20 +83,23 @@ class World:
     max_cycles: int
 
 
-def heldout_worlds(n: int, real: bool = True) -> list[World]:
+def heldout_worlds(n: int, real: bool = True, team: dict[str, Any] | None = None
+                   ) -> list[World]:
     """``n`` procedural worlds (sides uniform in :data:`SIZE_RANGE`, 0.5 m steps) from
     :data:`HELDOUT_ENTROPY`, then the real maps of ``../shared/maps`` when ``real`` (their
-    paths resolved, so that episodes cached from another checkout match)."""
+    paths resolved, so that episodes cached from another checkout match). ``team``: env
+    config fields of the team (``n_robots``, ``comm``) every world adds (the same worlds)."""
     rng = np.random.default_rng(np.random.SeedSequence(HELDOUT_ENTROPY))
+    team = team or {}
     out = []
     for k in range(n):
         size = tuple(float(v) for v in np.round(rng.uniform(*SIZE_RANGE, 2) * 2) / 2)
         seed = int(rng.integers(2**31))
         out.append(World(f"procedural{k}_{size[0]:g}x{size[1]:g}",
-                         {"world": {"size": size}}, seed,
+                         {"world": {"size": size}, **team}, seed,
                          int(STEPS_PER_METRE * max(size))))
     if real:
-        out += [World(world_id, {"world": world}, 0, REAL_MAX_CYCLES)
+        out += [World(world_id, {"world": world, **team}, 0, REAL_MAX_CYCLES)
                 for world_id, world in real_worlds()]
     return out
 
@@ -138,11 +146,11 @@ def _policy(run: str, best: bool = False) -> tuple[Any, dict[str, Any]]:
     return policy, args.env_config()
 
 
-def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The team of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same policy sampling its
-    actions —, ``best-run:PATH`` / ``best-sample:PATH`` — the run's best policy —,
-    ``rule:NAME`` or a scripted name) and the env config it runs with (before the world is
-    set)."""
+def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The team of ``n`` robots of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same
+    policy sampling its actions —, ``best-run:PATH`` / ``best-sample:PATH`` — the run's best
+    policy —, ``rule:NAME`` or a scripted name) and the env config it runs with (before the
+    world is set)."""
     from agents.goals import SectorRule
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
@@ -151,11 +159,11 @@ def _team(explorer: str) -> tuple[dict[str, Any], dict[str, Any]]:
     if explorer.startswith(POLICY_KINDS):
         kind, _, run = explorer.partition(":")
         policy, config = _policy(run, kind.startswith("best-"))
-        return sb3_team(policy, deterministic=kind.endswith("run")), config
+        return sb3_team(policy, deterministic=kind.endswith("run"), n_robots=n), config
     if explorer.startswith("rule:"):
         board = Blackboard()
-        return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(2)}, {}
-    return make_team(explorer), {}
+        return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(n)}, {}
+    return make_team(explorer, n_robots=n), {}
 
 
 def episode(explorer: str, world: World) -> dict[str, Any]:
@@ -166,11 +174,11 @@ def episode(explorer: str, world: World) -> dict[str, Any]:
     torch.set_num_threads(1)
     from agents.base import run_episode
     from agents.metrics import EpisodeRecorder
-    from envs.two_robot_explore_v0 import parallel_env
+    from envs import parallel_env_for
 
-    team, config = _team(explorer)
+    team, config = _team(explorer, world.config.get("n_robots", 2))
     config = {**config, **world.config, "max_cycles": world.max_cycles}
-    env = parallel_env(**config)
+    env = parallel_env_for(config)
     rec = EpisodeRecorder()
     try:
         run_episode(env, team, seed=world.seed, callback=rec)
@@ -238,16 +246,17 @@ def bootstrap_iqm(ratios: np.ndarray, rng: np.random.Generator, reps: int = 2000
 
 
 def summarise(groups: dict[str, list[str]], worlds: list[World],
-              episodes: dict[tuple[str, str], dict[str, Any]], seed: int = 0
-              ) -> list[dict[str, Any]]:
+              episodes: dict[tuple[str, str], dict[str, Any]], seed: int = 0,
+              reference: str = "frontier") -> list[dict[str, Any]]:
     """One row per explorer group (a name → its explorers, one per training seed): the IQM
-    ratios to Frontier with intervals, final coverage and the share of episodes reaching 85 %."""
+    ratios to ``reference`` with intervals, final coverage and the share of episodes reaching
+    85 %."""
     rng = np.random.default_rng(seed)
     rows = []
     for name, members in groups.items():
         row: dict[str, Any] = {"explorer": name, "seeds": len(members), "worlds": len(worlds)}
         for m in METRICS:
-            ratios = np.array([[episodes[(e, w.id)][m] / episodes[("frontier", w.id)][m]
+            ratios = np.array([[episodes[(e, w.id)][m] / episodes[(reference, w.id)][m]
                                 for e in members] for w in worlds])
             row[f"{m}_ratio"] = bootstrap_iqm(ratios, rng)
             if m == "T85":
@@ -341,6 +350,12 @@ def main() -> None:
     parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
     parser.add_argument("--baselines", nargs="*", default=["random_walk"],
                         help="scripted explorers besides frontier")
+    parser.add_argument("--reference", default="frontier",
+                        help="scripted explorer the T ratios are taken to (it is evaluated too)")
+    parser.add_argument("--n-robots", type=int, default=2,
+                        help="robots per team (2-8); runs must have been trained with as many")
+    parser.add_argument("--comm-range", type=float, default=None,
+                        help="communication range of the team, m (default: unlimited)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=Path("out/training_eval"))
     opts = parser.parse_args()
@@ -348,6 +363,15 @@ def main() -> None:
         parser.error(f"--worlds must be >= 1, got {opts.worlds}")
     if opts.workers < 1:
         parser.error(f"--workers must be >= 1, got {opts.workers}")
+    if not 2 <= opts.n_robots <= 8:
+        parser.error(f"--n-robots must be between 2 and 8, got {opts.n_robots}")
+    if opts.comm_range is not None and opts.comm_range <= 0:
+        parser.error(f"--comm-range must be > 0, got {opts.comm_range}")
+    team: dict[str, Any] = {}
+    if opts.n_robots != 2:
+        team["n_robots"] = opts.n_robots
+    if opts.comm_range is not None:
+        team["comm"] = {"range": opts.comm_range}
     groups: dict[str, list[str]] = {}
     kind = ("best-" if opts.best else "") + ("sample" if opts.sample else "run")
     if opts.label:
@@ -366,21 +390,26 @@ def main() -> None:
             run = Path(m.partition(":")[2])
             if not (run / "args.json").is_file():
                 parser.error(f"{run}: not a train.py run folder (no args.json)")
+            trained = json.loads((run / "args.json").read_text()).get("n_robots", 2)
+            if trained != opts.n_robots:
+                parser.error(f"{run} was trained with {trained} robots, --n-robots is "
+                             f"{opts.n_robots}")
             try:
                 _policy_path(run, opts.best)
             except SystemExit as missing:
                 parser.error(str(missing))
-    scripted = ["frontier", *opts.baselines, *(f"rule:{r}" for r in opts.rules)]
-    groups = {**groups, **{s: [s] for s in scripted if s != "frontier"},
-              "frontier": ["frontier"]}
+    ref = opts.reference
+    scripted = list(dict.fromkeys(["frontier", ref, *opts.baselines,
+                                   *(f"rule:{r}" for r in opts.rules)]))
+    groups = {**groups, **{s: [s] for s in scripted if s != ref}, ref: [ref]}
     if not opts.skip_real and not MAPS.is_dir():
         parser.error(f"the real maps are not at {MAPS} (shared/ beside the repository); "
                      "pass --skip-real to evaluate on procedural worlds only")
-    worlds = heldout_worlds(opts.worlds, real=not opts.skip_real)
+    worlds = heldout_worlds(opts.worlds, real=not opts.skip_real, team=team)
     opts.out.mkdir(parents=True, exist_ok=True)
-    explorers = list(dict.fromkeys(["frontier", *(m for ms in groups.values() for m in ms)]))
+    explorers = list(dict.fromkeys([ref, *(m for ms in groups.values() for m in ms)]))
     episodes = run_all(explorers, worlds, opts.out / "episodes.json", opts.workers)
-    rows = summarise(groups, worlds, episodes)
+    rows = summarise(groups, worlds, episodes, reference=ref)
     text = table(rows)
     print("\n" + text)
     atomic_write_bytes(opts.out / "summary.md", text.encode())
