@@ -119,9 +119,11 @@ def robot_kwargs(noise: float, alphas: str | None) -> dict:
 
 def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock,
             threshold: float | None = None, robot: dict | None = None,
-            prior: _DriftPrior | None = None) -> dict:
+            prior: _DriftPrior | None = None, mapping: dict | None = None) -> dict:
     """One episode's row of the table (module docstring), watched step by step."""
-    mapping = {} if threshold is None else {"accept_threshold": threshold}
+    mapping = dict(mapping or {})
+    if threshold is not None:
+        mapping["accept_threshold"] = threshold
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
                                             mapping=mapping, robot=robot or {})
     clock.env = env
@@ -185,16 +187,21 @@ def main() -> None:
                         help="robot.odometry_noise = (S, S), the 'increment' model")
     parser.add_argument("--odometry-alphas", default=None,
                         help="the 'rot_trans_rot' model: a preset name or a1,a2,a3,a4")
+    parser.add_argument("--grid-merge-growth", type=float, default=None,
+                        help="mapping.grid_merge_growth (0: re-examine the transform in use "
+                             "every grid_merge_every steps, whether or not the maps grew)")
     parser.add_argument("--drift-prior", action="store_true",
                         help="give the merges the grids' drift_prior (module docstring)")
     args = parser.parse_args()
     robot = robot_kwargs(args.odometry_noise, args.odometry_alphas)
     prior = _DriftPrior(prior_noise(robot)) if args.drift_prior else None
+    mapping = ({} if args.grid_merge_growth is None
+               else {"grid_merge_growth": args.grid_merge_growth})
     clock = _GridClock()
     print(f"# merges in the loop: {args.explorer}, {args.worlds} worlds of {args.size:g} m "
           f"(seeds {args.first_seed}-{args.first_seed + args.worlds - 1}), {args.steps} steps, "
           f"accept_threshold {args.accept_threshold or 'default'}, robot {robot or 'default'}, "
-          f"drift prior {'on' if prior else 'off'}\n")
+          f"drift prior {'on' if prior else 'off'}, mapping {mapping or 'default'}\n")
     print("| seed | first merged | steps merged | steps wrong | first wrong | first right | "
           "installs | drops | accepted: structural / grids | T95 | wrong (start frame) | "
           "confident wrong | drift m |")
@@ -203,7 +210,7 @@ def main() -> None:
     t0 = time.perf_counter()
     for seed in range(args.first_seed, args.first_seed + args.worlds):
         r = episode(seed, args.explorer, args.steps, args.size, clock, args.accept_threshold,
-                    robot, prior)
+                    robot, prior, mapping)
         rows.append(r)
         print(f"| {seed} | {r['first'] or '-'} | {r['merged']} | {r['wrong']} | "
               f"{r['first_wrong'] or ''} | {r['first_right'] or '-'} | {r['installs']} | "
