@@ -4,7 +4,7 @@ An explorer is used like a Gymnasium agent, by hand, by the dataset generator an
 ``train.py``'s evaluation::
 
     env = two_robot_explore_v0.parallel_env()
-    team = make_team("frontier", env=env)           # {"robot_0": Explorer, "robot_1": Explorer}
+    team = make_team("frontier", env=env)           # {"robot_0": Explorer, ...}: one per robot
     observations, infos = env.reset(seed=0)
     while env.agents:
         actions = {a: team[a].act(observations[a], infos[a]) for a in env.agents}
@@ -15,7 +15,8 @@ Explorers see only what their robot knows: its observation, its own ``info`` ent
 (odometry; the true pose in ``info["pose"]`` is for metrics and must not steer them) and, for
 explorers that plan on maps, what :meth:`Explorer.bind` gives read access to: the robot's own
 maps (``env.robot_map(agent)``, a snapshot) and the merge state (``env.merge_state()``); the
-coordinated frontier explorer also reads its teammate's map, as robots sharing maps would.
+coordinated frontier explorer also reads its teammates' maps as it knows them
+(``env.teammate_map(agent, teammate)``), as robots sharing maps would.
 The maps are read through the env rather than handed out in every step's infos because they
 are large (a grid is megabytes) and explorers need them only when they plan.
 """
@@ -110,7 +111,8 @@ class Explorer(abc.ABC):
         """The bound env's sonar layout (:meth:`bind`), ``None`` before."""
 
     def bind(self, env: Any, agent: str) -> None:
-        """Drive robot ``agent`` of ``env`` (a ``two_robot_explore`` env, wrapped or not):
+        """Drive robot ``agent`` of ``env`` (a ``two_robot_explore`` or
+        ``multi_robot_explore`` env, wrapped or not):
         read access to that robot's maps, ``env.unwrapped.robot_map(agent)``, and to
         ``merge_state()``, for explorers that plan on maps, and the env's sonar layout
         (:attr:`sonar`). :func:`run_episode` and ``make_team(name, env=env)`` call it."""

@@ -1,5 +1,6 @@
 """Scripted explorers: random walk, wall following, frontier exploration and its coordinated
-two-robot version (:func:`agents.team.make_team` builds a team of any of them by name).
+team version, for teams of any size (:func:`agents.team.make_team` builds a team of any of
+them by name).
 
 All drive from the robot's own sensing: the ``sonar`` observation, read with the bound env's
 sonar layout (:attr:`agents.base.Explorer.sonar`: its angles and ``max_range``, whatever the
@@ -13,11 +14,13 @@ None of them reads the true pose.
 * :class:`WallFollower` — keep a wall on the right at a set distance.
 * :class:`Frontier` — Yamauchi (1997): frontier cells (known free next to unknown) of the
   robot's own grid, clustered; the nearest cluster by path cost through the configuration
-  space (:mod:`agents.frontier_planning`), followed by pure pursuit; re-plan on arrival,
-  blockage, or every ``replan_every`` steps.
-* :class:`CoordinatedFrontier` — once a merge is accepted, each robot announces its goal on a
-  shared :class:`Blackboard` and the other discounts frontiers near it (utility = gain − cost,
-  Burgard et al. 2005), so the two do not chase the same frontier.
+  space (:mod:`agents.frontier_planning`), searched in a window around the robot that grows
+  until its answer is the whole map's (so a plan costs the neighbourhood, not the building),
+  followed by pure pursuit; re-plan on arrival, blockage, or every ``replan_every`` steps.
+* :class:`CoordinatedFrontier` — once teammates are in its fused map, each robot plans on the
+  fused map, announces its goal on a shared :class:`Blackboard`, and the robots in contact
+  are assigned distinct frontiers (utility = gain − cost, Burgard et al. 2005), so they do not
+  chase the same frontier.
 """
 
 from __future__ import annotations

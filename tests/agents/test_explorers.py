@@ -174,3 +174,44 @@ def test_goal_frontier_drives_any_robot_of_a_team():
     for bad in ("robot_x", "robot_", "robot_01", "r2", 3):
         with pytest.raises(ValueError, match=r"agent must be 'robot_<k>' \(k = 0, 1, ...\)"):
             robot_index(bad)
+
+
+class WithoutTeams:
+    """The two-robot env as explorers saw it before teams: ``merge_state()`` with the
+    transform only, no ``teammate_map``."""
+
+    def __init__(self, env):
+        self._env = env.unwrapped
+
+    @property
+    def unwrapped(self):
+        return self
+
+    def merge_state(self):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(transform=self._env.merge_state().transform)
+
+    def __getattr__(self, name):
+        if name == "teammate_map":
+            raise AttributeError(name)
+        return getattr(self._env, name)
+
+
+def test_two_coordinated_robots_act_the_same_with_or_without_the_team_interface():
+    def actions(hide):
+        env = parallel_env(max_cycles=400, world={"size": (10.0, 10.0)})
+        team = make_team("coordinated_frontier", env=WithoutTeams(env) if hide else env)
+        obs, infos = env.reset(seed=2)
+        for e, s in zip(team.values(), np.random.SeedSequence(2).spawn(2), strict=True):
+            e.reset(int(s.generate_state(1)[0]))
+        seen = []
+        while env.agents:
+            acts = {a: team[a].act(obs[a], infos[a]) for a in env.agents}
+            seen.append(np.concatenate(list(acts.values())))
+            obs, _r, _t, _u, infos = env.step(acts)
+        return np.array(seen), team["robot_0"].events
+
+    with_frames, events = actions(hide=False)
+    assert events.get("assigned", 0) >= 1  # merged and coordinating within the episode
+    np.testing.assert_array_equal(with_frames, actions(hide=True)[0])
