@@ -38,8 +38,10 @@ only, say) is reported and skipped, not recorded, so a later run fills it in.
 Tables: per cell the median T50 / T85 / T95 over its seeds (an episode that never reached the
 level counts as ``max_cycles + 1`` and makes the median a lower bound, marked ``>``), the
 episodes that reached it, the mean final coverage; then per explorer, size and communication
-the per-seed ratio T85(N) / T85(2) (same seed: same building), its median and range; and per
-explorer, size and N the ratio T85(range-limited) / T85(unlimited), what the range costs.
+the per-seed ratio T85(N) / T85(2) (same seed: same building), its median and each seed's (an
+unreached level makes a ratio a bound: ``<`` when T85(2) was not reached, ``>`` when T85(N)
+was not, ``?`` both; ``~`` marks a median a bound enters); and per explorer, size and N the
+ratio T85(range-limited) / T85(unlimited), what the range costs.
 """
 
 from __future__ import annotations
@@ -187,13 +189,14 @@ def run_cell(explorer: str, size: float, comm: str, n: int, seed: int,
 
 
 # ----------------------------------------------------------------------------- tables
-def _fmt_median(values: list[int | None], never: int) -> str:
-    filled = sorted(never if v is None else v for v in values)
-    med = statistics.median(filled)
-    censored = sum(v is None for v in values)
-    # the median is a lower bound when the unreached episodes reach into the middle
-    lower = censored and med >= min(filled[len(filled) - censored:])
-    return (">" if lower else "") + f"{med:.0f}"
+def _fmt_median(values: list[tuple[int | None, int]]) -> str:
+    """Median of ``(step or None, max_cycles + 1)`` pairs, an unreached level counted as
+    ``max_cycles + 1``; ``>`` when that makes the median a lower bound."""
+    filled = sorted((never if v is None else v, v is None) for v, never in values)
+    k = len(filled) // 2
+    middle = filled[k - 1:k + 1] if len(filled) % 2 == 0 else filled[k:k + 1]
+    med = statistics.median(f for f, _ in filled)
+    return (">" if any(c for _, c in middle) else "") + f"{med:.0f}"
 
 
 def _group(rows: Iterable[dict[str, Any]]) -> dict[tuple, list[dict[str, Any]]]:
@@ -221,36 +224,49 @@ def cell_table(rows: list[dict[str, Any]]) -> str:
     cells = _group(rows)
     for cell in sorted(cells, key=_sort_key):
         rs = cells[cell]
-        never = rs[0]["max_cycles"] + 1
         reached = "/".join(str(sum(r[k] is not None for r in rs)) for k in LEVEL_KEYS)
-        fused = _fmt_median([r["fused_all"] for r in rs], never)
+        fused = _fmt_median([(r["fused_all"], r["max_cycles"] + 1) for r in rs])
         explorer, size, comm, n = cell
         lines.append(
             f"| {explorer} | {size:g} | {comm} | {n} | {len(rs)} | "
-            + " | ".join(_fmt_median([r[k] for r in rs], never) for k in LEVEL_KEYS)
+            + " | ".join(_fmt_median([(r[k], r["max_cycles"] + 1) for r in rs])
+                         for k in LEVEL_KEYS)
             + f" | {reached} | {statistics.mean(r['coverage'] for r in rs):.3f} | {fused} | "
             f"{statistics.mean(r['cpu_s'] for r in rs):.0f} |")
     return "\n".join(lines)
 
 
-def _paired(a: list[dict[str, Any]], b: list[dict[str, Any]], key: str) -> list[float]:
-    """Per-seed ``a[key] / b[key]`` over the seeds both have (unreached: ``max_cycles + 1``)."""
+def _paired(a: list[dict[str, Any]], b: list[dict[str, Any]], key: str
+            ) -> list[tuple[float, str]]:
+    """Per-seed ``a[key] / b[key]`` over the seeds both have, by seed, each with a mark: ``""``
+    exact; an unreached level counts as ``max_cycles + 1``, which makes the ratio an upper
+    bound ``"<"`` (the denominator's), a lower bound ``">"`` (the numerator's) or unknown
+    ``"?"`` (both)."""
     bs = {r["seed"]: r for r in b}
     out = []
-    for r in a:
+    for r in sorted(a, key=lambda r: r["seed"]):
         other = bs.get(r["seed"])
-        if other is not None:
-            num = r[key] if r[key] is not None else r["max_cycles"] + 1
-            den = other[key] if other[key] is not None else other["max_cycles"] + 1
-            out.append(num / den)
+        if other is None:
+            continue
+        num = r[key] if r[key] is not None else r["max_cycles"] + 1
+        den = other[key] if other[key] is not None else other["max_cycles"] + 1
+        mark = {(False, False): "", (False, True): "<", (True, False): ">",
+                (True, True): "?"}[(r[key] is None, other[key] is None)]
+        out.append((num / den, mark))
     return out
 
 
-def _fmt_ratios(ratios: list[float]) -> str:
+def _fmt_ratios(ratios: list[tuple[float, str]]) -> str:
+    """The median of the per-seed ratios (``~`` when a bound enters it; unknown ones left
+    out) and each seed's."""
     if not ratios:
         return "-"
-    return (f"{statistics.median(ratios):.2f} [{min(ratios):.2f}–{max(ratios):.2f}] "
-            f"(n={len(ratios)})")
+    known = [(v, m) for v, m in ratios if m != "?"]
+    each = ", ".join(f"{m}{v:.2f}" if m != "?" else "?" for v, m in ratios)
+    if not known:
+        return f"? ({each})"
+    approx = "~" if any(m for _, m in known) else ""
+    return f"{approx}{statistics.median(v for v, _ in known):.2f} ({each})"
 
 
 def ratio_tables(rows: list[dict[str, Any]], key: str = "t85") -> str:
@@ -259,7 +275,7 @@ def ratio_tables(rows: list[dict[str, Any]], key: str = "t85") -> str:
     cells = _group(rows)
     ns = sorted({c[3] for c in cells if c[3] != 2})
     name = key.upper()
-    lines = [f"{name}(N) / {name}(2), per seed (same building), median [range] (seeds):", "",
+    lines = [f"{name}(N) / {name}(2), median (each seed's; same seed, same building):", "",
              "| explorer | size m | comm | " + " | ".join(f"N = {n}" for n in ns) + " |",
              "|---|---|---|" + "---|" * len(ns)]
     for explorer, size, comm in sorted({c[:3] for c in cells},
@@ -271,7 +287,7 @@ def ratio_tables(rows: list[dict[str, Any]], key: str = "t85") -> str:
     limited = sorted({c[2] for c in cells if c[2] != "unlimited"}, key=_comm_order)
     if limited:
         all_ns = sorted({c[3] for c in cells})
-        lines += ["", f"{name}(range-limited) / {name}(unlimited), per seed, median [range]:",
+        lines += ["", f"{name}(range-limited) / {name}(unlimited), median (each seed's):",
                   "", "| explorer | size m | comm | " + " | ".join(
                       f"N = {n}" for n in all_ns) + " |",
                   "|---|---|---|" + "---|" * len(all_ns)]

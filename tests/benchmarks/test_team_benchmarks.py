@@ -51,10 +51,14 @@ def test_team_size_ratios_pair_seeds_and_mark_censored_medians():
     rows = [_row(2, 100, 40), _row(2, 101, 50), _row(4, 100, 20), _row(4, 101, 30),
             _row(4, 102, 10)]  # seed 102 has no N = 2 episode: not paired
     text = ts.ratio_tables(rows)
-    assert "| frontier | 10 | unlimited | 0.55 [0.50–0.60] (n=2) |" in text
+    assert "| frontier | 10 | unlimited | 0.55 (0.50, 0.60) |" in text
     never = [_row(2, s, None) for s in (1, 2)] + [_row(2, 3, 40)]
     assert "| >101 | >101 |" in ts.cell_table(never)
-    assert ts._fmt_median([None, 10, 20], 101) == "20"  # the median is a reached episode
+    assert ts._fmt_median([(None, 101), (10, 101), (20, 101)]) == "20"  # a reached median
+    # T85(2) not reached: the ratio is at most T85(4) / (max_cycles + 1)
+    bound = ts.ratio_tables([_row(2, 100, None), _row(4, 100, 50), _row(2, 101, 40),
+                             _row(4, 101, 20)])
+    assert "| frontier | 10 | unlimited | ~0.50 (<0.50, 0.50) |" in bound
 
 
 def test_team_size_rejects_bad_arguments():
