@@ -53,7 +53,8 @@ import fusion.hybrid as hybrid  # noqa: E402
 from agents.base import run_episode  # noqa: E402
 from agents.team import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-from envs.two_robot_explore.drift import drift_aware_error  # noqa: E402
+from envs.two_robot_explore.config import RobotConfig  # noqa: E402
+from envs.two_robot_explore.drift import drift_aware_error, odometry_noise_level  # noqa: E402
 from envs.two_robot_explore.robot import start_frame_pose  # noqa: E402
 
 WRONG_DEG, WRONG_M = 5.0, 1.0
@@ -102,11 +103,7 @@ class _DriftPrior:
 
 def prior_noise(robot: dict) -> float:
     """The odometry noise the drift prior reads from the env's ``robot`` settings."""
-    if "odometry_alphas" in robot:
-        from envs.two_robot_explore.config import RobotConfig
-
-        return math.sqrt(RobotConfig(**robot).odometry_alphas[0])
-    return max(robot.get("odometry_noise", (0.0, 0.0)))
+    return odometry_noise_level(RobotConfig(**robot))
 
 
 def robot_kwargs(noise: float, alphas: str | None) -> dict:

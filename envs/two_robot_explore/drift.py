@@ -14,8 +14,23 @@ import math
 
 import numpy as np
 
+from envs.two_robot_explore.config import RobotConfig
 from envs.two_robot_explore.robot import Robot
 from fusion.rigid import Rigid2D
+
+
+def odometry_noise_level(cfg: RobotConfig) -> float:
+    """One relative noise level σ of a robot's odometry, what
+    ``fusion.grid_merge.drift_prior(σ, steps)`` reads: the larger of
+    ``odometry_noise`` for the ``"increment"`` model, ``sqrt(α1)`` (the relative spread of
+    each rotation) for ``"rot_trans_rot"``; ``0`` for perfect odometry. The ``pioneer3dx``
+    preset (``sqrt(α1) = 0.05``) drifts about as much as ``"increment"`` at σ = 0.05
+    (``benchmarks/drift.md``)."""
+    if not isinstance(cfg, RobotConfig):
+        raise TypeError(f"cfg must be a RobotConfig, got {type(cfg).__name__}")
+    if cfg.odometry_model == "rot_trans_rot":
+        return math.sqrt(cfg.odometry_alphas[0])
+    return float(max(cfg.odometry_noise))
 
 
 def drift_aware_truth(robot_i: Robot, robot_j: Robot) -> Rigid2D:

@@ -2,10 +2,16 @@
 measures merges against the robots' current odometry frames."""
 
 import numpy as np
+import pytest
 from conftest import SMALL
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.drift import drift_aware_error, drift_aware_truth
+from envs.two_robot_explore.config import RobotConfig
+from envs.two_robot_explore.drift import (
+    drift_aware_error,
+    drift_aware_truth,
+    odometry_noise_level,
+)
 
 PIONEER = {"odometry_model": "rot_trans_rot", "odometry_alphas": "pioneer3dx"}
 
@@ -37,3 +43,11 @@ def test_the_pioneer_preset_drifts_the_same_way_for_the_same_seed():
     assert not truth.allclose(a.true_merge, atol=1e-4)  # the frames have drifted
     c = _run(5, 300, PIONEER)
     assert not np.array_equal(c.robots[0].odometry, a.robots[0].odometry)
+
+
+def test_odometry_noise_level_reads_either_model():
+    assert odometry_noise_level(RobotConfig()) == 0.0
+    assert odometry_noise_level(RobotConfig(odometry_noise=(0.01, 0.03))) == 0.03
+    assert odometry_noise_level(RobotConfig(**PIONEER)) == pytest.approx(0.05)
+    with pytest.raises(TypeError, match="cfg must be a RobotConfig, got dict"):
+        odometry_noise_level({})
