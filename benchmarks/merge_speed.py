@@ -92,18 +92,19 @@ def _reference_merge(rev: str, into: Path):
     current one (copied into ``into`` as ``fusion_ref``, its own imports renamed; its other
     modules then import as ``fusion_ref.*``)."""
     root = Path(__file__).resolve().parent.parent
-    names = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", rev, "fusion/"],
-                           check=True, capture_output=True, text=True).stdout.split()
+    names = subprocess.run(["git", "-C", str(root), "ls-tree", "-r", "--name-only", rev,
+                            "fusion/"], check=True, capture_output=True, text=True).stdout.split()
     package = into / "fusion_ref"
-    package.mkdir()
-    for name in names:
-        if not name.endswith(".py"):
+    for name in names:  # subpackages (fusion/merge) and package data (calibration.json) too
+        if not name.endswith((".py", ".json")):
             continue
         text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{name}"], check=True,
                               capture_output=True, text=True).stdout
         text = text.replace("from fusion ", "from fusion_ref ").replace("from fusion.",
                                                                         "from fusion_ref.")
-        (package / Path(name).name).write_text(text)
+        target = package / Path(name).relative_to("fusion")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text)
     sys.path.insert(0, str(into))
     return importlib.import_module("fusion_ref.merge").merge_maps
 
