@@ -18,6 +18,9 @@ map-pair dataset generation speed (process pool vs Ray).
 2. ``Frontier`` decision time on a 200 × 200 grid: the median ``act()`` and the median re-plan.
 3. Dataset generation: pairs/min with the process backend and with Ray on the same settings,
    alternating, ``--repeats`` times each (Ray's start-up included in its time).
+
+Team speed in large buildings against the raw env is ``explorer_speed.py``; T85 on the
+held-out worlds of ``training_eval.py``, and two commits compared, ``explorers_heldout.py``.
 """
 
 from __future__ import annotations
