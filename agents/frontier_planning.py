@@ -277,8 +277,8 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
         within: rows and columns ``(r0, r1, c0, c1)`` of ``grid`` that hold all its known
             cells (e.g. the robot's path so far, widened by the sensing range): the known
             cells are looked for there only, not over the whole grid (a large building's
-            grid is millions of cells). A known cell on the window's edge means it was too
-            small: the whole grid is searched then.
+            grid is millions of cells). A known cell on the box's edge (or an empty box)
+            means it was too small: the whole grid is searched then.
         radius: only the window within ``radius`` + :data:`WINDOW_MARGIN` metres of the
             robot (in each axis) is mapped (no ``teammates`` then); the map's
             :attr:`FrontierMap.exact_below` says which answers are those of the whole map.
@@ -290,8 +290,8 @@ def frontier_map(grid: Any, pose_xy: np.ndarray, cfg: FrontierConfig,
         b0, b1 = max(int(within[0]), 0), min(int(within[1]), h)
         a0, a1 = max(int(within[2]), 0), min(int(within[3]), w)
     known = states[b0:b1, a0:a1] != CellState.UNKNOWN
-    if within is not None and known.size and (
-            (b0 > 0 and known[0].any()) or (b1 < h and known[-1].any())
+    if within is not None and (
+            known.size == 0 or (b0 > 0 and known[0].any()) or (b1 < h and known[-1].any())
             or (a0 > 0 and known[:, 0].any()) or (a1 < w and known[:, -1].any())):
         b0, b1, a0, a1 = 0, h, 0, w
         known = states != CellState.UNKNOWN

@@ -271,8 +271,8 @@ class Frontier(CommandExplorer):
                 ) -> tuple[FrontierMap | None, dict[str, Any] | None]:
         """The map planned on and the chosen cluster (``None``: none reachable): the nearest
         by path cost (Yamauchi), the current goal's ``hysteresis`` metres cheaper. Searched
-        in a window of ``search_radius`` around the robot, doubled until its answer is the
-        whole map's (:attr:`FrontierMap.exact_below`)."""
+        in a window around the robot (``search_radius``, or the current goal's cost if more),
+        widened until its answer is the whole map's (:attr:`FrontierMap.exact_below`)."""
         goal = self._track.get("goal")
         slack = self.cfg.hysteresis if goal is not None else 0.0
         # the current goal's cost is a good guess of how far to look

@@ -328,6 +328,8 @@ def test_a_window_that_holds_every_known_cell_gives_the_same_map():
     cut = frontier_map(OWN, pose, CFG, within=(rows.min(), rows.max() - 10, cols.min(),
                                                 cols.max()))
     np.testing.assert_array_equal(cut.labels, full.labels)
+    outside = frontier_map(OWN, pose, CFG, within=(-50, -10, -50, -10))
+    np.testing.assert_array_equal(outside.labels, full.labels)
     with pytest.raises(ValueError, match="radius applies without teammates only"):
         frontier_map(OWN, pose, CFG, radius=2.0, teammates=[(OWN, Rigid2D())])
     with pytest.raises(ValueError, match=r"FrontierConfig.search_radius must be > 0.0, got 0.0"):
