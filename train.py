@@ -62,9 +62,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm.auto import tqdm
 
 from agents import evaluation
-from agents.goals import default_hold
+from agents.goals import default_hold, make_env
 from agents.metrics import EPISODE_INFO_KEYS
-from agents.motion import team_env
 from agents.policy import SectorPolicy, TopoExplorerExtractor
 from agents.sb3 import ParallelVecEnv
 from agents.sb3_explorer import sb3_team
@@ -336,14 +335,14 @@ class Args:
 
 
 class _EnvFactory:
-    """Builds one training env (:func:`agents.motion.team_env`); picklable for workers."""
+    """Builds one training env (:func:`agents.goals.make_env`); picklable for workers."""
 
     def __init__(self, config: dict[str, Any], args: Args) -> None:
         self.config, self.args = config, args
 
     def __call__(self) -> Any:
         a = self.args
-        return team_env(self.config, a.level, a.hold, a.frontier_shaping, a.central_critic,
+        return make_env(self.config, a.level, a.hold, a.frontier_shaping, a.central_critic,
                         a.motion_commands)
 
 

@@ -337,8 +337,10 @@ def default_hold(level: str) -> int:
 def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None = None,
              frontier_shaping: float = 0.0, global_state: bool = False,
              commands: str = "continuous") -> ParallelEnv:
-    """One ``two_robot_explore_v0`` ``ParallelEnv`` built from ``config`` (``EnvConfig``
-    fields), wrapped in :class:`FrontierGoalEnv` (holding decisions ``hold`` steps) when
+    """One ``ParallelEnv`` built from ``config`` (``EnvConfig`` fields:
+    ``two_robot_explore_v0`` for two robots, ``multi_robot_explore_v0`` for a larger
+    ``n_robots``, :func:`envs.parallel_env_for`), wrapped in :class:`FrontierGoalEnv`
+    (holding decisions ``hold`` steps) when
     ``level`` is ``"goals"`` (with ``global_state``, observations carry the env's ``state()``
     for a centralised critic), or at the motion level in :class:`agents.motion.MotionEnv` when
     ``hold > 1``, ``frontier_shaping > 0`` or ``commands="arcs"`` (commands held ``hold``
@@ -349,9 +351,9 @@ def make_env(config: Mapping[str, Any], level: str = "motion", hold: int | None 
         raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
     if hold is None:
         hold = default_hold(level)
-    from envs.two_robot_explore_v0 import parallel_env
+    from envs import parallel_env_for
 
-    env = parallel_env(**config)
+    env = parallel_env_for(config)
     if level == "goals":
         return FrontierGoalEnv(env, hold=hold, global_state=global_state)
     if global_state:

@@ -168,36 +168,3 @@ class MotionEnv(BaseParallelWrapper):
         self.agents = list(self.env.agents)
         infos = {a: {**i, **extra[a]} for a, i in infos.items()}
         return obs, total, terms, truncs, infos
-
-
-def team_env(config: Any, level: str = "motion", hold: int | None = None,
-             frontier_shaping: float = 0.0, global_state: bool = False,
-             commands: str = "continuous") -> Any:
-    """:func:`agents.goals.make_env` for a team of any size (the arguments are its own):
-    ``config``'s ``n_robots`` 2 or absent is exactly ``make_env`` (``two_robot_explore_v0``);
-    a larger team wraps ``multi_robot_explore_v0`` (:func:`envs.parallel_env_for`) the same
-    way — in :class:`agents.goals.FrontierGoalEnv` at the goal level, in :class:`MotionEnv`
-    at the motion level when a command is held, shaped or an arc. A top-level function, so it
-    pickles for worker processes.
-
-    Raises:
-        ValueError, TypeError: what ``make_env`` and the env raise (``n_robots`` outside 2–8
-            names the field and the value).
-    """
-    from agents.goals import LEVELS, FrontierGoalEnv, default_hold, make_env
-    from envs import parallel_env_for
-
-    n_robots = config.get("n_robots", 2)
-    if n_robots == 2 and not isinstance(n_robots, bool):
-        return make_env(config, level, hold, frontier_shaping, global_state, commands)
-    if level not in LEVELS:
-        raise ValueError(f"level must be one of {list(LEVELS)}, got {level!r}")
-    hold = default_hold(level) if hold is None else hold
-    env = parallel_env_for(config)
-    if level == "goals":
-        return FrontierGoalEnv(env, hold=hold, global_state=global_state)
-    if global_state:
-        raise ValueError("global_state applies to level='goals' only")
-    if hold == 1 and not frontier_shaping and commands == "continuous":
-        return env
-    return MotionEnv(env, hold=hold, frontier_shaping=frontier_shaping, commands=commands)

@@ -5,8 +5,8 @@ rllib``). Needs the ``rllib`` extra (``pip install 'topomerge[rllib]'``); import
 without it raises an ``ImportError`` that says so.
 
 * **Env** — :func:`env_creator` (registered as :data:`ENV_NAME`) builds
-  :func:`agents.motion.team_env` (goal or motion level, ``agents.goals.make_env`` for two
-  robots; the config's ``n_robots`` is the team size), wraps it in :class:`LightInfoEnv` and
+  :func:`agents.goals.make_env` (goal or motion level; the config's ``n_robots`` is the
+  team size), wraps it in :class:`LightInfoEnv` and
   then in ``ParallelPettingZooEnv``. ``LightInfoEnv`` keeps only finite numbers in the infos:
   ``two_robot_explore``'s infos also carry the robots' live occupancy grids and maps (and NaN
   merge errors before a merge), which RLlib would store in every episode step and ship from
@@ -45,9 +45,9 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from torch import nn
 
-from agents.goals import LEVELS, default_hold
+from agents.goals import LEVELS, default_hold, make_env
 from agents.metrics import EPISODE_INFO_KEYS
-from agents.motion import COMMANDS, team_env
+from agents.motion import COMMANDS
 from agents.policy import SectorLatent, SectorScorer, TopoExplorerExtractor
 from agents.sb3_explorer import sample_action
 from topo.fileio import atomic_write_dir
@@ -158,14 +158,14 @@ class LightInfoEnv(ParallelEnv):
 
 def env_creator(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
     """RLlib's env factory: ``env_config`` holds ``config`` (the env's ``EnvConfig`` fields),
-    ``level``, ``hold``, ``frontier_shaping`` and ``commands`` (:func:`agents.motion.team_env`);
+    ``level``, ``hold``, ``frontier_shaping`` and ``commands`` (:func:`agents.goals.make_env`);
     RLlib's ``EnvContext`` adds the env runner's ``worker_index`` (the :class:`LightInfoEnv`
     stream)."""
     allowed = ["commands", "config", "frontier_shaping", "hold", "level"]
     unknown = set(env_config) - set(allowed)
     if unknown:
         raise ValueError(f"env_config has unknown keys {sorted(unknown)}; allowed: {allowed}")
-    env = team_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
+    env = make_env(dict(env_config.get("config", {})), env_config.get("level", "motion"),
                    env_config.get("hold"), env_config.get("frontier_shaping", 0.0),
                    commands=env_config.get("commands", "continuous"))
     stream = int(getattr(env_config, "worker_index", 0) or 0)
@@ -349,7 +349,7 @@ def ppo_config(*, env_config: Mapping[str, Any], level: str = "goals", hold: int
 
     Args:
         env_config: the env's ``EnvConfig`` fields (``n_robots``: the team size).
-        level, hold, frontier_shaping, commands: :func:`agents.motion.team_env`'s (``gamma``
+        level, hold, frontier_shaping, commands: :func:`agents.goals.make_env`'s (``gamma``
             is per decision: pass ``gamma ** hold`` for a per-step discount; ``commands="arcs"``
             at the motion level: a categorical policy over :data:`agents.motion.ARCS`).
         sector_head: :class:`TopoExplorerModule`'s per-sector scorer (goal level only).

@@ -151,33 +151,31 @@ TEAM = {"world": {"size": (12.0, 12.0)}, "max_cycles": 20, "sonar": {"rays": 1},
         "comm": {"range": 5.0}}
 
 
-def test_team_env_is_make_env_for_two_robots_and_wraps_a_team_alike():
+def test_make_env_builds_the_two_robot_env_or_a_team_alike():
     from agents.goals import FrontierGoalEnv
-    from agents.motion import team_env
 
-    two = team_env(SMALL, "motion", hold=2)
+    two = make_env(SMALL, "motion", hold=2)
     assert isinstance(two, MotionEnv) and two.unwrapped.metadata["name"] == (
         "two_robot_explore_v0")
-    assert type(team_env(SMALL, "motion").unwrapped) is type(make_env(SMALL, "motion"))
-    three = team_env({**TEAM, "n_robots": 3}, "motion", hold=2, frontier_shaping=0.1)
+    assert type(make_env(SMALL, "motion").unwrapped) is type(make_env(SMALL, "motion"))
+    three = make_env({**TEAM, "n_robots": 3}, "motion", hold=2, frontier_shaping=0.1)
     assert isinstance(three, MotionEnv) and three.possible_agents == [
         "robot_0", "robot_1", "robot_2"]
     assert three.unwrapped.metadata["name"] == "multi_robot_explore_v0"
-    plain = team_env({**TEAM, "n_robots": 3}, "motion")
+    plain = make_env({**TEAM, "n_robots": 3}, "motion")
     assert plain.metadata["name"] == "multi_robot_explore_v0"
-    goals = team_env({**TEAM, "n_robots": 4}, "goals", hold=3, global_state=True)
+    goals = make_env({**TEAM, "n_robots": 4}, "goals", hold=3, global_state=True)
     assert isinstance(goals, FrontierGoalEnv) and goals.hold == 3
     assert goals.observation_space("robot_3")["teammates"].shape == (3, 7)
     with pytest.raises(ValueError, match="n_robots must be between 2 and 8, got 9"):
-        team_env({**TEAM, "n_robots": 9})
+        make_env({**TEAM, "n_robots": 9})
     with pytest.raises(ValueError, match="global_state applies to level='goals' only"):
-        team_env({**TEAM, "n_robots": 3}, "motion", global_state=True)
+        make_env({**TEAM, "n_robots": 3}, "motion", global_state=True)
     with pytest.raises(ValueError, match=r"level must be one of \['goals', 'motion'\]"):
-        team_env({**TEAM, "n_robots": 3}, "wheels")
+        make_env({**TEAM, "n_robots": 3}, "wheels")
 
 
 def test_team_of_three_passes_the_parallel_api_test():
-    from agents.motion import team_env
 
-    parallel_api_test(team_env({**TEAM, "n_robots": 3}, "motion", hold=2, commands="arcs"),
+    parallel_api_test(make_env({**TEAM, "n_robots": 3}, "motion", hold=2, commands="arcs"),
                       num_cycles=8)
