@@ -425,21 +425,23 @@ def _pair_of_room_views():
 
 def test_recheck_drops_a_transform_in_use_whose_confidence_fell_by_the_margin(monkeypatch):
     """Drift bends the maps: the grids still align them where the transform in use does, but
-    no longer trust it. Below accept_threshold − drop_margin the merge is dropped; within the
-    margin it stays (no drop-and-accept flicker at the threshold)."""
+    no longer trust it. With a drift prior, below accept_threshold − drop_margin the merge is
+    dropped; within the margin it stays (no drop-and-accept flicker at the threshold);
+    without a drift prior the rule is off."""
     import dataclasses
 
     import fusion.grid_merge as gm
 
     a, b, truth = overlapping_views(90.0)
-    cfg = GridMergeConfig()
+    cfg = GridMergeConfig(drift_prior=0.02)
     real = gm.merge_grids
     for confidence, dropped in ((0.2, True), (cfg.accept_threshold - cfg.drop_margin - 0.01, True),
                                 (cfg.accept_threshold - cfg.drop_margin + 0.01, False)):
         monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None, c=confidence:
                             dataclasses.replace(real(ga, gb, config), accepted=False,
                                                 confidence=c, reason="low confidence"))
-        res, why = recheck(TINY, TINY, a, b, truth)
+        assert recheck(TINY, TINY, a, b, truth)[1] is None  # no drift prior: kept
+        res, why = recheck(TINY, TINY, a, b, truth, cfg)
         assert not res.accepted and res.grid.margin > gm.TIE_MARGIN
         assert (why is not None) is dropped, confidence
         if dropped:
@@ -450,7 +452,7 @@ def test_recheck_drops_a_transform_in_use_whose_confidence_fell_by_the_margin(mo
     # the same low confidence from a tie of look-alikes (a symmetric room) keeps it
     monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
         real(ga, gb, config), accepted=False, confidence=0.2, margin=1.0, reason="a tie"))
-    assert recheck(TINY, TINY, a, b, truth)[1] is None
+    assert recheck(TINY, TINY, a, b, truth, cfg)[1] is None
 
 
 def test_drop_margin_is_checked():
