@@ -33,8 +33,10 @@ merge built from the maps' structure:
    on mutually nearest nodes within ``fit_eps`` (each pair weighing ``1 − d²/fit_eps²``: one
    that may be a neighbour rather than the same place pulls little) and,
    for maps whose paths are straight node-to-node segments, on B's path points lying on A's
-   paths (long corridors fix the rotation better than the few nodes of a small overlap; two
-   robots' polylines of the same corridor run apart and would pull it off).
+   paths (long corridors fix the rotation better than the few nodes of a small overlap); for
+   maps with polylines (two robots' polylines of the same corridor run apart and would pull a
+   point-to-point fit off), a point-to-line fit of the node pairs and B's polyline points on
+   A's polylines, where only the corridors' directions count.
 6. **Accept/reject** (:func:`decide`): enough matches, not collinear, log-odds at least
    ``min_score``, and a margin of ``min_margin`` over the best *distinct* runner-up (a symmetric
    map has several equally good alignments: rejected as ambiguous).
