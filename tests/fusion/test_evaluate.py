@@ -120,9 +120,9 @@ def test_cli_exhaustive_on_large_maps_is_an_argument_error(tmp_path, capsys):
 
 
 def test_parse_methods():
-    assert parse_methods("auto, exhaustive,auto") == ["auto", "exhaustive"]
+    assert parse_methods("auto, exhaustive,auto,ransac") == ["auto", "exhaustive", "ransac"]
     with pytest.raises(ValueError, match=r"methods must be a comma-separated list of \['auto'"):
-        parse_methods("auto,ransac")
+        parse_methods("auto,icp")
 
 
 def test_oracle_is_exact_without_noise():
