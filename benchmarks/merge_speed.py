@@ -63,8 +63,9 @@ def grid_times(pairs_dir: Path, rev: str | None = None) -> None:
             _reference_merge(rev, Path(tmp))
             ref = importlib.import_module("fusion_ref.grid_merge")
             runs[f"merge_grids@{rev}"] = lambda p: ref.merge_grids(*p.grids)
-            runs[f"hybrid_merge@{rev}"] = lambda p: ref.hybrid_merge(p.map_a, p.map_b, *p.grids,
-                                                                     try_grids=True)
+            ref_hybrid = importlib.import_module("fusion_ref.hybrid")
+            runs[f"hybrid_merge@{rev}"] = lambda p: ref_hybrid.hybrid_merge(
+                p.map_a, p.map_b, *p.grids, try_grids=True)
         for run in runs.values():  # compiled kernels load on the first call
             run(pairs[0])
         times: dict[str, list[float]] = {name: [] for name in runs}
@@ -196,7 +197,9 @@ def env_times(rev: str, steps: int, repeats: int = 3) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         _reference_merge(rev, Path(tmp))
         ref = importlib.import_module("fusion_ref.grid_merge")
-        versions = {"now": (hybrid_merge, merge_grids), rev: (ref.hybrid_merge, ref.merge_grids)}
+        ref_hybrid = importlib.import_module("fusion_ref.hybrid")
+        versions = {"now": (hybrid_merge, merge_grids),
+                    rev: (ref_hybrid.hybrid_merge, ref.merge_grids)}
         first = calls[0]
         for hybrid, _ in versions.values():  # compiled kernels load on the first call
             hybrid(*first["maps"], *first["grids"], try_grids=True)
