@@ -269,13 +269,14 @@ def summarise(groups: dict[str, list[str]], worlds: list[World],
     return rows
 
 
-def table(rows: list[dict[str, Any]]) -> str:
-    """The Markdown table of :func:`summarise`'s rows."""
+def table(rows: list[dict[str, Any]], reference: str = "Frontier") -> str:
+    """The Markdown table of :func:`summarise`'s rows (ratios to ``reference``)."""
     def cell(v: tuple[float, float, float]) -> str:
         return f"{v[0]:.2f} [{v[1]:.2f}, {v[2]:.2f}]"
 
-    lines = ["| explorer | seeds × worlds | T85 / Frontier, IQM [95 % CI] | T50 / Frontier | "
-             "T95 / Frontier | final coverage | reached 85 % | overlap | per-seed T85 IQM |",
+    ref = reference
+    lines = [f"| explorer | seeds × worlds | T85 / {ref}, IQM [95 % CI] | T50 / {ref} | "
+             f"T95 / {ref} | final coverage | reached 85 % | overlap | per-seed T85 IQM |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         per_seed = ", ".join(f"{v:.2f}" for v in r["per_seed_T85_ratio"]) if r["seeds"] > 1 \
@@ -410,7 +411,7 @@ def main() -> None:
     explorers = list(dict.fromkeys([ref, *(m for ms in groups.values() for m in ms)]))
     episodes = run_all(explorers, worlds, opts.out / "episodes.json", opts.workers)
     rows = summarise(groups, worlds, episodes, reference=ref)
-    text = table(rows)
+    text = table(rows, "Frontier" if ref == "frontier" else ref)
     print("\n" + text)
     atomic_write_bytes(opts.out / "summary.md", text.encode())
     atomic_write_json(opts.out / "summary.json", {"rows": rows,
