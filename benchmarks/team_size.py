@@ -294,10 +294,12 @@ def ratio_tables(rows: list[dict[str, Any]], key: str = "t85") -> str:
         for explorer, size in sorted({c[:2] for c in cells},
                                      key=lambda c: _sort_key((*c, "unlimited", 0))):
             for comm in limited:
-                lines.append(f"| {explorer} | {size:g} | {comm} m | " + " | ".join(
-                    _fmt_ratios(_paired(cells.get((explorer, size, comm, n), []),
-                                        cells.get((explorer, size, "unlimited", n), []), key))
-                    for n in all_ns) + " |")
+                ratios = [_fmt_ratios(_paired(cells.get((explorer, size, comm, n), []),
+                                              cells.get((explorer, size, "unlimited", n), []),
+                                              key)) for n in all_ns]
+                if any(r != "-" for r in ratios):
+                    lines.append(f"| {explorer} | {size:g} | {comm} m | " + " | ".join(ratios)
+                                 + " |")
     return "\n".join(lines)
 
 
