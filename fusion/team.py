@@ -17,7 +17,11 @@ the edges that the cycles they close support:
    look-alike among four robots breaks two triangles while its right neighbours break one
    each: it goes alone. In an inconsistent triangle of three robots any edge may be the
    wrong one: all three go, since a wrong merge costs more than a late one.
-2. **Spanning forest.** The remaining edges are added by decreasing confidence
+2. **Unconfirmed edges.** An edge no consistent triangle confirms (the bridge that first
+   joins a robot to the others, say) is judged by its own confidence alone, and a team has
+   many pairs, hence many chances of one confident look-alike: such an edge is kept only at
+   ``min_unconfirmed`` confidence or more (the env's ``mapping.team_accept_threshold``).
+3. **Spanning forest.** The remaining edges are added by decreasing confidence
    (Kruskal's order); an edge closing a longer cycle is kept only if the path through the
    forest already built agrees with it, so the forest is consistent by construction.
 
@@ -85,6 +89,8 @@ class CycleCheck:
         kept: the edges of the consistent spanning forest, keyed ``(i, j)``.
         disputed: edges left out by the triangle votes.
         rejected: edges left out because the forest's path disagreed with them.
+        unconfirmed: edges no consistent triangle confirms, left out below
+            ``min_unconfirmed`` confidence.
         votes: ``(i, j) → (consistent, inconsistent)`` triangle counts before any edge was
             left out.
     """
@@ -93,6 +99,7 @@ class CycleCheck:
     disputed: tuple[tuple[int, int], ...]
     rejected: tuple[tuple[int, int], ...]
     votes: dict[tuple[int, int], tuple[int, int]]
+    unconfirmed: tuple[tuple[int, int], ...] = ()
 
 
 def _agrees(a: Rigid2D, b: Rigid2D, at: np.ndarray, tolerance_deg: float,
@@ -105,7 +112,8 @@ def _agrees(a: Rigid2D, b: Rigid2D, at: np.ndarray, tolerance_deg: float,
 
 def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | None = None,
                      *, check: bool = True, tolerance_deg: float = CYCLE_TOLERANCE_DEG,
-                     tolerance_m: float = CYCLE_TOLERANCE_M) -> CycleCheck:
+                     tolerance_m: float = CYCLE_TOLERANCE_M,
+                     min_unconfirmed: float = 0.0) -> CycleCheck:
     """The consistent subset of pairwise merges (module docstring).
 
     Args:
@@ -115,6 +123,8 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
         check: ``False`` keeps the pairwise decisions alone: a spanning forest by confidence,
             no votes, no rejection (for ablations).
         tolerance_deg, tolerance_m: what a consistent cycle may compose to.
+        min_unconfirmed: least confidence of an edge no consistent triangle confirms
+            (with ``check``).
 
     Returns:
         a :class:`CycleCheck`.
@@ -159,7 +169,10 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
         fewest = min(votes[p][0] for p in tied)
         out.update(p for p in tied if votes[p][0] == fewest)
     disputed = tuple(sorted(out))
-    order = sorted((e for p, e in by_pair.items() if p not in disputed),
+    confirmed = {p for p, v in votes.items() if v[0]}
+    unconfirmed = tuple(sorted(p for p, e in by_pair.items() if check and p not in out
+                               and p not in confirmed and e.confidence < min_unconfirmed))
+    order = sorted((e for p, e in by_pair.items() if p not in out and p not in unconfirmed),
                    key=lambda e: (-e.confidence, e.i, e.j))
     forest = nx.Graph()
     forest.add_nodes_from(range(1 + max((e.j for e in edges), default=0)))
@@ -176,7 +189,7 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
             continue
         forest.add_edge(e.i, e.j)
         kept[(e.i, e.j)] = e
-    return CycleCheck(kept, disputed, tuple(rejected), first_votes)
+    return CycleCheck(kept, disputed, tuple(rejected), first_votes, unconfirmed)
 
 
 def _triangles(graph: nx.Graph) -> list[tuple[int, int, int]]:

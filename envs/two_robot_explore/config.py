@@ -341,6 +341,10 @@ class MappingConfig:
         cycle_check: with three or more robots, keep only pairwise merges that the cycles
             they close agree with (``fusion.team.consistent_edges``); ``False`` uses the
             pairwise decisions alone (for ablations). No effect with two robots.
+        team_accept_threshold: with three or more robots and ``cycle_check``, a pairwise
+            merge that no consistent triangle confirms is used only at this confidence or more
+            (a team has many pairs, so many chances of one confident look-alike), in
+            ``[0, 1]``. No effect with two robots.
     """
 
     grid_resolution: float = 0.1
@@ -357,6 +361,7 @@ class MappingConfig:
     local_map_resolution: float = 0.15
     max_nodes: int = 32
     cycle_check: bool = True
+    team_accept_threshold: float = 0.97
 
     def __post_init__(self) -> None:
         _set(self, "grid_resolution", check_real(self.grid_resolution,
@@ -395,6 +400,9 @@ class MappingConfig:
         if self.max_nodes > 256:
             raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
         _check_bool(self.cycle_check, "mapping.cycle_check")
+        _set(self, "team_accept_threshold", check_real(
+            self.team_accept_threshold, "mapping.team_accept_threshold", low=0.0,
+            low_inclusive=True, high=1.0))
 
     @property
     def sensor_model(self) -> SensorModel:

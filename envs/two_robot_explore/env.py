@@ -141,12 +141,15 @@ with the maps, i.e. as it was at its last contact with either robot of the pair.
 
 Every ``merge_every`` steps the pairs in contact are merged pairwise (the two-robot merge
 below, each pair with its own schedule), at most ``max(1, N // 2)`` pairs per merge step —
-first pairs that would join two fused maps, then the least recently merged — so each robot's
-share of the merge cost does not grow with the team. Each robot assembles the pairs' transforms
+first pairs that would join two fused maps, then the least recently merged — and the grid
+alignment on every ``grid_merge_every / merge_every``-th turn of a pair, so each robot's share
+of the merge cost does not grow with the team. Each robot assembles the pairs' transforms
 it knows into a graph of frames; with three or more robots **cycle consistency** rejects
 look-alike merges (``fusion.team``: A→B→C must agree with A→C within 5° and 1 m; the edges that
-break the most triangles are left out until none is broken, then a spanning forest by
-confidence). Robot ``i``'s **fused map** is its component of that forest: its own map and each
+break the most triangles are left out until none is broken; a merge no consistent triangle
+confirms — the bridge that first joins a robot to the others — needs
+``mapping.team_accept_threshold`` (0.97) confidence, as a team's many pairs give many chances
+of one confident look-alike; then a spanning forest by confidence). Robot ``i``'s **fused map** is its component of that forest: its own map and each
 member's (as it knows it) moved into its frame. ``mapping.cycle_check = False`` uses the
 pairwise decisions alone. ``merge_state()`` reports every pair (transform, confidence, kept by
 the cycle check), each robot's fused members and frames, and the contacts.
@@ -319,6 +322,7 @@ are a ``ValueError``.
 | ``comm.range`` | float or None | None | contact range, m (see Communication) |
 | ``comm.line_of_sight`` | bool | False | contact also needs no wall between |
 | ``mapping.cycle_check`` | bool | True | cycle consistency (see Merging N maps) |
+| ``mapping.team_accept_threshold`` | float | 0.97 | unconfirmed merges in teams (likewise) |
 | ``robot.radius`` | float | 0.25 | disc radius, m |
 | ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
 | ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |

@@ -137,7 +137,7 @@ class PairLoop:
     """
 
     __slots__ = ("i", "j", "config", "result", "calls", "drops", "method", "source",
-                 "transform", "history", "last_run", "_grid_checked_at", "_grid_tried_at",
+                 "transform", "history", "last_run", "_turns", "_grid_tried_at",
                  "_merged_maps")
 
     def __init__(self, i: int, j: int, config: MappingConfig) -> None:
@@ -151,24 +151,25 @@ class PairLoop:
         self.transform: Rigid2D | None = None
         self.history: list[tuple[int, Rigid2D | None, float]] = []
         self.last_run = -1
-        self._grid_checked_at = 0  # step the grid alignment was last considered
+        self._turns = 0  # merge steps this pair was considered at
         self._grid_tried_at = 0  # known cells (both maps) at the last grid alignment
         self._merged_maps: tuple = (None, None)  # the topological maps of the last merge
 
-    def due(self, steps: int, map_i: RobotMap, map_j: RobotMap) -> bool | None:
-        """``None`` if this pair has nothing to merge at merge step ``steps``, else whether it
-        also tries the grids (and then counts them as tried). The grid alignment is
-        considered at most every ``grid_merge_every`` steps (considering it uses the slot)."""
+    def due(self, map_i: RobotMap, map_j: RobotMap) -> bool | None:
+        """``None`` if this pair has nothing to merge at this merge step, else whether it
+        also tries the grids (and then counts them as tried). The grid alignment is considered
+        on every ``grid_merge_every / merge_every``-th turn of the pair (every
+        ``grid_merge_every`` steps for a pair merged at every merge step, as two robots are),
+        so that a team's grid alignments grow with its merge calls, not its pairs."""
         cfg = self.config
         # the structural merge needs 3 nodes a map; the grid alignment (hybrid) only grids
         small = min(map_i.topomap.n_nodes, map_j.topomap.n_nodes) < 3
         if small and cfg.merge_method != "hybrid":
             return None
         known = map_i.n_ever + map_j.n_ever
+        self._turns += 1
         slot = bool(cfg.grid_merge_every
-                    and steps - self._grid_checked_at >= cfg.grid_merge_every)
-        if slot:
-            self._grid_checked_at = steps
+                    and self._turns % (cfg.grid_merge_every // cfg.merge_every) == 0)
         try_grids = slot and known >= self._grid_tried_at * (1.0 + cfg.grid_merge_growth)
         topomaps = (map_i.topomap, map_j.topomap)
         unchanged = topomaps[0] is self._merged_maps[0] and topomaps[1] is self._merged_maps[1]
@@ -202,6 +203,10 @@ class PairLoop:
             self.transform = result.transform
             self.history.append((steps, self.transform, confidence))
             return True
+        if result.accepted and confidence > self.confidence:
+            # the transform in use, found again more confidently
+            self.history.append((steps, self.transform, confidence))
+            return True
         if refuted is not None and self.transform is not None:
             self.drops += 1
             self.method = "none"
@@ -210,6 +215,11 @@ class PairLoop:
             self.history.append((steps, None, confidence))
             return True
         return False
+
+    @property
+    def confidence(self) -> float:
+        """The confidence the transform in use was last accepted with (0 without one)."""
+        return self.history[-1][2] if self.transform is not None else 0.0
 
     def known(self, step: int) -> tuple[Rigid2D | None, float]:
         """The transform in use and its confidence as of ``step`` (``(None, 0)`` before)."""
@@ -251,6 +261,8 @@ class TeamMerging:
         self.check: CycleCheck | None = None
         self._keys: list[tuple | None] = [None] * n
         self._per_step = max(1, n // 2)
+        # two robots have no cycle to confirm a merge: their pair is the accept rule alone
+        self._min_unconfirmed = config.team_accept_threshold if n >= 3 else 0.0
         self._errors: dict[int, tuple] = {}
 
     @property
@@ -269,7 +281,7 @@ class TeamMerging:
             if runs == self._per_step:
                 break
             mi, mj = views.maps[pair.i], views.maps[pair.j]
-            try_grids = pair.due(steps, mi, mj)
+            try_grids = pair.due(mi, mj)
             if try_grids is None:
                 continue
             changed |= pair.run(steps, mi, mj, try_grids)
@@ -304,7 +316,8 @@ class TeamMerging:
             edges = [Edge(i, j, t, c) for (i, j), (t, c) in key if t is not None]
             held = {j for j in range(self.n) if views.view(r, j) is not None}
             edges = [e for e in edges if e.i in held and e.j in held]
-            check = consistent_edges(edges, centres, check=self.config.cycle_check)
+            check = consistent_edges(edges, centres, check=self.config.cycle_check,
+                                     min_unconfirmed=self._min_unconfirmed)
             frames = frames_from(r, check.kept)
             old = self.frames[r]
             if frames.keys() != old.keys() or any(
@@ -312,9 +325,10 @@ class TeamMerging:
                     for j in frames):
                 self.frames[r] = frames
                 changed.append(r)
-        edges = [Edge(p.i, p.j, p.transform, p.history[-1][2]) for p in self.pairs.values()
+        edges = [Edge(p.i, p.j, p.transform, p.confidence) for p in self.pairs.values()
                  if p.transform is not None]
-        self.check = consistent_edges(edges, centres, check=self.config.cycle_check)
+        self.check = consistent_edges(edges, centres, check=self.config.cycle_check,
+                                      min_unconfirmed=self._min_unconfirmed)
         return changed
 
     def _knowledge(self, r: int, steps: int, views: TeamViews) -> tuple:
@@ -354,7 +368,8 @@ class TeamMerging:
 
     def state(self, views: TeamViews, transform: Rigid2D | None) -> MergeState:
         """A :class:`MergeState` (``transform``: robot 1 → robot 0 in robot 0's fused map)."""
-        out = set() if self.check is None else {*self.check.disputed, *self.check.rejected}
+        out = set() if self.check is None else {*self.check.disputed, *self.check.rejected,
+                                                *self.check.unconfirmed}
         pairs = {k: PairState(p.transform, float(getattr(p.result, "confidence", 0.0))
                               if p.result is not None else 0.0, p.method, p.source, p.calls,
                               p.drops, p.transform is not None and k not in out)

@@ -92,7 +92,7 @@ def test_a_team_copy_continues_exactly(how):
 
 
 def _put_in_use(env, i, j):
-    """Give pair (i, j) the true transform, as an accepted merge would."""
+    """Give pair (i, j) the true transform, as an accepted merge would (certain of it)."""
     pair = env._merging.pairs[(i, j)]
     pair.transform = env.true_transform(i, j)
     pair.history.append((env.steps, pair.transform, 1.0))
@@ -168,6 +168,8 @@ def test_a_merge_found_in_contact_reaches_a_third_robot_only_through_contact():
     ({"comm": {"range": -1.0}}, r"comm.range must be > 0.0, got -1.0"),
     ({"comm": {"line_of_sight": 1}}, r"comm.line_of_sight must be True or False, got 1"),
     ({"comm": {"radius": 3}}, r"radius"),
+    ({"mapping": {"team_accept_threshold": 1.5}},
+     r"mapping.team_accept_threshold must be <= 1.0, got 1.5"),
 ])
 def test_bad_team_settings_are_refused(kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):
@@ -183,3 +185,23 @@ def test_start_poses_must_give_every_robot_one_row():
 def test_the_two_robot_env_is_a_team_of_two():
     with pytest.raises(ValueError, match="n_robots must be 2 for two_robot_explore_v0, got 3"):
         two_robot_explore_v0.parallel_env(n_robots=3)
+
+
+def test_grid_alignments_follow_a_pairs_own_turns(monkeypatch):
+    """With more pairs than merge slots, each pair tries the grids on every
+    grid_merge_every / merge_every-th turn of its own, not on every turn it gets."""
+    import envs.two_robot_explore.merging as merging
+
+    calls = []
+    real = merging.run_merge
+
+    def counted(*args, try_grids=False, **kwargs):
+        calls.append(try_grids)
+        return real(*args, try_grids=try_grids, **kwargs)
+
+    monkeypatch.setattr(merging, "run_merge", counted)
+    env = multi_robot_explore_v0.parallel_env(n_robots=6, **TEAM)
+    _run(env, 0, 200)
+    turns = [p._turns for p in env._merging.pairs.values()]
+    assert max(turns) < 20  # 20 merge steps, 15 pairs: no pair is considered at every one
+    assert 0 < sum(calls) <= sum(t // 2 for t in turns)  # every 2nd turn of a pair at most

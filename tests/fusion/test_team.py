@@ -109,3 +109,18 @@ def test_bad_edges_are_refused():
         consistent_edges([Edge(0, 1, t, 0.5), Edge(0, 1, t, 0.6)])
     with pytest.raises(ValueError, match="tolerances must be > 0"):
         consistent_edges([], tolerance_deg=0.0)
+
+
+def test_an_unconfirmed_edge_needs_the_higher_confidence():
+    frames = _world_frames(5, 4)
+    # robots 0, 1, 2 confirm each other; robot 3 hangs on one edge (a bridge, no triangle)
+    edges = [_true_edge(frames, 0, 1), _true_edge(frames, 1, 2), _true_edge(frames, 0, 2),
+             _true_edge(frames, 2, 3, confidence=0.91)]
+    check = consistent_edges(edges, min_unconfirmed=0.97)
+    assert check.unconfirmed == ((2, 3),) and set(frames_from(0, check.kept)) == {0, 1, 2}
+    edges[-1] = _true_edge(frames, 2, 3, confidence=0.98)
+    check = consistent_edges(edges, min_unconfirmed=0.97)
+    assert not check.unconfirmed and set(frames_from(0, check.kept)) == {0, 1, 2, 3}
+    # without the check, no edge is held back
+    assert not consistent_edges(edges[:3] + [_true_edge(frames, 2, 3, 0.5)], check=False,
+                                min_unconfirmed=0.97).unconfirmed
