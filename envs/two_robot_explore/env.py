@@ -149,8 +149,9 @@ look-alike merges (``fusion.team``: A→B→C must agree with A→C within 5° a
 break the most triangles are left out until none is broken; a merge no consistent triangle
 confirms — the bridge that first joins a robot to the others — needs
 ``mapping.team_accept_threshold`` (0.97) confidence, as a team's many pairs give many chances
-of one confident look-alike; then a spanning forest by confidence). Robot ``i``'s **fused map** is its component of that forest: its own map and each
-member's (as it knows it) moved into its frame. ``mapping.cycle_check = False`` uses the
+of one confident look-alike; then a spanning forest by confidence). Robot ``i``'s **fused
+map** is its component of that forest: its own map and each member's (as it knows it) moved
+into its frame. ``mapping.cycle_check = False`` uses the
 pairwise decisions alone. ``merge_state()`` reports every pair (transform, confidence, kept by
 the cycle check), each robot's fused members and frames, and the contacts.
 
@@ -840,14 +841,18 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
 
     # ------------------------------------------------------------------ observations
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        return {a: self._observe_one(i) for i, a in enumerate(self.possible_agents)
+        live = [r.odometry for r in self.robots]
+        return {a: self._observe_one(i, live) for i, a in enumerate(self.possible_agents)
                 if a in self.agents}
 
-    def _observe_one(self, i: int) -> dict[str, np.ndarray]:
+    def _observe_one(self, i: int, live: list[np.ndarray] | None = None
+                     ) -> dict[str, np.ndarray]:
+        """Robot ``i``'s observation (``live``: every robot's odometry now)."""
+        if live is None:
+            live = [r.odometry for r in self.robots]
         cfg = self.config
         robot = self.robots[i]
-        odo = robot.odometry
-        ox, oy, oth = odo.tolist()
+        ox, oy, oth = robot.odometry.tolist()
         c, s = math.cos(oth), math.sin(oth)
         # clipped as floats, then rounded: the bounds are float32 values, so this is the
         # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
@@ -864,20 +869,22 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
             "local_map": self._local_map(i),
         }
         if self.two_robot:
-            obs["teammate"] = self._teammate(i, 1 - i, ox, oy, oth, c, s, "teammate")
+            obs["teammate"] = self._teammate(i, 1 - i, ox, oy, oth, c, s, live)
         else:
-            obs["teammates"] = np.stack([self._teammate(i, j, ox, oy, oth, c, s, "teammates")
+            obs["teammates"] = np.stack([self._teammate(i, j, ox, oy, oth, c, s, live)
                                          for j in range(self.n_robots) if j != i])
         return obs
 
     def _teammate(self, i: int, j: int, ox: float, oy: float, oth: float, c: float,
-                  s: float, key: str) -> np.ndarray:
-        """Robot ``i``'s observation row of teammate ``j`` (manual, Observations, c)."""
+                  s: float, live: list[np.ndarray]) -> np.ndarray:
+        """Robot ``i``'s observation row of teammate ``j`` (manual, Observations, c and h;
+        ``live``: every robot's odometry now)."""
+        key = "teammate" if self.two_robot else "teammates"
         lo, hi = self._obs_low[key], self._obs_high[key]
         width = 5 if self.two_robot else TEAMMATE_FEATURES
         row = np.zeros(width, dtype=np.float32)
         frame = self._merging.frames[i].get(j)
-        peer_odo = self.views.odometry(i, j, [r.odometry for r in self.robots])
+        peer_odo = self.views.odometry(i, j, live)
         if frame is not None and peer_odo is not None:
             peer = compose_pose(frame[0], peer_odo)
             dx, dy = peer[0] - ox, peer[1] - oy
