@@ -327,7 +327,9 @@ are a ``ValueError``.
 | ``robot.radius`` | float | 0.25 | disc radius, m |
 | ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
 | ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |
-| ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of odometry increments |
+| ``robot.odometry_model`` | str | ``"increment"`` | or ``"rot_trans_rot"`` (Thrun's α1–α4 model) |
+| ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of ``"increment"`` odometry |
+| ``robot.odometry_alphas`` | 4 floats or str | 0s | α1–α4, or ``"pioneer3dx"`` |
 | ``sonar.rays`` / ``cone`` | int / float | 3 / 15 | rays per cone, cone width (°) |
 | ``sonar.min_range`` / ``max_range`` | float | 0.15 / 5 | m |
 | ``sonar.noise_std`` | float | 0.01 | m |
@@ -387,7 +389,7 @@ from envs.two_robot_explore.actions import DISCRETE_ACTIONS, action_space, parse
 from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.copies import History, ReplayCopies
-from envs.two_robot_explore.drift import drift_aware_error
+from envs.two_robot_explore.drift import drift_aware_error, odometry_noise_level
 from envs.two_robot_explore.global_state import (
     STATE_MAP_SIZE,
     STATE_SAMPLES,
@@ -630,7 +632,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model,
                                      robots=n)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
-        self._merging = TeamMerging(n, cfg.mapping)
+        self._merging = TeamMerging(n, cfg.mapping, odometry_noise_level(cfg.robot))
         self.views = TeamViews(self.maps, cfg.comm)
         self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0

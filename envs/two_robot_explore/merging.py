@@ -23,6 +23,7 @@ from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
 from envs.two_robot_explore.config import MappingConfig
 from envs.two_robot_explore.mapping import RobotMap
+from fusion.grid_merge import drift_prior
 from fusion.rigid import Rigid2D
 from fusion.team import CycleCheck, Edge, consistent_edges, frames_from
 from topo.graph import TopoMap
@@ -97,20 +98,24 @@ class MergeState:
 
 def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
               grid_b: OccupancyGrid | None = None, try_grids: bool = False,
-              in_use: Rigid2D | None = None, accept_threshold: float | None = None
-              ) -> tuple[Any, str | None]:
+              in_use: Rigid2D | None = None, accept_threshold: float | None = None,
+              drift_prior: float = 0.0) -> tuple[Any, str | None]:
     """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"`` (the
     grids are aligned only when ``try_grids``; ``in_use`` is the transform the env uses now,
     and with the grids ``fusion.hybrid.recheck`` re-examines it; accepted when the confidence
-    reaches ``accept_threshold``, ``None``: the library's default), else
+    reaches ``accept_threshold``, ``None``: the library's default; ``drift_prior``: how far
+    the maps' odometry may have drifted, ``fusion.grid_merge.drift_prior``, 0 for perfect
+    odometry), else
     ``fusion.merge_maps(map_a, map_b, method=method)``. Returns the result and why the grids
     refute ``in_use`` (``None``: they do not, or were not asked)."""
     if method == "hybrid":
         from fusion.grid_merge import GridMergeConfig
         from fusion.hybrid import hybrid_merge, recheck
 
-        config = (None if accept_threshold is None
-                  else GridMergeConfig(accept_threshold=accept_threshold))
+        config = None
+        if accept_threshold is not None or drift_prior:
+            fields = {} if accept_threshold is None else {"accept_threshold": accept_threshold}
+            config = GridMergeConfig(**fields, drift_prior=drift_prior)
         if try_grids and in_use is not None:
             return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
         return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
@@ -137,12 +142,13 @@ class PairLoop:
     """
 
     __slots__ = ("i", "j", "config", "result", "calls", "drops", "method", "source",
-                 "transform", "history", "last_run", "_turns", "_grid_tried_at",
+                 "transform", "history", "last_run", "noise", "_turns", "_grid_tried_at",
                  "_merged_maps")
 
-    def __init__(self, i: int, j: int, config: MappingConfig) -> None:
+    def __init__(self, i: int, j: int, config: MappingConfig, noise: float = 0.0) -> None:
         self.i, self.j = i, j
         self.config = config
+        self.noise = noise
         self.result: Any = None
         self.calls = 0
         self.drops = 0
@@ -170,7 +176,10 @@ class PairLoop:
         self._turns += 1
         slot = bool(cfg.grid_merge_every
                     and self._turns % (cfg.grid_merge_every // cfg.merge_every) == 0)
-        try_grids = slot and known >= self._grid_tried_at * (1.0 + cfg.grid_merge_growth)
+        # with drifting odometry the transform in use is re-examined whether or not the maps
+        # grew: drift can make it wrong while nothing is added
+        grown = known >= self._grid_tried_at * (1.0 + cfg.grid_merge_growth)
+        try_grids = slot and (grown or (self.noise > 0 and self.transform is not None))
         topomaps = (map_i.topomap, map_j.topomap)
         unchanged = topomaps[0] is self._merged_maps[0] and topomaps[1] is self._merged_maps[1]
         if (small or unchanged) and not try_grids:
@@ -184,10 +193,11 @@ class PairLoop:
         """Merge the two maps now and keep the result; returns whether the transform in use
         changed (a new one accepted, or the one in use dropped)."""
         cfg = self.config
+        prior = drift_prior(self.noise, steps) if self.noise > 0 else 0.0
         result, refuted = run_merge(map_i.topomap, map_j.topomap, cfg.merge_method,
                                     map_i.grid, map_j.grid, try_grids=try_grids,
                                     in_use=self.transform,
-                                    accept_threshold=cfg.accept_threshold)
+                                    accept_threshold=cfg.accept_threshold, drift_prior=prior)
         self.result = result
         self.calls += 1
         self.last_run = steps
@@ -244,13 +254,16 @@ class TeamMerging:
         pairs: ``{(i, j): PairLoop}``.
         result, calls, drops, time_s: the last merge call's result; totals; its wall time.
         frames: ``frames[i]``: ``{j: (to_i, from_i)}`` for each robot j in robot i's fused map.
+        noise: the robots' odometry noise level (``drift.odometry_noise_level``): with drift,
+            merges weigh ``fusion.grid_merge.drift_prior`` and rechecks need no growth.
         check: the team's cycle check with everything known (for ``merge_state``).
     """
 
-    def __init__(self, n: int, config: MappingConfig) -> None:
+    def __init__(self, n: int, config: MappingConfig, noise: float = 0.0) -> None:
         self.n = n
         self.config = config
-        self.pairs = {(i, j): PairLoop(i, j, config) for i in range(n) for j in range(i + 1, n)}
+        self.pairs = {(i, j): PairLoop(i, j, config, noise) for i in range(n)
+                      for j in range(i + 1, n)}
         self.result: Any = None
         self.calls = 0
         self.drops = 0
