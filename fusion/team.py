@@ -28,15 +28,16 @@ the edges that the cycles they close support:
 This is pairwise consistency maximisation (PCM, Mangelson et al. 2018) reduced to what frames
 without odometry links allow: the group-k consistency of triangles, and a greedy maximum
 consistent set. :func:`frames_from` then composes each robot's transform into a root robot's
-frame along the forest (both directions composed from the edges' own transforms and inverses,
-so a two-robot team gets exactly the pairwise transform and its inverse).
+frame along the fewest consistent edges (both directions composed from the edges' own
+transforms and inverses, so a two-robot team gets exactly the pairwise transform and its
+inverse): every hop adds its pair's error, so a direct merge beats a chain of two.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import networkx as nx
 import numpy as np
@@ -87,6 +88,8 @@ class CycleCheck:
 
     Attributes:
         kept: the edges of the consistent spanning forest, keyed ``(i, j)``.
+        consistent: those and the edges closing a cycle that the forest agrees with (what
+            :func:`frames_from` composes along).
         disputed: edges left out by the triangle votes.
         rejected: edges left out because the forest's path disagreed with them.
         unconfirmed: edges no consistent triangle confirms, left out below
@@ -100,6 +103,7 @@ class CycleCheck:
     rejected: tuple[tuple[int, int], ...]
     votes: dict[tuple[int, int], tuple[int, int]]
     unconfirmed: tuple[tuple[int, int], ...] = ()
+    consistent: dict[tuple[int, int], Edge] = field(default_factory=dict)
 
 
 def _agrees(a: Rigid2D, b: Rigid2D, at: np.ndarray, tolerance_deg: float,
@@ -177,6 +181,7 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
     forest = nx.Graph()
     forest.add_nodes_from(range(1 + max((e.j for e in edges), default=0)))
     kept: dict[tuple[int, int], Edge] = {}
+    agreeing: dict[tuple[int, int], Edge] = {}
     rejected = []
     for e in order:
         if nx.has_path(forest, e.i, e.j):
@@ -186,10 +191,13 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
             along = _compose_path(path, kept)  # j → i along the forest
             if not _agrees(e.transform, along, centre(e.j), tolerance_deg, tolerance_m):
                 rejected.append((e.i, e.j))
+            else:
+                agreeing[(e.i, e.j)] = e
             continue
         forest.add_edge(e.i, e.j)
         kept[(e.i, e.j)] = e
-    return CycleCheck(kept, disputed, tuple(rejected), first_votes, unconfirmed)
+    return CycleCheck(kept, disputed, tuple(rejected), first_votes, unconfirmed,
+                      {**kept, **agreeing})
 
 
 def _triangles(graph: nx.Graph) -> list[tuple[int, int, int]]:
@@ -212,10 +220,12 @@ def _compose_path(path: Sequence[int], edges: Mapping[tuple[int, int], Edge]) ->
 
 def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
                 ) -> dict[int, tuple[Rigid2D, Rigid2D]]:
-    """Every robot of ``root``'s component of the forest ``kept``, with ``(to_root,
-    from_root)``: its frame → root's and root's → its, each composed from the edges'
-    transforms (not inverted afterwards), so a single edge gives exactly ``(T, T.inverse())``
-    as stored. ``root`` maps to the identity both ways."""
+    """Every robot of ``root``'s component of the consistent edges ``kept``
+    (:attr:`CycleCheck.consistent`, or a forest), with ``(to_root, from_root)``: its frame →
+    root's and root's → its, composed along a path of the fewest edges (breadth first, the
+    more confident edge first), each from the edges' transforms (not inverted afterwards), so
+    a single edge gives exactly ``(T, T.inverse())`` as stored. ``root`` maps to the identity
+    both ways."""
     ident = Rigid2D.identity()
     out = {root: (ident, ident)}
     adj: dict[int, list[Edge]] = {}
@@ -226,7 +236,7 @@ def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
     while queue:
         a = queue.pop(0)
         to_a, from_a = out[a]
-        for e in sorted(adj.get(a, ()), key=lambda e: (e.i, e.j)):
+        for e in sorted(adj.get(a, ()), key=lambda e: (-e.confidence, e.i, e.j)):
             b = e.j if a == e.i else e.i
             if b in out:
                 continue

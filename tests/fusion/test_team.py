@@ -124,3 +124,13 @@ def test_an_unconfirmed_edge_needs_the_higher_confidence():
     # without the check, no edge is held back
     assert not consistent_edges(edges[:3] + [_true_edge(frames, 2, 3, 0.5)], check=False,
                                 min_unconfirmed=0.97).unconfirmed
+
+
+def test_frames_take_the_direct_merge_over_a_chain():
+    frames = _world_frames(6, 3)
+    small = Rigid2D.from_degrees(1.0, (0.2, 0.0))  # within the tolerance: consistent
+    edges = [_true_edge(frames, 0, 1, 0.99), _true_edge(frames, 1, 2, 0.98),
+             _true_edge(frames, 0, 2, 0.9, error=small)]
+    check = consistent_edges(edges)
+    assert len(check.kept) == 2 and len(check.consistent) == 3
+    assert frames_from(0, check.consistent)[2][0] is edges[2].transform  # one hop, not two
