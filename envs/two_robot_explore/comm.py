@@ -22,6 +22,7 @@ import numpy as np
 import pymunk
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import pdist, squareform
 
 from envs.two_robot_explore.config import CommConfig
 from envs.two_robot_explore.mapping import RobotMap
@@ -39,7 +40,7 @@ def contact_groups(positions: np.ndarray, config: CommConfig,
     n = len(positions)
     if config.unlimited:
         return np.zeros(n, dtype=np.int64)
-    d = np.hypot(*(positions[:, None, :] - positions[None, :, :]).transpose(2, 0, 1))
+    d = squareform(pdist(positions))
     near = d <= (math.inf if config.range is None else config.range)
     np.fill_diagonal(near, False)
     if config.line_of_sight:

@@ -798,16 +798,8 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         if not (changed or self._contacts_changed):
             return
         self._contacts_changed = False
-        centres = {}
-        for i, m in enumerate(self.maps):
-            win = m.known_window()
-            if win is not None:
-                g = m.geometry
-                centres[i] = np.array([g.origin[0] + 0.5 * (win[1].start + win[1].stop)
-                                       * g.resolution,
-                                       g.origin[1] + 0.5 * (win[0].start + win[0].stop)
-                                       * g.resolution])
-        if 0 in self._merging.refresh(self.steps, self.views, centres):
+        centres = {i: c for i, m in enumerate(self.maps) if (c := m.known_centre()) is not None}
+        if 0 in self._merging.refresh(self.views, centres):
             members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
             known = {j: self.views.view(0, j) for j in (0, *members)}
             self._shared_delta += self.shared.rebuild(known, members)

@@ -190,6 +190,16 @@ class RobotMap:
             return None
         return slice(self.bbox[0], self.bbox[1]), slice(self.bbox[2], self.bbox[3])
 
+    def known_centre(self) -> np.ndarray | None:
+        """The centre of :attr:`bbox` in the map's frame, metres (``None`` before the first
+        scan)."""
+        if self.bbox is None:
+            return None
+        r0, r1, c0, c1 = self.bbox
+        g = self.geometry
+        return np.array([g.origin[0] + 0.5 * (c0 + c1) * g.resolution,
+                         g.origin[1] + 0.5 * (r0 + r1) * g.resolution])
+
     def extract(self, config: ExtractConfig | None = None) -> TopoMap:
         """Re-extract :attr:`topomap` from the cell states inside :attr:`bbox` with
         ``topo.extract_topomap`` (``config``: its :class:`topo.extract.ExtractConfig`)."""

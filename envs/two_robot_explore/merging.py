@@ -252,7 +252,8 @@ class TeamMerging:
 
     Attributes:
         pairs: ``{(i, j): PairLoop}``.
-        result, calls, drops, time_s: the last merge call's result; totals; its wall time.
+        result, time_s: the last merge call's result and its wall time.
+        calls, drops: merge calls and dropped transforms, all pairs together.
         frames: ``frames[i]``: ``{j: (to_i, from_i)}`` for each robot j in robot i's fused map.
         noise: the robots' odometry noise level (``drift.odometry_noise_level``): with drift,
             merges weigh ``fusion.grid_merge.drift_prior`` and rechecks need no growth.
@@ -265,8 +266,6 @@ class TeamMerging:
         self.pairs = {(i, j): PairLoop(i, j, config, noise) for i in range(n)
                       for j in range(i + 1, n)}
         self.result: Any = None
-        self.calls = 0
-        self.drops = 0
         self.time_s = math.nan
         ident = Rigid2D.identity()
         self.frames: list[dict[int, tuple[Rigid2D, Rigid2D]]] = [{i: (ident, ident)}
@@ -277,6 +276,16 @@ class TeamMerging:
         # two robots have no cycle to confirm a merge: their pair is the accept rule alone
         self._min_unconfirmed = config.team_accept_threshold if n >= 3 else 0.0
         self._errors: dict[int, tuple] = {}
+
+    @property
+    def calls(self) -> int:
+        """Merge calls this episode, all pairs together."""
+        return sum(p.calls for p in self.pairs.values())
+
+    @property
+    def drops(self) -> int:
+        """Transforms dropped this episode (the grids refuted them), all pairs together."""
+        return sum(p.drops for p in self.pairs.values())
 
     @property
     def pair01(self) -> PairLoop:
@@ -300,9 +309,7 @@ class TeamMerging:
             changed |= pair.run(steps, mi, mj, try_grids)
             runs += 1
             self.result = pair.result
-            self.calls += 1
             self.time_s = float(pair.result.time_s)
-            self.drops = sum(p.drops for p in self.pairs.values())
         return changed
 
     def _order(self, views: TeamViews) -> list[PairLoop]:
@@ -317,12 +324,13 @@ class TeamMerging:
         return sorted(live, key=lambda p: (comp.get(p.i) == comp.get(p.j), p.last_run, p.i,
                                            p.j))
 
-    def refresh(self, steps: int, views: TeamViews, centres: dict[int, np.ndarray]) -> list[int]:
-        """Recompute each robot's fused map from what it knows now; returns the robots whose
-        fused map changed (members or frames)."""
+    def refresh(self, views: TeamViews, centres: dict[int, np.ndarray]) -> list[int]:
+        """Recompute each robot's fused map from what it knows now (``centres``: each map's
+        centre, where the cycle check measures); returns the robots whose fused map changed
+        (members or frames)."""
         changed = []
         for r in range(self.n):
-            key = self._knowledge(r, steps, views)
+            key = self._knowledge(r, views)
             if key == self._keys[r]:
                 continue
             self._keys[r] = key
@@ -344,19 +352,12 @@ class TeamMerging:
                                       min_unconfirmed=self._min_unconfirmed)
         return changed
 
-    def _knowledge(self, r: int, steps: int, views: TeamViews) -> tuple:
+    def _knowledge(self, r: int, views: TeamViews) -> tuple:
         """What robot ``r`` knows of the pairs' transforms: ``((i, j), (transform,
-        confidence))`` for each pair with one, as of its latest contact with i or j."""
-        out = []
-        for (i, j), pair in self.pairs.items():
-            if not pair.history:
-                continue
-            if views.in_contact(r, i) or views.in_contact(r, j):
-                known = (pair.transform, pair.history[-1][2])
-            else:
-                known = pair.known(int(max(views.seen[r, i], views.seen[r, j])))
-            out.append(((i, j), known))
-        return tuple(out)
+        confidence))`` for each pair with one, as of its latest contact with i or j (now,
+        while in contact: ``views.seen`` is the current step then)."""
+        return tuple(((i, j), pair.known(int(max(views.seen[r, i], views.seen[r, j]))))
+                     for (i, j), pair in self.pairs.items() if pair.history)
 
     def errors(self, j: int, transform: Rigid2D, map_j: TopoMap, truth: Rigid2D,
                fallback: Any) -> tuple[float, float]:
