@@ -228,21 +228,15 @@ def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
     both ways."""
     ident = Rigid2D.identity()
     out = {root: (ident, ident)}
-    adj: dict[int, list[Edge]] = {}
-    for e in kept.values():
-        adj.setdefault(e.i, []).append(e)
-        adj.setdefault(e.j, []).append(e)
-    queue = [root]
-    while queue:
-        a = queue.pop(0)
+    graph = nx.Graph()
+    graph.add_node(root)
+    # added most confident first: each robot's neighbours are listed (and searched) so
+    for e in sorted(kept.values(), key=lambda e: (-e.confidence, e.i, e.j)):
+        graph.add_edge(e.i, e.j, edge=e)
+    for a, b in nx.bfs_edges(graph, root):
+        e = graph.edges[a, b]["edge"]
         to_a, from_a = out[a]
-        for e in sorted(adj.get(a, ()), key=lambda e: (-e.confidence, e.i, e.j)):
-            b = e.j if a == e.i else e.i
-            if b in out:
-                continue
-            b_to_a = e.towards(a)
-            a_to_b = e.towards(b)
-            out[b] = (b_to_a if a == root else to_a @ b_to_a,
-                      a_to_b if a == root else a_to_b @ from_a)
-            queue.append(b)
+        b_to_a, a_to_b = e.towards(a), e.towards(b)
+        out[b] = (b_to_a if a == root else to_a @ b_to_a,
+                  a_to_b if a == root else a_to_b @ from_a)
     return out

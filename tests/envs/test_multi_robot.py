@@ -182,6 +182,16 @@ def test_start_poses_must_give_every_robot_one_row():
         env.reset(seed=0, options={"start_poses": [[1.0, 1.0, 0.0], [3.0, 3.0, 0.0]]})
 
 
+def test_teammate_map_names_a_wrong_robot():
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, **TEAM)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"teammate must be one of \['robot_0', 'robot_1', "
+                                         r"'robot_2'\], got 'robot_3'"):
+        env.teammate_map("robot_0", "robot_3")
+    with pytest.raises(ValueError, match=r"agent must be one of .*, got 'robot_9'"):
+        env.teammate_map("robot_9", "robot_1")
+
+
 def test_the_two_robot_env_is_a_team_of_two():
     with pytest.raises(ValueError, match="n_robots must be 2 for two_robot_explore_v0, got 3"):
         two_robot_explore_v0.parallel_env(n_robots=3)
