@@ -314,8 +314,6 @@ class TeamMerging:
 
     def _order(self, views: TeamViews) -> list[PairLoop]:
         """Pairs in contact, those joining two fused maps first, then least recently run."""
-        if self.n == 2:
-            return [self.pair01] if views.in_contact(0, 1) else []
         comp = {}
         for i in range(self.n):
             for j in self.frames[i]:
