@@ -20,7 +20,8 @@ ceiling of the extraction when only what each robot has seen differs), then
   has ≥ 3 nodes in the shared region: the ≥ 3 mutual figure this node design reaches with
   perfect, complete maps;
 * **merges** (``fusion.evaluate.evaluate``) per overlap bin: success (accepted, < 2°, < 0.3 m)
-  and wrong accepts (accepted and not a success) over all pairs, no-overlap pairs included.
+  and wrong accepts (accepted and not a success) over all pairs, no-overlap pairs included, and
+  how many of the accepted merges are within 2° of the true rotation (look-alikes included).
 
 A pair whose grids and transform repeat one measured before in the split (the Frontier and
 CoordinatedFrontier sets of one seed share their early snapshots: the teams act alike until
@@ -46,7 +47,7 @@ sys.path.insert(0, str(ROOT))
 
 from agents.dataset import env_kwargs  # noqa: E402
 from envs.two_robot_explore_v0 import parallel_env  # noqa: E402
-from fusion.eval_results import EvalPair  # noqa: E402
+from fusion.eval_results import ROTATION_OK_DEG, EvalPair  # noqa: E402
 from fusion.evaluate import evaluate  # noqa: E402
 from fusion.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
 from fusion.repeatability import in_region, node_repeatability, shared_region  # noqa: E402
@@ -157,7 +158,8 @@ def measure(folder: Path, methods: list[str], stored: bool, true_views: bool = F
         for rec in evaluate(eval_pairs, methods, progress=False):
             row = rows[[p.name for p in eval_pairs].index(rec.pair)]
             row["methods"][rec.method] = {"accepted": rec.accepted, "success": rec.success,
-                                          "time_s": rec.time_s}
+                                          "time_s": rec.time_s,
+                                          "rotation_deg": rec.rotation_error_deg}
     return rows
 
 
@@ -203,7 +205,8 @@ def repeatability_table(rows: list[dict]) -> list[str]:
 def merge_table(rows: list[dict], methods: list[str]) -> list[str]:
     head = f"{'method':>8} " + " ".join(f"{f'ov {lo:.1f}-{min(hi, 1.0):.1f}':>13}"
                                         for lo, hi in BINS[1:])
-    lines = [head + f" {'ov>=0.4':>13} {'wrong accepts':>16} {'median ms':>9}"]
+    lines = [head + f" {'ov>=0.4':>13} {'wrong accepts':>16} {'within 2 deg':>17} "
+                    f"{'median ms':>9}"]
     for m in methods:
         cells = []
         for lo, hi in (*BINS[1:], (0.4, 1.01)):
@@ -213,9 +216,14 @@ def merge_table(rows: list[dict], methods: list[str]) -> list[str]:
         done = [r for r in rows if m in r["methods"]]
         wrong = sum(r["methods"][m]["accepted"] and not r["methods"][m]["success"]
                     for r in done)
+        accepted = [r["methods"][m] for r in done if r["methods"][m]["accepted"]]
+        close = sum(e.get("rotation_deg") is not None and e["rotation_deg"] < ROTATION_OK_DEG
+                    for e in accepted)
         ms = 1000 * _median(r["methods"][m]["time_s"] for r in done)
         lines.append(f"{m:>8} " + " ".join(cells)
                      + f" {wrong:4d}/{len(done):<4d}({100 * wrong / max(len(done), 1):4.1f}%)"
+                     + f" {close:4d}/{len(accepted):<4d}"
+                     + f"({100 * close / max(len(accepted), 1):5.1f}%)"
                      + f" {ms:9.1f}")
     return lines
 
