@@ -44,6 +44,7 @@ import dataclasses
 import datetime
 import json
 import math
+import re
 import subprocess
 import sys
 import time
@@ -262,9 +263,18 @@ def unique_rows(rows: list[dict], key_feature: str = "log_score") -> list[dict]:
     return out
 
 
+_NOISE_LEVEL = re.compile(r"/s[0-9.e+-]+(?=/)")
+"""The noise level in a synthetic or generic pair's name (``…/s0.05/12``)."""
+
+
 def _group(row: dict) -> str:
-    """Cross-validation group: the world (the procedural sets of one seed share worlds)."""
-    return row["world"].split(":", 1)[1] if "real" not in row["set"] else row["world"]
+    """Cross-validation group: the world. The procedural sets of one seed share worlds, and
+    the synthetic and generic pairs of one index share theirs at every noise level (only the
+    noise differs), so those are one group: held out together, none is judged by a model that
+    saw its world's other noise levels."""
+    if "real" in row["set"]:
+        return row["world"]
+    return _NOISE_LEVEL.sub("", row["world"].split(":", 1)[1])
 
 
 def matrix(rows: list[dict], names=MODEL_FEATURES) -> tuple[np.ndarray, np.ndarray]:
