@@ -73,6 +73,11 @@ from topo.validation import check_real
 ENV_ID = "two_robot_explore_v0"
 """The env of a two-robot run (:func:`run_env_id` names any team's)."""
 
+DEFAULT_WORLD_SIZE_MAX = 20.0
+"""The largest training building by default (``Args.world_size_max``): the held-out worlds of
+``benchmarks/training_eval.py`` are 10–20 m, and training on that range is the measured recipe
+(``benchmarks/training.md``)."""
+
 
 def run_env_id(n_robots: int) -> str:
     """The env part of a run's folder name: :data:`ENV_ID` for two robots,
@@ -150,7 +155,9 @@ class Args:
     """``--backend sb3``: train on buildings of several sizes, the ``n_envs`` envs spread
     evenly from ``world_size`` to this side (metres), each env's episodes lengthened in
     proportion (``max_cycles`` is the first's); evaluation stays on ``world_size``. Default:
-    every env on ``world_size``."""
+    :data:`DEFAULT_WORLD_SIZE_MAX` (20 m: the measured recipe, held-out T85 0.84× Frontier's
+    against 1.01× for 10 m buildings alone), or every env on ``world_size`` when that is as
+    large or the backend is RLlib. Set it to ``max(world_size)`` for one size."""
     max_cycles: int = 500
     """Env steps per episode (truncation); with 10 m buildings Frontier reaches 85 % in
     about 300–500 steps, so T85 separates explorers."""
@@ -303,16 +310,28 @@ class Args:
         """``--backend rllib``: envs each env runner steps (``n_envs`` split evenly)."""
         return math.ceil(self.n_envs / max(1, self.num_env_runners or 0))
 
+    @property
+    def size_range_top(self) -> float | None:
+        """The largest training building's side: ``world_size_max``, or its default
+        (:data:`DEFAULT_WORLD_SIZE_MAX` on SB3 when ``world_size`` is smaller); ``None``: every
+        env on ``world_size``."""
+        if self.world_size_max is not None:
+            return float(self.world_size_max)
+        if self.backend == "sb3" and max(self.world_size) < DEFAULT_WORLD_SIZE_MAX:
+            return DEFAULT_WORLD_SIZE_MAX
+        return None
+
     def train_env_configs(self) -> list[dict[str, Any]]:
-        """One env config per training env: :meth:`env_config`, or with ``world_size_max``
-        the sizes spread from ``world_size`` to it (``max_cycles`` scaled by the side)."""
+        """One env config per training env: :meth:`env_config`, with the sizes spread from
+        ``world_size`` to :attr:`size_range_top` (``max_cycles`` scaled by the side)."""
         base = self.env_config()
-        if self.world_size_max is None:
+        top = self.size_range_top
+        if top is None:
             return [base] * self.n_envs
         out = []
         for k in range(self.n_envs):
             f = k / max(1, self.n_envs - 1)
-            size = tuple(float(s + f * (self.world_size_max - s)) for s in self.world_size)
+            size = tuple(float(s + f * (top - s)) for s in self.world_size)
             scale = max(size) / max(self.world_size)
             out.append({**base, "world": {**base["world"], "size": size},
                         "max_cycles": int(round(self.max_cycles * scale))})

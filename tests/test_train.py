@@ -244,7 +244,18 @@ def test_world_size_max_spreads_the_training_envs():
     configs = Args(n_envs=3, world_size=(10.0, 12.0), world_size_max=20.0).train_env_configs()
     assert [c["world"]["size"] for c in configs] == [(10.0, 12.0), (15.0, 16.0), (20.0, 20.0)]
     assert [c["max_cycles"] for c in configs] == [500, 667, 833]
-    assert Args(n_envs=2).train_env_configs() == [Args().env_config()] * 2
+    one = Args(n_envs=2, world_size_max=10.0)  # one size: world_size's
+    assert one.train_env_configs() == [one.env_config()] * 2
+
+
+def test_training_spreads_sizes_to_20_m_by_default_where_it_can():
+    """The default is the measured recipe (10–20 m buildings) on SB3; RLlib and buildings of
+    20 m or more train on ``world_size`` alone."""
+    assert [c["world"]["size"] for c in Args(n_envs=3).train_env_configs()] == [
+        (10.0, 10.0), (15.0, 15.0), (20.0, 20.0)]
+    for args in (Args(backend="rllib", n_envs=2), Args(n_envs=2, world_size=(25.0, 25.0))):
+        assert args.size_range_top is None
+        assert args.train_env_configs() == [args.env_config()] * 2
 
 
 def test_rllib_defaults_split_the_envs_between_runners():
