@@ -27,10 +27,11 @@ the edges that the cycles they close support:
 
 This is pairwise consistency maximisation (PCM, Mangelson et al. 2018) reduced to what frames
 without odometry links allow: the group-k consistency of triangles, and a greedy maximum
-consistent set. :func:`frames_from` then composes each robot's transform into a root robot's
-frame along the fewest consistent edges (both directions composed from the edges' own
-transforms and inverses, so a two-robot team gets exactly the pairwise transform and its
-inverse): every hop adds its pair's error, so a direct merge beats a chain of two.
+consistent set. :func:`frames_from` then places each robot's frame in a root robot's: along
+the fewest consistent edges where they form a tree (both directions composed from the edges'
+own transforms and inverses, so a two-robot team gets exactly the pairwise transform and its
+inverse), and where consistent edges close cycles by a least-squares pose graph over all of
+them (:func:`adjust_frames`), so that no robot carries one pair's error alone.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 import numpy as np
+from scipy.optimize import least_squares
 
 from fusion.rigid import Rigid2D
 
@@ -218,14 +220,22 @@ def _compose_path(path: Sequence[int], edges: Mapping[tuple[int, int], Edge]) ->
     return out if out is not None else Rigid2D.identity()
 
 
-def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
+def frames_from(root: int, kept: Mapping[tuple[int, int], Edge],
+                centres: Mapping[int, np.ndarray] | None = None
                 ) -> dict[int, tuple[Rigid2D, Rigid2D]]:
     """Every robot of ``root``'s component of the consistent edges ``kept``
     (:attr:`CycleCheck.consistent`, or a forest), with ``(to_root, from_root)``: its frame →
-    root's and root's → its, composed along a path of the fewest edges (breadth first, the
-    more confident edge first), each from the edges' transforms (not inverted afterwards), so
-    a single edge gives exactly ``(T, T.inverse())`` as stored. ``root`` maps to the identity
-    both ways."""
+    root's and root's → its.
+
+    Where the component is a tree, each frame is composed along its path from the edges'
+    transforms (breadth first, the more confident edge first; not inverted afterwards), so a
+    single edge gives exactly ``(T, T.inverse())`` as stored. Where consistent edges close
+    cycles they over-determine the frames, and each pair's error would otherwise land whole on
+    whichever robot it reaches: the frames are then the least-squares fit to all of them
+    (:func:`adjust_frames`, a pose graph over the robots' frames), started from the composed
+    ones. ``centres`` (each robot's map centre in its own frame, where errors are weighed;
+    missing: its origin) as for :func:`consistent_edges`. ``root`` maps to the identity both
+    ways."""
     ident = Rigid2D.identity()
     out = {root: (ident, ident)}
     graph = nx.Graph()
@@ -239,4 +249,89 @@ def frames_from(root: int, kept: Mapping[tuple[int, int], Edge]
         b_to_a, a_to_b = e.towards(a), e.towards(b)
         out[b] = (b_to_a if a == root else to_a @ b_to_a,
                   a_to_b if a == root else a_to_b @ from_a)
-    return out
+    component = graph.subgraph(out)
+    if component.number_of_edges() < len(out):  # a tree: nothing over-determined
+        return out
+    edges = [d["edge"] for _, _, d in component.edges(data=True)]
+    to_root = adjust_frames(root, {k: f[0] for k, f in out.items()}, edges, centres)
+    return {k: (t, t.inverse()) if k != root else out[root] for k, t in to_root.items()}
+
+
+ROTATION_SCALE_M = 0.3 / math.radians(2.0)
+"""Metres one radian of a pair's rotation error weighs in :func:`adjust_frames`: a merge's
+"right" bounds (2°, 0.3 m; ``fusion.calibration``) count alike."""
+
+
+def adjust_frames(root: int, to_root: Mapping[int, Rigid2D], edges: Sequence[Edge],
+                  centres: Mapping[int, np.ndarray] | None = None) -> dict[int, Rigid2D]:
+    """The least-squares frames of a connected set of robots given their pairwise merges.
+
+    Each edge ``(i, j)`` asks that robot j's frame, seen through ``T_ij`` and robot i's frame,
+    land where robot j's own frame puts it: the residuals are the two placements' distance at
+    robot j's map centre (metres) and their rotation difference (× :data:`ROTATION_SCALE_M`).
+    Solved with ``scipy.optimize.least_squares`` from ``to_root``, ``root`` held at the
+    identity — the pose-graph optimisation that follows a consistent-set selection (as in
+    PCM): with every edge consistent, a plain (non-robust) fit.
+
+    Args:
+        root: the robot whose frame is the reference.
+        to_root: a first guess per robot (its frame → root's), ``root`` included.
+        edges: merges between robots of ``to_root``.
+        centres: each robot's map centre in its own frame (missing: its origin).
+
+    Returns:
+        ``{robot: its frame → root's}`` for the robots of ``to_root``.
+
+    Raises:
+        ValueError: ``root`` not in ``to_root``, or an edge to a robot outside it.
+    """
+    if root not in to_root:
+        raise ValueError(f"root {root!r} is not among the robots {sorted(to_root)}")
+    for e in edges:
+        if e.i not in to_root or e.j not in to_root:
+            raise ValueError(f"edge ({e.i}, {e.j}) leaves the robots {sorted(to_root)}")
+    free = sorted(k for k in to_root if k != root)
+    if not free or not edges:
+        return dict(to_root)
+    slot = {k: n for n, k in enumerate(free)}
+    centres = centres or {}
+    at = {k: np.asarray(centres.get(k, (0.0, 0.0)), dtype=np.float64) for k in to_root}
+    # per edge: robot j's centre in robot i's frame through T_ij, and in its own frame
+    via = np.array([e.transform.R @ at[e.j] + e.transform.T for e in edges])
+    own = np.array([at[e.j] for e in edges])
+    theta_ij = np.array([e.transform.theta for e in edges])
+    # rows of the poses vector [0 (root), x...] each edge's ends read
+    ii = np.array([0 if e.i == root else 1 + slot[e.i] for e in edges])
+    jj = np.array([0 if e.j == root else 1 + slot[e.j] for e in edges])
+
+    m = len(edges)
+    rows = np.arange(m)
+
+    def rotated(x: np.ndarray) -> tuple[np.ndarray, ...]:
+        poses = np.vstack([np.zeros(3), x.reshape(-1, 3)])  # theta, tx, ty per robot
+        ci, si = np.cos(poses[ii, 0]), np.sin(poses[ii, 0])
+        cj, sj = np.cos(poses[jj, 0]), np.sin(poses[jj, 0])
+        return (poses, ci * via[:, 0] - si * via[:, 1], si * via[:, 0] + ci * via[:, 1],
+                cj * own[:, 0] - sj * own[:, 1], sj * own[:, 0] + cj * own[:, 1])
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        poses, vx, vy, ox, oy = rotated(x)
+        turn = np.remainder(poses[ii, 0] + theta_ij - poses[jj, 0] + math.pi,
+                            2 * math.pi) - math.pi
+        return np.concatenate([vx + poses[ii, 1] - ox - poses[jj, 1],
+                               vy + poses[ii, 2] - oy - poses[jj, 2], turn * ROTATION_SCALE_M])
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        _, vx, vy, ox, oy = rotated(x)
+        jac = np.zeros((3 * m, 3 * (len(free) + 1)))
+        for r, (di, dj) in enumerate((((-vy, 1, 0), (oy, -1, 0)), ((vx, 0, 1), (-ox, 0, -1)),
+                                      ((ROTATION_SCALE_M, 0, 0), (-ROTATION_SCALE_M, 0, 0)))):
+            for col in range(3):  # d/d theta, d/d tx, d/d ty of each end's pose
+                jac[r * m + rows, 3 * ii + col] += di[col]
+                jac[r * m + rows, 3 * jj + col] += dj[col]
+        return jac[:, 3:]  # the root's pose is fixed
+
+    x0 = np.concatenate([[to_root[k].theta, *to_root[k].T] for k in free])
+    x = least_squares(residuals, x0, jac=jacobian, method="lm").x
+    return {root: to_root[root], **{k: Rigid2D(x[3 * slot[k]], x[3 * slot[k] + 1:3 * slot[k] + 3])
+                                    for k in free}}

@@ -337,7 +337,7 @@ class TeamMerging:
             edges = [e for e in edges if e.i in held and e.j in held]
             check = consistent_edges(edges, centres, check=self.config.cycle_check,
                                      min_unconfirmed=self._min_unconfirmed)
-            frames = frames_from(r, check.consistent)
+            frames = frames_from(r, check.consistent, centres)
             old = self.frames[r]
             if frames.keys() != old.keys() or any(
                     frames[j][0] is not old[j][0] and not frames[j][0].allclose(old[j][0])
