@@ -84,14 +84,31 @@ class SB3Explorer(Explorer):
         self._since = self.hold
 
     @staticmethod
-    def load_policy(path: str | Path, device: str = "cpu") -> Any:
-        """Load a model saved by ``train.py`` (a PPO ``.zip``)."""
+    def load_policy(path: str | Path, device: str = "cpu", n_robots: int | None = None) -> Any:
+        """Load a model saved by ``train.py`` (a PPO ``.zip``).
+
+        ``n_robots``: the team it will drive, when that is not the team it was trained with. A
+        team policy reads its teammates as a set (``teammates`` rows, :mod:`agents.policy`), so
+        its weights fit any team size: the model is rebuilt for ``n_robots − 1`` rows
+        (:func:`team_space`) and the same weights loaded.
+
+        Raises:
+            FileNotFoundError: no file at ``path``.
+            ValueError: ``n_robots`` outside 2–8, or another team size for a policy trained on
+                ``two_robot_explore_v0`` (its single ``teammate`` input is not a set).
+        """
         from stable_baselines3 import PPO
 
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no saved model at {str(path)!r}")
-        return PPO.load(path, device=device)
+        model = PPO.load(path, device=device)
+        if n_robots is None:
+            return model
+        space = team_space(model.observation_space, n_robots)
+        if space is model.observation_space:
+            return model
+        return PPO.load(path, device=device, custom_objects={"observation_space": space})
 
     def _predict(self, observation: dict[str, Any]) -> Any:
         """The policy's mode, or a sample drawn with this explorer's own generator (so a
@@ -131,6 +148,36 @@ class SB3Explorer(Explorer):
         return self._action
 
 
+def team_space(space: Any, n_robots: int) -> Any:
+    """A team policy's Dict observation ``space`` for a team of ``n_robots``: its ``teammates``
+    rows (each bounded alike) repeated or cut to ``n_robots − 1``; ``space`` itself when it has
+    that many. Everything else stays, the critic-only ``state`` included (an actor never reads
+    it and :class:`SB3Explorer` fills it with zeros of its trained shape).
+
+    Raises:
+        ValueError: ``n_robots`` outside 2–8; a two-robot policy's space (``teammate``, not
+            ``teammates``) for another team size.
+    """
+    from gymnasium import spaces
+
+    from envs.two_robot_explore.config import MAX_ROBOTS
+
+    if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
+        raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")
+    rows = space.spaces.get("teammates")
+    if rows is None:
+        if n_robots == 2:
+            return space
+        raise ValueError(f"n_robots={n_robots}: this policy was trained on "
+                         f"two_robot_explore_v0 (one 'teammate' input, not a set of "
+                         f"'teammates'); train it with train.py --n-robots to drive other teams")
+    if rows.shape[0] == n_robots - 1:
+        return space
+    low = np.repeat(rows.low[:1], n_robots - 1, axis=0)
+    high = np.repeat(rows.high[:1], n_robots - 1, axis=0)
+    return spaces.Dict({**space.spaces, "teammates": spaces.Box(low, high, dtype=rows.dtype)})
+
+
 def sample_action(dist: Any, rng: np.random.Generator, space: Any) -> int | np.ndarray:
     """One action drawn with ``rng`` from a torch distribution over a batch of one: a
     ``Categorical`` gives an index, anything else its ``mean`` and ``stddev`` a diagonal
@@ -152,13 +199,18 @@ def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "contin
     :class:`~agents.scripted.Blackboard` as in :class:`agents.goals.FrontierGoalEnv`.
 
     Raises:
-        ValueError: ``n_robots`` is not an integer from 2 to 8 (the env's team sizes).
+        ValueError: ``n_robots`` is not an integer from 2 to 8 (the env's team sizes), or not
+            the team ``policy``'s observation space was built for (load it for this team
+            with ``SB3Explorer.load_policy(path, n_robots=...)``).
     """
     from agents.scripted import Blackboard
-    from envs.two_robot_explore.config import MAX_ROBOTS
 
-    if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
-        raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")
+    space = getattr(policy, "observation_space", None)
+    if hasattr(space, "spaces") and team_space(space, n_robots) is not space:
+        rows = space.spaces["teammates"].shape[0] if "teammates" in space.spaces else 1
+        raise ValueError(f"n_robots={n_robots}: the policy's observations are for a team of "
+                         f"{rows + 1}; load it with SB3Explorer.load_policy(path, "
+                         f"n_robots={n_robots}) to drive this team")
     board = Blackboard()
     return {f"robot_{i}": SB3Explorer(policy, deterministic, action_type, blackboard=board)
             for i in range(n_robots)}

@@ -50,11 +50,9 @@ def make_team(name: str, action_type: str = "continuous", env: Any = None,
     if name.startswith("sb3:"):
         from agents.sb3_explorer import SB3Explorer, sb3_team
 
-        policy = SB3Explorer.load_policy(name[4:])
-        if len(agents) == 2:
-            team = sb3_team(policy, action_type=action_type)
-        else:
-            team = sb3_team(policy, action_type=action_type, n_robots=len(agents))
+        # a team policy drives any team size (its teammates are a set)
+        policy = SB3Explorer.load_policy(name[4:], n_robots=len(agents))
+        team = sb3_team(policy, action_type=action_type, n_robots=len(agents))
     elif name == "coordinated_frontier":
         board = Blackboard()
         team = {a: CoordinatedFrontier(robot_index(a), board, action_type=action_type)

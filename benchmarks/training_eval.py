@@ -25,8 +25,9 @@ and once per world ``Frontier``,
 default ``ahead``: always the frontier in front), plus ``--baselines``.
 
 **Teams.** ``--n-robots N`` (and ``--comm-range R``) evaluates every explorer with N robots
-(``multi_robot_explore_v0`` for N > 2) on the same worlds; a run must have been trained with
-the same N (its ``args.json``), or its observations would not fit.
+(``multi_robot_explore_v0`` for N > 2) on the same worlds; a run trained with two robots
+must be evaluated with two (its ``teammate`` input is not a set), while an SB3 run trained with
+a team of 3 or more drives any team of 3 or more (``SB3Explorer.load_policy(n_robots=N)``).
 
 **Statistics** (the practice of ``rliable``, Agarwal et al. 2021): for every explorer and
 world, ratio = T / the reference's T on that world (``--reference``, default ``frontier``);
@@ -123,8 +124,9 @@ def _policy_path(run: str | Path, best: bool) -> Path:
 
 
 @functools.lru_cache(maxsize=8)
-def _policy(run: str, best: bool = False) -> tuple[Any, dict[str, Any]]:
-    """A run's policy (:func:`_policy_path`) and its env config (loaded once per process)."""
+def _policy(run: str, best: bool = False, n: int | None = None) -> tuple[Any, dict[str, Any]]:
+    """A run's policy (:func:`_policy_path`), for a team of ``n`` when that is not the run's
+    own, and its env config (loaded once per process)."""
     import train
 
     run_dir = Path(run)
@@ -138,7 +140,7 @@ def _policy(run: str, best: bool = False) -> tuple[Any, dict[str, Any]]:
     if path.is_file():
         from agents.sb3_explorer import SB3Explorer
 
-        policy = SB3Explorer.load_policy(path)
+        policy = SB3Explorer.load_policy(path, n_robots=n)
     else:
         from agents.rllib import RLlibPolicy
 
@@ -158,7 +160,7 @@ def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
 
     if explorer.startswith(POLICY_KINDS):
         kind, _, run = explorer.partition(":")
-        policy, config = _policy(run, kind.startswith("best-"))
+        policy, config = _policy(run, kind.startswith("best-"), n)
         return sb3_team(policy, deterministic=kind.endswith("run"), n_robots=n), config
     if explorer.startswith("rule:"):
         board = Blackboard()
@@ -392,9 +394,11 @@ def main() -> None:
             if not (run / "args.json").is_file():
                 parser.error(f"{run}: not a train.py run folder (no args.json)")
             trained = json.loads((run / "args.json").read_text()).get("n_robots", 2)
-            if trained != opts.n_robots:
+            if trained != opts.n_robots and (min(trained, opts.n_robots) == 2
+                                              or not (run / "model.zip").is_file()):
                 parser.error(f"{run} was trained with {trained} robots, --n-robots is "
-                             f"{opts.n_robots}")
+                             f"{opts.n_robots}: only an SB3 team policy (3 or more robots) "
+                             f"drives a team of another size (3 or more)")
             try:
                 _policy_path(run, opts.best)
             except SystemExit as missing:

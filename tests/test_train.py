@@ -341,3 +341,39 @@ def test_goal_level_team_of_three_trains_one_policy(tmp_path):
     model = PPO.load(run / "model.zip", device="cpu")
     assert model.observation_space["teammates"].shape == (2, 7) and model.goal_hold == 2
     assert "| ppo |" in (run / "eval.md").read_text()
+    # its teammates are a set: the same weights drive a team of five, or of two
+    import torch
+
+    from agents.base import run_episode
+    from agents.sb3_explorer import SB3Explorer, sb3_team
+    from agents.team import make_team
+    from envs import multi_robot_explore_v0
+
+    with pytest.raises(ValueError, match=r"n_robots=5: the policy's observations are for a "
+                                         r"team of 3; load it with SB3Explorer.load_policy"):
+        sb3_team(model, n_robots=5)
+    for n in (5, 2):
+        resized = SB3Explorer.load_policy(run / "model.zip", n_robots=n)
+        assert resized.observation_space["teammates"].shape == (n - 1, 7)
+        for name, value in model.policy.state_dict().items():
+            assert torch.equal(value, resized.policy.state_dict()[name]), name
+        env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=6,
+                                                  world={"size": (12.0, 12.0)})
+        out = run_episode(env, make_team(f"sb3:{run / 'model.zip'}", env=env), seed=1)
+        assert out["steps"] == 6 and len(out["infos"]) == n
+    assert SB3Explorer.load_policy(run / "model.zip", n_robots=3).observation_space == (
+        model.observation_space)
+
+
+def test_a_two_robot_policy_refuses_other_team_sizes():
+    from gymnasium import spaces
+
+    from agents.sb3_explorer import team_space
+
+    two = spaces.Dict({"teammate": spaces.Box(-1, 1, (5,))})
+    assert team_space(two, 2) is two
+    with pytest.raises(ValueError, match="n_robots=4: this policy was trained on "
+                                         "two_robot_explore_v0"):
+        team_space(two, 4)
+    with pytest.raises(ValueError, match="n_robots must be between 2 and 8, got 9"):
+        team_space(two, 9)

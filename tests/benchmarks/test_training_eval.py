@@ -55,3 +55,34 @@ def test_policy_path_picks_the_final_or_the_best_policy(tmp_path):
     # the best policy is another explorer, cached apart from the final one
     world = te.heldout_worlds(1, real=False)[0]
     assert te._key(f"run:{tmp_path}", world) != te._key(f"best-run:{tmp_path}", world)
+
+
+@pytest.mark.parametrize(("trained", "n", "ok"), [(2, 4, False), (4, 2, False), (3, 6, True),
+                                                  (4, 4, True)])
+def test_only_team_policies_are_evaluated_with_another_team_size(tmp_path, monkeypatch,
+                                                                 capsys, trained, n, ok):
+    import json
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "args.json").write_text(json.dumps({"n_robots": trained}))
+    (run / "model.zip").write_bytes(b"not read before the episodes")
+
+    class Checked(Exception):
+        """The checks passed: the episodes would run now."""
+
+    def run_all(*_args):
+        raise Checked
+
+    monkeypatch.setattr(te, "run_all", run_all)
+    monkeypatch.setattr(sys, "argv", ["training_eval.py", str(run), "--n-robots", str(n),
+                                      "--worlds", "1", "--skip-real", "--baselines",
+                                      "--rules", "--out", str(tmp_path / "out")])
+    if ok:
+        with pytest.raises(Checked):
+            te.main()
+    else:
+        with pytest.raises(SystemExit):
+            te.main()
+        assert (f"was trained with {trained} robots, --n-robots is {n}: only an SB3 team "
+                "policy") in capsys.readouterr().err
