@@ -148,6 +148,14 @@ class SB3Explorer(Explorer):
         return self._action
 
 
+def _check_team_size(n_robots: Any) -> None:
+    """Raise unless ``n_robots`` is an integer from 2 to 8 (the env's team sizes)."""
+    from envs.two_robot_explore.config import MAX_ROBOTS
+
+    if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
+        raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")
+
+
 def team_space(space: Any, n_robots: int) -> Any:
     """A team policy's Dict observation ``space`` for a team of ``n_robots``: its ``teammates``
     rows (each bounded alike) repeated or cut to ``n_robots − 1``; ``space`` itself when it has
@@ -160,10 +168,7 @@ def team_space(space: Any, n_robots: int) -> Any:
     """
     from gymnasium import spaces
 
-    from envs.two_robot_explore.config import MAX_ROBOTS
-
-    if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
-        raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")
+    _check_team_size(n_robots)
     rows = space.spaces.get("teammates")
     if rows is None:
         if n_robots == 2:
@@ -205,6 +210,7 @@ def sb3_team(policy: Any, deterministic: bool = True, action_type: str = "contin
     """
     from agents.scripted import Blackboard
 
+    _check_team_size(n_robots)
     space = getattr(policy, "observation_space", None)
     if hasattr(space, "spaces") and team_space(space, n_robots) is not space:
         rows = space.spaces["teammates"].shape[0] if "teammates" in space.spaces else 1
