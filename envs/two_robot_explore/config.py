@@ -195,6 +195,12 @@ class RobotConfig:
             (variances: rotation from rotation, rotation from translation, translation from
             translation, translation from rotation), or the name of a preset of
             :data:`ODOMETRY_PRESETS` (``"pioneer3dx"``), stored as its four numbers.
+        drift_correction: correct the odometry against the robot's own map by scan-to-map
+            matching (``envs.two_robot_explore.localize``); only with noisy odometry.
+        drift_correction_every: steps between two matches.
+        drift_correction_window: steps of sonar echoes in a match's submap.
+        drift_correction_age: the match's reference is the walls occupied this many steps ago.
+        drift_correction_sigma: metres; the match's information is ``JᵀJ / sigma²``.
     """
 
     radius: float = 0.25
@@ -205,6 +211,11 @@ class RobotConfig:
     odometry_model: str = "increment"
     odometry_noise: tuple[float, float] = (0.0, 0.0)
     odometry_alphas: tuple[float, float, float, float] | str = (0.0, 0.0, 0.0, 0.0)
+    drift_correction: bool = False
+    drift_correction_every: int = 25
+    drift_correction_window: int = 150
+    drift_correction_age: int = 300
+    drift_correction_sigma: float = 3.0
 
     def __post_init__(self) -> None:
         _set(self, "radius", check_real(self.radius, "robot.radius", low=0.0, high=2.0))
@@ -230,6 +241,12 @@ class RobotConfig:
                 f"{self.odometry_noise} with odometry_model 'rot_trans_rot' (use "
                 f"robot.odometry_alphas)"
             )
+        _check_bool(self.drift_correction, "robot.drift_correction")
+        for name in ("every", "window", "age"):
+            key = f"drift_correction_{name}"
+            _set(self, key, check_int(getattr(self, key), f"robot.{key}", low=1))
+        _set(self, "drift_correction_sigma", check_real(
+            self.drift_correction_sigma, "robot.drift_correction_sigma", low=0.0))
         step = self.max_speed * self.dt / self.substeps
         if step > self.radius:
             raise ValueError(

@@ -330,6 +330,10 @@ are a ``ValueError``.
 | ``robot.odometry_model`` | str | ``"increment"`` | or ``"rot_trans_rot"`` (Thrun's α1–α4 model) |
 | ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of ``"increment"`` odometry |
 | ``robot.odometry_alphas`` | 4 floats or str | 0s | α1–α4, or ``"pioneer3dx"`` |
+| ``robot.drift_correction`` | bool | False | scan-to-map odometry correction (noisy only) |
+| ``robot.drift_correction_every`` | int | 25 | steps between matches (``localize``) |
+| ``robot.drift_correction_window`` / ``_age`` | int | 150 / 300 | echoes' steps, walls' age |
+| ``robot.drift_correction_sigma`` | float | 3 | m per echo of the match's information |
 | ``sonar.rays`` / ``cone`` | int / float | 3 / 15 | rays per cone, cone width (°) |
 | ``sonar.min_range`` / ``max_range`` | float | 0.15 / 5 | m |
 | ``sonar.noise_std`` | float | 0.01 | m |
@@ -398,6 +402,7 @@ from envs.two_robot_explore.global_state import (
     state_scalars,
     state_space,
 )
+from envs.two_robot_explore.localize import DriftCorrector
 from envs.two_robot_explore.mapping import (
     LocalMapSampler,
     OracleCoverage,
@@ -633,6 +638,12 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
                                      robots=n)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         self._merging = TeamMerging(n, cfg.mapping, odometry_noise_level(cfg.robot))
+        self._correctors = [None] * n
+        if cfg.robot.drift_correction and odometry_noise_level(cfg.robot) > 0.0:
+            self._correctors = [
+                DriftCorrector(cfg.robot, s.angles, s.mount_radius, cfg.sonar.max_range,
+                               m.geometry.shape, m.geometry.origin, m.geometry.resolution)
+                for s, m in zip(self.sonars, self.maps, strict=True)]
         self.views = TeamViews(self.maps, cfg.comm)
         self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0
@@ -757,6 +768,10 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
             self.caster.discs[i] = pose[:2]
         for i, (pose, sonar) in enumerate(zip(poses, self.sonars, strict=True)):
             sonar.measure(self.caster, pose, i, self._rng, travelled[i])
+            if self._correctors[i] is not None:
+                self._correctors[i].step(self.steps, self.robots[i].odometry,
+                                         sonar.last if sonar.fresh else None,
+                                         self.maps[i].grid.log_odds)
             if not sonar.fresh:
                 self._own_delta[i] = 0
                 continue
