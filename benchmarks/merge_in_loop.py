@@ -3,6 +3,7 @@ the grid alignment costs once a merge is in use.
 
     python benchmarks/merge_in_loop.py [--explorer frontier] [--worlds 20] [--size 20]
         [--steps 3000] [--first-seed 0] [--odometry-noise S] [--odometry-alphas A]
+        [--drift-prior] [--drift-correction [KEY=VALUE ...]]
 
 For each seed ``first_seed .. first_seed + worlds - 1`` (its own procedural ``size`` m
 building) one episode of ``--steps`` steps with a scripted team (``agents.scripted``), defaults
@@ -16,7 +17,9 @@ name); the table then adds the steps wrong against the env's start-frame truth
 (``env.merge_errors()``, at robot 1's map centroid), which no rigid transform can match once
 the maps are bent, the accepted merge results more than 5° off (drift-aware) at a confidence
 of 0.9 or more ("confident wrong"), and the robots' odometry drift at the end (metres, the
-larger of the two). ``--drift-prior`` gives every merge the grids' ``drift_prior``
+larger of the two). ``--drift-correction [KEY=VALUE ...]`` turns on the robots' own drift correction
+(``robot.drift_correction``, ``envs.two_robot_explore.localize``; e.g. ``sigma=1.0`` sets
+``robot.drift_correction_sigma``). ``--drift-prior`` gives every merge the grids' ``drift_prior``
 (``fusion.grid_merge.drift_prior`` of the odometry noise — ``sqrt(α1)`` for the alphas — and
 the env's steps), as the env's merging should: the benchmark wraps ``fusion.hybrid``'s
 ``hybrid_merge`` and ``recheck`` to do it. Per episode: the first step merged, steps
@@ -189,8 +192,16 @@ def main() -> None:
                              "every grid_merge_every steps, whether or not the maps grew)")
     parser.add_argument("--drift-prior", action="store_true",
                         help="give the merges the grids' drift_prior (module docstring)")
+    parser.add_argument("--drift-correction", nargs="*", default=None, metavar="KEY=VALUE",
+                        help="robot.drift_correction = True, with further "
+                             "robot.drift_correction_<KEY> = VALUE settings")
     args = parser.parse_args()
     robot = robot_kwargs(args.odometry_noise, args.odometry_alphas)
+    if args.drift_correction is not None:
+        robot["drift_correction"] = True
+        for item in args.drift_correction:
+            key, value = item.split("=")
+            robot[f"drift_correction_{key}"] = float(value) if "." in value else int(value)
     prior = _DriftPrior(prior_noise(robot)) if args.drift_prior else None
     mapping = ({} if args.grid_merge_growth is None
                else {"grid_merge_growth": args.grid_merge_growth})
