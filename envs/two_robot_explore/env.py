@@ -330,7 +330,7 @@ are a ``ValueError``.
 | ``robot.odometry_model`` | str | ``"increment"`` | or ``"rot_trans_rot"`` (Thrun's α1–α4 model) |
 | ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of ``"increment"`` odometry |
 | ``robot.odometry_alphas`` | 4 floats or str | 0s | α1–α4, or ``"pioneer3dx"`` |
-| ``robot.drift_correction`` | bool | False | scan-to-map odometry correction (noisy only; experimental) |
+| ``robot.drift_correction`` | bool | False | experimental odometry correction (noisy only) |
 | ``robot.drift_correction_every`` | int | 25 | steps between matches (``localize``) |
 | ``robot.drift_correction_window`` / ``_age`` | int | 150 / 300 | echoes' steps, walls' age |
 | ``robot.drift_correction_sigma`` | float | 3 | m per echo of the match's information |
