@@ -462,8 +462,9 @@ def test_drop_margin_is_checked():
 
 def test_with_a_drift_prior_a_structural_merge_needs_the_grids_confidence(monkeypatch):
     """Drifting odometry: the structural merge's confidence knows nothing of drift, so an
-    accepted structural merge also needs the grids' calibrated confidence (which weighs the
-    drift prior) when their best alignment is the same; without a prior it is not asked."""
+    accepted structural merge also needs the grids' best alignment to be the same one, at
+    their calibrated confidence (which weighs the drift prior); without a prior they are not
+    asked."""
     import dataclasses
 
     import fusion.grid_merge as gm
@@ -495,6 +496,15 @@ def test_with_a_drift_prior_a_structural_merge_needs_the_grids_confidence(monkey
         real(ga, gb, config), accepted=True, confidence=0.99, reason=None))
     res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
     assert res.accepted and res.supplied_by == "structural"
+    # confident grids whose best alignment is another one do not vouch for it either
+    turned = Rigid2D.from_degrees(180.0) @ truth
+    monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
+        real(ga, gb, config), transform=turned, accepted=True, confidence=0.99, reason=None))
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
+    assert not res.accepted
+    assert ("structural merge refuted by the grids: with drift_prior 0.04 the grids' best "
+            "alignment is another one") in res.reason
+    assert hybrid_merge(TINY, TINY, a, b, try_grids=False).accepted  # no drift: not asked
 
 
 def test_drift_prior_is_the_noise_over_the_steps_and_a_feature():
