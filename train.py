@@ -155,9 +155,9 @@ class Args:
     """``--backend sb3``: train on buildings of several sizes, the ``n_envs`` envs spread
     evenly from ``world_size`` to this side (metres), each env's episodes lengthened in
     proportion (``max_cycles`` is the first's); evaluation stays on ``world_size``. Default:
-    :data:`DEFAULT_WORLD_SIZE_MAX` (20 m: the measured recipe, held-out T85 0.84× Frontier's
-    against 1.01× for 10 m buildings alone), or every env on ``world_size`` when that is as
-    large or the backend is RLlib. Set it to ``max(world_size)`` for one size."""
+    :data:`DEFAULT_WORLD_SIZE_MAX` (20 m: the measured recipe, ``benchmarks/training.md``), or
+    every env on ``world_size`` when that is as large or the backend is RLlib. Set it to
+    ``max(world_size)`` for one size."""
     max_cycles: int = 500
     """Env steps per episode (truncation); with 10 m buildings Frontier reaches 85 % in
     about 300–500 steps, so T85 separates explorers."""

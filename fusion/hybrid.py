@@ -165,7 +165,7 @@ def _drifted(grid: gm.GridMergeResult, transform: Rigid2D,
     (``cfg.drift_prior > 0``): the grids' best alignment is another one, or the same one with
     a calibrated confidence, which weighs the drift, below ``accept_threshold``; ``None``
     otherwise. The structural merge's own confidence knows nothing of drift, so under drift
-    only the grids can vouch for it (a look-alike of bent maps reached 0.96 structurally)."""
+    only the grids can vouch for it."""
     if grid.centre is None:
         return None
     if gm.distinct(grid.transform, transform, grid.centre, cfg):

@@ -197,8 +197,7 @@ class RobotConfig:
             :data:`ODOMETRY_PRESETS` (``"pioneer3dx"``), stored as its four numbers.
         drift_correction: correct the odometry against the robot's own map by scan-to-map
             matching (``envs.two_robot_explore.localize``); only with noisy odometry.
-            Experimental: with 8 sonars it leaves the drift about where it is (held-out end
-            pose error 0.84 → 0.83 m at σ 0.02, ``benchmarks/drift.md``).
+            Experimental: measured not to reduce these robots' drift (``benchmarks/drift.md``).
         drift_correction_every: steps between two matches.
         drift_correction_window: steps of sonar echoes in a match's submap.
         drift_correction_age: the match's reference is the walls occupied this many steps ago.

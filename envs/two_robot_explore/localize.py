@@ -31,9 +31,8 @@ estimate back onto the robot's own older map, a scan-to-map match done every
   what the noise accumulated since the last one allows. A fit whose Mahalanobis distance
   exceeds :data:`GATE` (χ² with 3 degrees of freedom, p = 0.01) is rejected.
 
-**It does not pay** (``benchmarks/drift.md``, 2026-12-06, correction inside each robot's
-map): on the tuning seeds every setting that corrects noticeably leaves the robots' drift the
-same or larger; ``robot.drift_correction`` is off by default.
+Measured not to reduce these robots' drift (``benchmarks/drift.md``), so
+``robot.drift_correction`` is off by default.
 
 Applied corrections move :attr:`Robot.odometry` (the env then draws new cells where they belong
 and the drift-aware truth follows the corrected frame) and the buffered echoes with it. Nothing
