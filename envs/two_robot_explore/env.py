@@ -931,8 +931,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         truth is drift-aware (``envs.two_robot_explore.drift.drift_aware_error``: the
         transform that is right at the robots' current places, errors measured there)."""
         worst = (math.nan, math.nan)
-        robot = self.config.robot
-        drifts = any(robot.odometry_noise) or any(robot.odometry_alphas)
+        drifts = odometry_noise_level(self.config.robot) > 0.0
         for j, (to_0, _) in sorted(self.shared.members.items()):
             if drifts:
                 rot, trans = drift_aware_error(to_0, self.robots[0], self.robots[j])

@@ -49,5 +49,8 @@ def test_odometry_noise_level_reads_either_model():
     assert odometry_noise_level(RobotConfig()) == 0.0
     assert odometry_noise_level(RobotConfig(odometry_noise=(0.01, 0.03))) == 0.03
     assert odometry_noise_level(RobotConfig(**PIONEER)) == pytest.approx(0.05)
+    # rotations exact, translations noisy: it drifts (the env's one "does it drift?" test)
+    only_trans = RobotConfig(odometry_model="rot_trans_rot", odometry_alphas=(0, 0, 0.03 ** 2, 0))
+    assert odometry_noise_level(only_trans) == pytest.approx(0.03)
     with pytest.raises(TypeError, match="cfg must be a RobotConfig, got dict"):
         odometry_noise_level({})
