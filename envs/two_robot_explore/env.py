@@ -393,7 +393,7 @@ from envs.two_robot_explore.actions import DISCRETE_ACTIONS, action_space, parse
 from envs.two_robot_explore.comm import TeamViews
 from envs.two_robot_explore.config import EnvConfig
 from envs.two_robot_explore.copies import History, ReplayCopies
-from envs.two_robot_explore.drift import drift_aware_error, odometry_noise_level
+from envs.two_robot_explore.drift import odometry_noise_level
 from envs.two_robot_explore.global_state import (
     STATE_MAP_SIZE,
     STATE_SAMPLES,
@@ -402,14 +402,13 @@ from envs.two_robot_explore.global_state import (
     state_scalars,
     state_space,
 )
+from envs.two_robot_explore.infos import merge_errors, step_infos
 from envs.two_robot_explore.localize import DriftCorrector
 from envs.two_robot_explore.mapping import (
-    LocalMapSampler,
     OracleCoverage,
     RobotMap,
     RobotMapSnapshot,
     SharedMap,
-    compose_pose,
 )
 from envs.two_robot_explore.merging import (
     MERGE_METHODS,
@@ -423,7 +422,7 @@ from envs.two_robot_explore.observations import (
     MAX_DEGREE,
     N_NODE_FEATURES,
     TEAMMATE_FEATURES,
-    GraphEncoder,
+    Observer,
     observation_space,
 )
 from envs.two_robot_explore.raycast import RayCaster
@@ -524,8 +523,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
         self._build_spaces()
         self.state_space = state_space(config.n_robots)
-        self._sampler = LocalMapSampler(cfg.mapping.local_map_size,
-                                        cfg.mapping.local_map_resolution)
+        self._observer = Observer(config, self.frame_radius, self.two_robot)
         self._rng: np.random.Generator | None = None
         self._renderer = None
         self._ready = False
@@ -539,10 +537,6 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self._observation_spaces = {a: observation_space(self.config, self.frame_radius,
                                                          self.two_robot) for a in agents}
         self._action_spaces = {a: action_space(self.config.action_type) for a in agents}
-        obs = self._observation_spaces[agents[0]]
-        self._obs_low = {k: sp.low for k, sp in obs.spaces.items()}
-        self._obs_high = {k: sp.high for k, sp in obs.spaces.items()}
-        self._odo_bound = float(self._obs_high["odometry"][0])  # R as a float32 value
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object every call)."""
@@ -622,8 +616,8 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(n)]
         # map frames: each robot's start; the truth frame_i -> world is its start pose
         self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
-        self._frame_inverses = [f.inverse() for f in self.frames]
-        self.true_merge = self._frame_inverses[0] @ self.frames[1]
+        self._truths = [[f_i.inverse() @ f_j for f_j in self.frames] for f_i in self.frames]
+        self.true_merge = self._truths[0][1]
         x0, y0, x1, y1 = world.extent
         corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
         self.maps = []
@@ -654,8 +648,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self._own_delta = [0] * n
         self._oracle_delta = 0
         self._coll_delta = [0] * n
-        self._graphs = [GraphEncoder(cfg.mapping.max_nodes, self.frame_radius)
-                        for _ in range(n)]
+        self._observer.reset(n)
         self.agents = list(self.possible_agents)
         self._ready = True
         self._contacts_changed = False
@@ -792,7 +785,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
                         1.0 + cfg.mapping.topo_growth):
                     self._extracted_at[i] = rmap.n_ever
                     rmap.extract(cfg.mapping.topo)
-                    self._graphs[i].refresh(rmap.topomap)
+                    self._observer.graphs[i].refresh(rmap.topomap)
 
     def _contact(self, step: int) -> None:
         """Who is in contact now (before this step's odometry and scans enter the maps);
@@ -857,129 +850,30 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
     def _observe_one(self, i: int, live: list[np.ndarray] | None = None
                      ) -> dict[str, np.ndarray]:
         """Robot ``i``'s observation (``live``: every robot's odometry now)."""
-        if live is None:
-            live = [r.odometry for r in self.robots]
-        cfg = self.config
-        robot = self.robots[i]
-        ox, oy, oth = robot.odometry.tolist()
-        c, s = math.cos(oth), math.sin(oth)
-        # clipped as floats, then rounded: the bounds are float32 values, so this is the
-        # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
-        r = self._odo_bound
-        odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
-        sonar = (self.sonars[i].last / cfg.sonar.max_range).astype(np.float32)
-        nodes, mask, adj = self._graphs[i].encode(self.maps[i].topomap, ox, oy, c, s)
-        obs = {
-            "sonar": sonar,
-            "odometry": odometry,
-            "graph_nodes": nodes,
-            "graph_mask": mask,
-            "graph_adjacency": adj,
-            "local_map": self._local_map(i),
-        }
-        if self.two_robot:
-            obs["teammate"] = self._teammate(i, 1 - i, ox, oy, oth, c, s, live)
-        else:
-            obs["teammates"] = np.stack([self._teammate(i, j, ox, oy, oth, c, s, live)
-                                         for j in range(self.n_robots) if j != i])
-        return obs
-
-    def _teammate(self, i: int, j: int, ox: float, oy: float, oth: float, c: float,
-                  s: float, live: list[np.ndarray]) -> np.ndarray:
-        """Robot ``i``'s observation row of teammate ``j`` (manual, Observations, c and h;
-        ``live``: every robot's odometry now)."""
-        key = "teammate" if self.two_robot else "teammates"
-        lo, hi = self._obs_low[key], self._obs_high[key]
-        width = 5 if self.two_robot else TEAMMATE_FEATURES
-        row = np.zeros(width, dtype=np.float32)
-        frame = self._merging.frames[i].get(j)
-        peer_odo = self.views.odometry(i, j, live)
-        if frame is not None and peer_odo is not None:
-            peer = compose_pose(frame[0], peer_odo)
-            dx, dy = peer[0] - ox, peer[1] - oy
-            dth = peer[2] - oth
-            row[:5] = (c * dx + s * dy, -s * dx + c * dy, math.cos(dth), math.sin(dth), 1.0)
-        if not self.two_robot:
-            seen = int(self.views.seen[i, j])
-            row[5] = float(self.views.in_contact(i, j))
-            row[6] = 1.0 if seen < 0 else min((self.steps - seen) / self._max_cycles, 1.0)
-        np.clip(row, lo if lo.ndim == 1 else lo[0], hi if hi.ndim == 1 else hi[0], out=row)
-        return row
-
-    def _local_map(self, i: int) -> np.ndarray:
-        own = self.maps[i]
-        odo = self.robots[i].odometry
-        others = []
-        for j, (_, from_i) in self._merging.frames[i].items():
-            if j != i:
-                peer = self.views.view(i, j)
-                others.append((peer.states, peer.geometry, compose_pose(from_i, odo)))
-        return self._sampler.image(own.states, own.geometry, odo, others)
+        return self._observer.observe(i, self.robots, self.sonars, self.maps,
+                                      self._merging.frames, self.views, self.steps,
+                                      self._max_cycles, live)
 
     # ------------------------------------------------------------------ infos
     def true_transform(self, i: int, j: int) -> Rigid2D:
         """The true transform from robot ``j``'s map frame into robot ``i``'s (their start
-        poses)."""
-        if (i, j) == (0, 1):
-            return self.true_merge
-        return self._frame_inverses[i] @ self.frames[j]
+        poses; the same object for the whole episode)."""
+        return self._truths[i][j]
 
     def merge_errors(self) -> tuple[float, float]:
         """Rotation error (degrees) and translation error (metres, at the centroid of the
         teammate's map) of the merge transforms in use in robot 0's fused map against ground
-        truth, the largest over its teammates; NaN when it has none. With odometry noise the
-        truth is drift-aware (``envs.two_robot_explore.drift.drift_aware_error``: the
-        transform that is right at the robots' current places, errors measured there)."""
-        worst = (math.nan, math.nan)
-        drifts = odometry_noise_level(self.config.robot) > 0.0
-        for j, (to_0, _) in sorted(self.shared.members.items()):
-            if drifts:
-                rot, trans = drift_aware_error(to_0, self.robots[0], self.robots[j])
-            else:
-                rot, trans = self._merging.errors(j, to_0, self.views.view(0, j).topomap,
-                                                  self.true_transform(0, j),
-                                                  self.robots[j].odometry[:2])
-            worst = (rot, trans) if math.isnan(worst[0]) else (max(worst[0], rot),
-                                                               max(worst[1], trans))
-        return worst
+        truth, the largest over its teammates; NaN when it has none; drift-aware with odometry
+        noise (:func:`envs.two_robot_explore.infos.merge_errors`)."""
+        return merge_errors(self.shared.members, self.robots, self._truths[0], self._merging,
+                            self.views, odometry_noise_level(self.config.robot) > 0.0)
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        """Small, numeric, comparable infos (manual, Infos): no NaN, no wall clock, no live
-        objects, so that equal episodes give equal infos and infos are cheap to send."""
-        in_use = bool(self.shared.members)
-        rot_err, trans_err = self.merge_errors() if in_use else (0.0, 0.0)
-        common = {
-            "true_coverage": self.oracle.fraction,
-            "true_area_m2": self.oracle.area,
-            "shared_area_m2": self.shared.area,
-            "shared_coverage": self.shared.area / self._world_area,
-            "overlap": self.oracle.overlap,
-            "merge_accepted": in_use,
-            "merge_method": MERGE_METHODS.index(self._merging.pair01.method),
-            "merge_source": MERGE_SOURCES.index(self._merging.pair01.source),
-            "merge_errors_valid": in_use,
-            "merge_rotation_error_deg": rot_err,
-            "merge_translation_error_m": trans_err,
-            "merges": self._merging.calls,
-            "merge_drops": self._merging.drops,
-        }
-        out = {}
-        for i, a in enumerate(self.possible_agents):
-            if a not in self.agents:
-                continue
-            rmap = self.maps[i]
-            robot = self.robots[i]
-            out[a] = {
-                **common,
-                "own_area_m2": rmap.n_ever * rmap.geometry.resolution ** 2,
-                "collisions": robot.collisions,
-                "pose": robot.true_pose(),
-                "odometry": robot.odometry.copy(),
-            }
-            if not self.two_robot:
-                out[a]["contacts"] = len(self.views.contacts(i))
-                out[a]["fused_robots"] = len(self._merging.frames[i])
-        return out
+        """This step's infos (manual, Infos; :func:`envs.two_robot_explore.infos.step_infos`)."""
+        errors = self.merge_errors() if self.shared.members else (0.0, 0.0)
+        return step_infos(self.agents, self.possible_agents, self.robots, self.maps,
+                          self.oracle, self.shared, self._world_area, self._merging,
+                          self.views, errors, not self.two_robot)
 
     # ------------------------------------------------------------------ snapshots, state
     def robot_map(self, agent: str) -> RobotMapSnapshot:
