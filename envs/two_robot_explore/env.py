@@ -380,7 +380,6 @@ radians) places the robots; other keys are ignored with a warning.
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Any
 
 import gymnasium
@@ -428,6 +427,7 @@ from envs.two_robot_explore.observations import (
 from envs.two_robot_explore.raycast import RayCaster
 from envs.two_robot_explore.robot import Robot, build_space, simulate
 from envs.two_robot_explore.sonar import Sonar
+from envs.two_robot_explore.starts import check_start_poses, parse_reset_options
 from envs.two_robot_explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
 
@@ -584,7 +584,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
-        self._begin(self._parse_options(options))
+        self._begin(parse_reset_options(options, self.n_robots, self.metadata["name"]))
         if self.render_mode == "human":
             self.render()
         return self._observe(), self._infos()
@@ -609,7 +609,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
             starts = world.sample_starts(rng, cfg.world.start_clearance,
                                          cfg.world.min_start_separation, n)
         else:
-            self._check_starts(starts)
+            check_start_poses(starts, world, cfg.robot.radius)
         self.robots = [Robot(i, starts[i], cfg.robot) for i in range(n)]
         self.space = build_space(world.segments, self.robots)
         self.caster = RayCaster(world.segments, cfg.robot.radius, robots=n)
@@ -655,44 +655,6 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self._contact(0)
         self._sense_and_map(travelled=[0.0] * n)
         self._history = history
-
-    def _parse_options(self, options: dict[str, Any] | None) -> np.ndarray | None:
-        if options is None:
-            return None
-        if not isinstance(options, dict):
-            raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
-        unknown = sorted(str(k) for k in options if k != "start_poses")
-        if unknown:
-            warnings.warn(
-                f"reset options {unknown} are not used by {self.metadata['name']}; known: "
-                f"['start_poses']", stacklevel=3)
-        if "start_poses" not in options:
-            return None
-        try:
-            starts = np.asarray(options["start_poses"], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError("options['start_poses'] must be numeric [[x, y, theta], ...], "
-                            "one row per robot") from exc
-        n = self.n_robots
-        if starts.shape != (n, 3) or not np.all(np.isfinite(starts)):
-            raise ValueError(f"options['start_poses'] must be finite with shape ({n}, 3) (one "
-                             f"[x, y, theta] per robot), got {starts.tolist()}")
-        return starts
-
-    def _check_starts(self, starts: np.ndarray) -> None:
-        world = self._world
-        ij = world.cell_of(starts[:, :2])
-        h, w = world.shape
-        for k, (iy, ix) in enumerate(ij):
-            if not (0 <= iy < h and 0 <= ix < w) or not world.drivable[iy, ix]:
-                raise ValueError(
-                    f"options['start_poses'][{k}] = {starts[k, :2].tolist()} is not a drivable "
-                    f"position of world {world.name!r} (free with robot clearance)")
-        for i in range(len(starts)):
-            for j in range(i + 1, len(starts)):
-                if math.dist(starts[i, :2], starts[j, :2]) < 2 * self.config.robot.radius:
-                    raise ValueError(f"options['start_poses'] put robots {i} and {j} on top "
-                                     f"of each other")
 
     # ------------------------------------------------------------------ step
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -817,8 +779,8 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         cfg = self.config
         coll = self._coll_delta
         if cfg.reward_mode == "individual":
-            area = self.maps[0].geometry.resolution ** 2
-            return {a: float(cfg.coverage_reward * self._own_delta[i] * area
+            return {a: float(cfg.coverage_reward * self._own_delta[i]
+                             * self.maps[i].geometry.resolution ** 2
                              - cfg.collision_penalty * coll[i] - cfg.time_penalty)
                     for i, a in enumerate(self.agents)}
         if cfg.reward_mode == "shared":
