@@ -17,7 +17,9 @@ transform robot j's frame → robot 0's it uses) the transform is compared with 
 ``env.true_transform(0, j)`` (the robots' start poses; odometry is perfect at the defaults):
 **wrong** is more than 2° or more than 0.3 m off (the calibration's "right": rotation < 2°,
 translation < 0.3 m), the translation error taken at the centroid of robot j's topological map
-(its places; robot j's position while it has none), as ``env.merge_errors()`` does. A
+(its places; robot j's position while it has none), as ``env.merge_errors()`` does; **grossly wrong** is
+more than 5° or 1 m off, what ``merge_in_loop.py`` calls wrong for two robots (a teammate's
+rooms on the wrong rooms, not a near miss). A
 **merged robot-step** is one teammate in robot 0's fused map for one step; the headline is
 wrong robot-steps / merged robot-steps (target ≤ 0.5 %). Also per episode: the steps with any
 teammate wrong, the first step robot 0's map held the whole team, the pair transforms in use
@@ -48,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from team_size import add_run_arguments, append_row, read_rows, run_all  # noqa: E402
 
 WRONG_DEG, WRONG_M = 2.0, 0.3
+GROSS_DEG, GROSS_M = 5.0, 1.0
 DEFAULT_OUT = Path(tempfile.gettempdir()) / "topomerge-team_merge_in_loop.jsonl"
 QUICK = {"worlds": 4, "steps": 1500}
 """What ``--quick`` sets (explicit ``--worlds`` / ``--steps`` win)."""
@@ -92,7 +95,7 @@ def episode(seed: int, n: int, size: float, steps: int, cycle_check: bool,
            "comm_range": comm_range, "merged": 0, "wrong": 0, "steps_wrong": 0,
            "first_merged": None, "fused_all": None, "first_wrong": None, "pair_steps": 0,
            "pair_wrong": 0, "pair_wrong_kept": 0, "pair_kept": 0, "worst_deg": 0.0,
-           "worst_m": 0.0}
+           "worst_m": 0.0, "gross": 0}
 
     def watch(k: int, _obs, _rewards, _infos) -> None:
         state = env.merge_state()
@@ -105,6 +108,7 @@ def episode(seed: int, n: int, size: float, steps: int, cycle_check: bool,
             bad, rot, trans = errors.wrong((0, j), transform, env.true_transform(0, j),
                                            env.maps[j].topomap, robot.odometry[:2])
             row["merged"] += 1
+            row["gross"] += rot > GROSS_DEG or trans > GROSS_M
             if bad:
                 row["wrong"] += 1
                 any_wrong = True
@@ -155,18 +159,23 @@ def tables(rows: list[dict[str, Any]]) -> str:
             f"({r['pair_wrong_kept']}) / {r['pair_steps']} | {r['drops']} | "
             f"{r['coverage']:.3f} |")
     lines += ["", "| cycle check | episodes | merged robot-steps | wrong robot-steps | wrong / "
-              "merged | episodes with a wrong step | wrong pair-steps, kept / all |",
-              "|---|---|---|---|---|---|---|"]
+              "merged | episodes with a wrong step | wrong pair-steps, kept / all | grossly wrong "
+              "(> 5° or > 1 m) / merged |",
+              "|---|---|---|---|---|---|---|---|"]
     for check in (True, False):
         rs = [r for r in rows if r["cycle_check"] == check]
         if not rs:
             continue
         merged = sum(r["merged"] for r in rs)
         wrong = sum(r["wrong"] for r in rs)
+        # rows written before the gross count existed have none
+        gross = "–" if any("gross" not in r for r in rs) else \
+            f"{sum(r['gross'] for r in rs)} ({sum(r['gross'] for r in rs) / max(merged, 1):.2%})"
         lines.append(
             f"| {'on' if check else 'off'} | {len(rs)} | {merged} | {wrong} | "
             f"{wrong / max(merged, 1):.2%} | {sum(r['wrong'] > 0 for r in rs)} | "
-            f"{sum(r['pair_wrong_kept'] for r in rs)} / {sum(r['pair_wrong'] for r in rs)} |")
+            f"{sum(r['pair_wrong_kept'] for r in rs)} / {sum(r['pair_wrong'] for r in rs)} | "
+            f"{gross} |")
     return "\n".join(lines)
 
 

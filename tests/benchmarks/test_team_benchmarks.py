@@ -73,7 +73,7 @@ def test_team_merge_in_loop_runs_both_checks(tmp_path, capsys):
     tml.main(["--n", "3", "--worlds", "1", "--steps", "20", "--size", "10", "--out", str(out)])
     rows = ts.read_rows(out)
     assert sorted(r["cycle_check"] for r in rows) == [False, True]
-    assert all(0 <= r["wrong"] <= r["merged"] and r["steps"] == 20 for r in rows)
+    assert all(0 <= r["gross"] <= r["wrong"] <= r["merged"] and r["steps"] == 20 for r in rows)
     assert "| cycle check | episodes | merged robot-steps |" in capsys.readouterr().out
 
 
