@@ -643,7 +643,6 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self.steps = 0
         self._snapshots = [None] * n
         self._state = GlobalState(world.extent, self.frames[0], self.oracle, self.shared)
-        self._prev_collisions = [0] * n
         self._shared_delta = 0
         self._own_delta = [0] * n
         self._oracle_delta = 0
@@ -708,10 +707,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
 
     def _simulate(self) -> None:
         rcfg = self.config.robot
-        simulate(self.space, self.robots, rcfg.dt, rcfg.substeps)
-        for i, robot in enumerate(self.robots):
-            self._coll_delta[i] = robot.collisions - self._prev_collisions[i]
-            self._prev_collisions[i] = robot.collisions
+        self._coll_delta = simulate(self.space, self.robots, rcfg.dt, rcfg.substeps)
 
     def _sense_and_map(self, travelled: list[float]) -> None:
         cfg = self.config

@@ -246,10 +246,14 @@ def _add_walls(space: pymunk.Space, segments: np.ndarray) -> None:
     space.add(*walls)
 
 
-def simulate(space: pymunk.Space, robots: list[Robot], dt: float, substeps: int) -> None:
-    """Advance the whole space by ``dt`` in ``substeps`` fixed substeps (HighwayEnv style)."""
+def simulate(space: pymunk.Space, robots: list[Robot], dt: float, substeps: int
+             ) -> list[int]:
+    """Advance the whole space by ``dt`` in ``substeps`` fixed substeps (HighwayEnv style);
+    returns the contacts each robot began meanwhile (the growth of its ``collisions``)."""
+    before = [robot.collisions for robot in robots]
     h = dt / substeps
     for _ in range(substeps):
         for robot in robots:
             robot.drive()
         space.step(h)
+    return [robot.collisions - b for robot, b in zip(robots, before, strict=True)]
