@@ -657,7 +657,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
 
     # ------------------------------------------------------------------ step
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
-        """Advance both robots one step (``robot.dt`` seconds); see the manual."""
+        """Advance every robot one step (``robot.dt`` seconds); see the manual."""
         self._require_reset()
         if not self.agents:
             raise RuntimeError(

@@ -29,7 +29,7 @@ class Robot:
     """One differential-drive disc.
 
     Attributes:
-        index: 0 or 1.
+        index: its index in the team, 0 … N − 1.
         body, shape: the pymunk dynamic body and its circle.
         sensor_filter: a ``ShapeFilter`` for pymunk queries that skips this robot's own disc (a
             ray starting inside the disc would hit it at ``alpha = 0``) but sees walls and the
