@@ -220,8 +220,8 @@ TorchRL turns every entry into a tensor). Per robot:
 | ``overlap`` | float | fraction of the smaller robot's true sweep the other also swept |
 | ``collisions`` | int | contacts of this robot so far |
 | ``merge_accepted`` | bool | a merge transform is in use |
-| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) |
-| ``merge_source`` | int | ``MERGE_SOURCES[code]``: what supplied it (1 structural, 2 grid) |
+| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) (g) |
+| ``merge_source`` | int | ``MERGE_SOURCES[code]``: what supplied it (1 structural, 2 grid) (g) |
 | ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
 | ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
 | ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
@@ -240,7 +240,8 @@ truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos 
 odometry noise the truth is drift-aware: the transform right at the robots' current places
 (each robot's current odometry frame, ``Robot.odometry_frame()``), the translation error the
 larger at the two robots' positions (``envs.two_robot_explore.drift``); in a team, the largest
-over robot 0's fused teammates.
+over robot 0's fused teammates. (g) in a team, pair (robot_0, robot_1)'s;
+``merge_state().pairs`` has every pair's.
 
 The maps are read through the env, not handed out every step (a grid is megabytes; explorers
 need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
