@@ -17,16 +17,15 @@ transform robot j's frame → robot 0's it uses) the transform is compared with 
 ``env.true_transform(0, j)`` (the robots' start poses; odometry is perfect at the defaults):
 **wrong** is more than 2° or more than 0.3 m off (the calibration's "right": rotation < 2°,
 translation < 0.3 m), the translation error taken at the centroid of robot j's topological map
-(its places; robot j's position while it has none), as ``env.merge_errors()`` does; **grossly wrong** is
-more than 5° or 1 m off, what ``merge_in_loop.py`` calls wrong for two robots (a teammate's
-rooms on the wrong rooms, not a near miss). A
-**merged robot-step** is one teammate in robot 0's fused map for one step; the headline is
-wrong robot-steps / merged robot-steps (target ≤ 0.5 %). Also per episode: the steps with any
-teammate wrong, the first step robot 0's map held the whole team, the pair transforms in use
-(``merge_state().pairs``, each pair (i, j) against ``env.true_transform(i, j)``) that were
-wrong, counted per pair-step, and how many of those the cycle check kept (``kept``: used for
-fusion) — with the check off every pair transform is kept, so the pair-step counts say what the
-check removes.
+(its places; robot j's position while it has none), as ``env.merge_errors()`` does; **grossly
+wrong** is more than 5° or 1 m off, what ``merge_in_loop.py`` calls wrong for two robots (a
+teammate's rooms on the wrong rooms, not a near miss). A **merged robot-step** is one teammate
+in robot 0's fused map for one step; the headline is wrong robot-steps / merged robot-steps
+(target ≤ 0.5 %). Also per episode: the steps with any teammate wrong, the first step robot 0's
+map held the whole team, the pair transforms in use (``merge_state().pairs``, each pair (i, j)
+against ``env.true_transform(i, j)``) that were wrong, counted per pair-step, and how many of
+those the cycle check kept (``kept``: used for fusion) — with the check off every pair
+transform is kept, so the pair-step counts say what the check removes.
 
 Seeds from 100 are held out (the merge was developed on seeds 0–19). Each finished episode is
 one JSON line in ``--out``, the file rewritten atomically after each row: an interrupted run
