@@ -98,17 +98,19 @@ class SB3Explorer(Explorer):
                 ``two_robot_explore_v0`` (its single ``teammate`` input is not a set).
         """
         from stable_baselines3 import PPO
+        from stable_baselines3.common.save_util import load_from_zip_file
 
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no saved model at {str(path)!r}")
-        model = PPO.load(path, device=device)
         if n_robots is None:
-            return model
-        space = team_space(model.observation_space, n_robots)
-        if space is model.observation_space:
-            return model
-        return PPO.load(path, device=device, custom_objects={"observation_space": space})
+            return PPO.load(path, device=device)
+        # the trained space from the zip's data alone, so the model is built once
+        data, _, _ = load_from_zip_file(path, device=device)
+        trained = data["observation_space"]
+        space = team_space(trained, n_robots)
+        custom = None if space is trained else {"observation_space": space}
+        return PPO.load(path, device=device, custom_objects=custom)
 
     def _predict(self, observation: dict[str, Any]) -> Any:
         """The policy's mode, or a sample drawn with this explorer's own generator (so a
