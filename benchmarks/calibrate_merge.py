@@ -34,7 +34,10 @@ Odometry drift: ``--pairs`` may name the drift-aware sets of ``benchmarks/env_pa
 --odometry-noise`` (``data/env_pairs/drift/tune/sigma_<σ>``, whose truth is the robots' current
 odometry frames at the snapshot); the report then adds, per set, the cross-validated reliability
 table and its largest gap, and the gap of the model stored now (``--drift`` adds every
-``data/env_pairs/drift/tune`` set to the default ones).
+``data/env_pairs/drift/tune`` set to the default ones). ``--held-out DIR …`` (e.g. the drift
+sets of ``env_pairs.py --only test --odometry-noise σ``: other seeds, other worlds) reports, per
+folder, the reliability table, largest gap in bins of ≥ 20 and Brier score of the model stored
+now and of the model just fitted (on all tuning pairs), on alignments neither saw.
 """
 
 from __future__ import annotations
@@ -361,6 +364,9 @@ def main(argv: list[str] | None = None) -> int:
                              "the drift terms on top (see MODEL_FEATURES)")
     parser.add_argument("--drift", action="store_true",
                         help="add the drift-aware sets of data/env_pairs/drift/tune")
+    parser.add_argument("--held-out", type=Path, nargs="*", default=(),
+                        help="grid: report the stored and the fitted model on these folders "
+                             "(their features cached next to --cache)")
     args = parser.parse_args(argv)
     dirs = args.pairs or default_dirs()
     if args.drift:
@@ -429,6 +435,10 @@ def main(argv: list[str] | None = None) -> int:
     print("coefficients (standardised):",
           {n: round(c, 3) for n, c in zip(model.names, model.coef, strict=True)},
           f"intercept {model.intercept:.3f}")
+    if args.held_out:
+        if args.model != "grid":
+            parser.error("--held-out reports the grid model only")
+        held_out_report(args.held_out, model, args.cache)
     if args.write:
         print(f"wrote {write_model(args.model, model, args.table)}")
     return 0
@@ -443,8 +453,10 @@ def noise_free_base(model):
     if tuple(model.names[:k]) != BASE_FEATURES:
         raise ValueError(f"the stored grid model's features {list(model.names)} do not start "
                          f"with {list(BASE_FEATURES)}")
+    # an extended model's meta says where its noise-free weights came from under "extends"
+    meta = dict(model.meta.get("extends") or model.meta)
     return Calibrator(BASE_FEATURES, model.mean[:k], model.scale[:k], model.low[:k],
-                      model.high[:k], model.coef[:k], model.intercept, dict(model.meta))
+                      model.high[:k], model.coef[:k], model.intercept, meta)
 
 
 def cross_validated_extension(rows: list[dict], base, l2: float = L2) -> np.ndarray:
@@ -482,6 +494,31 @@ def per_set_report(rows: list[dict], p: np.ndarray, names, model_name: str) -> N
         print(f"{name}: {int(sel.sum())} alignments, {int(y[sel].sum())} right; cross-validated "
               f"gap {max_calibration_gap(table):.3f}, stored model's gap {gap_now:.3f}; "
               f"bins (n predicted/observed): {line}")
+
+
+def held_out_report(dirs, model, cache: Path | None = None) -> None:
+    """Per folder of ``dirs``: the reliability table (n, mean predicted, observed), largest gap
+    in bins of ≥ 20 and Brier score of the model stored now and of ``model`` on its alignments
+    (repeats left out). The rows are cached in ``<cache stem>.held-out.json`` when ``cache``."""
+    path = None if cache is None else cache.with_name(f"{cache.stem}.held-out.json")
+    if path is not None and path.exists():
+        rows = json.loads(path.read_text())
+    else:
+        rows = alignment_rows(dirs)
+        if path is not None:
+            atomic_write_json(path, rows)
+    stored = load_model("grid")
+    for d in dirs:
+        sel = unique_rows([r for r in rows if r["set"] == d.name])
+        X, y = matrix(sel, MODEL_FEATURES)
+        print(f"\nheld out {d}: {len(sel)} alignments, {int(y.sum())} right")
+        for label, m in (("stored", stored), ("fitted", model)):
+            p = m.predict(X)
+            table = reliability_table(p, y)
+            print(f"{label}: largest gap in bins of ≥ 20 {max_calibration_gap(table):.3f}, "
+                  f"Brier {brier_score(p, y):.4f}; bins (n predicted/observed): "
+                  + " ".join(f"{r['low']:.1f}–{r['high']:.1f}: {r['n']} {r['predicted']:.2f}/"
+                             f"{r['observed']:.2f}" for r in table))
 
 
 def _ranking(rows: list[dict], l2: float) -> int:

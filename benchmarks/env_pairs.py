@@ -24,7 +24,8 @@ snapshot rule) driven with ``robot.odometry_noise = (σ, σ)``, whose ``transfor
 **drift-aware** truth at the snapshot (``envs.two_robot_explore.drift.drift_aware_truth``: the
 robots' current odometry frames), not the start-frame one the dataset CLI stores — with drift no
 rigid transform matches the start frames, and the current frames are where the maps are right
-now. Finished episodes are skipped, so a rerun resumes.
+now. Finished episodes are skipped, so a rerun resumes. The ``tune`` split (seed 0) unless
+``--only test``: seed 1's worlds, a held-out set for ``calibrate_merge.py --held-out``.
 """
 
 from __future__ import annotations

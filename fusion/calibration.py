@@ -181,7 +181,9 @@ def extend_logistic(base: Calibrator, X: np.ndarray, y: np.ndarray, names: Seque
     Newton/IRLS with ``base``'s log-odds as a fixed offset. The new features are standardised
     with mean 0 (scale: their root mean square) and clipped from 0, so that wherever they
     are 0 — e.g. a drift prior on perfect odometry — the extended model's log-odds are
-    ``base``'s exactly: what ``base`` was fitted and tested on keeps its answers.
+    ``base``'s exactly: what ``base`` was fitted and tested on keeps its answers. Newton's
+    steps are damped (halved until the penalised loss falls): where ``base`` is confident and
+    wrong its offset saturates the probabilities and a full step diverges.
 
     Raises:
         ValueError: shapes that do not match the names, a name already in ``base``, labels
@@ -209,14 +211,25 @@ def extend_logistic(base: Calibrator, X: np.ndarray, y: np.ndarray, names: Seque
     scale = np.sqrt(np.mean(extra ** 2, axis=0))
     scale[scale <= 1e-12] = 1.0
     Z = extra / scale
+    sign = 2.0 * y - 1.0
+
+    def loss(w: np.ndarray) -> float:
+        # the penalised negative log-likelihood, which each step must lower
+        return float(np.logaddexp(0.0, -sign * (offset + Z @ w)).sum() + 0.5 * l2 * w @ w)
+
     w = np.zeros(Z.shape[1])
     for _ in range(max_iter):
         p = 1.0 / (1.0 + np.exp(-np.clip(offset + Z @ w, -700, 700)))
         grad = Z.T @ (p - y) + l2 * w
         hess = (Z * (p * (1 - p))[:, None]).T @ Z + (l2 + 1e-9) * np.eye(len(w))
         step = np.linalg.solve(hess, grad)
-        w -= step
-        if np.max(np.abs(step)) < 1e-10:
+        # Newton's full step overshoots where the offset saturates p (p (1 − p) ≈ 0 leaves
+        # the Hessian at the penalty alone): halve it until the loss falls (Armijo)
+        now, t = loss(w), 1.0
+        while t > 1e-12 and loss(w - t * step) > now - 1e-4 * t * (grad @ step):
+            t *= 0.5
+        w -= t * step
+        if np.max(np.abs(t * step)) < 1e-10:
             break
     n = len(names)
     return Calibrator(base.names + names, base.mean + (0.0,) * n,

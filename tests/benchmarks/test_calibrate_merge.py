@@ -47,3 +47,27 @@ def test_cross_validation_holds_out_every_noise_level_of_a_world():
     X, y = cm.matrix(rows, ("score",))
     alone = fit_logistic(X[~held], y[~held], ("score",), l2=cm.L2).predict(X[held])
     np.testing.assert_allclose(p[held], alone)
+
+
+def test_held_out_report_reads_cached_rows_and_scores_both_models(tmp_path, capsys):
+    """``--held-out``: per folder, the stored and the fitted model on rows neither saw (read
+    from ``<cache stem>.held-out.json``); an extension names its noise-free base's origin."""
+    import json
+
+    from fusion.calibration import load_model
+
+    rng = np.random.default_rng(1)
+    rows = [{"set": "sigma_0.02", "world": f"sigma_0.02:procedural:{i}", "way": "ab",
+             "overlap": 0.5, "right": bool(i % 3 == 0),
+             "features": {**{n: float(rng.uniform(0.1, 1.0)) for n in cm.MODEL_FEATURES},
+                          "log_score": float(i)}} for i in range(40)]
+    cache = tmp_path / "rows.json"
+    (tmp_path / "rows.held-out.json").write_text(json.dumps(rows))
+    stored = load_model("grid")
+    cm.held_out_report([tmp_path / "sigma_0.02"], stored, cache)
+    out = capsys.readouterr().out
+    assert "sigma_0.02: 40 alignments, 14 right" in out
+    assert out.count("largest gap in bins of ≥ 20") == 2 and "fitted:" in out
+    base = cm.noise_free_base(stored)
+    assert base.names == cm.BASE_FEATURES
+    assert base.meta == stored.meta.get("extends", stored.meta)

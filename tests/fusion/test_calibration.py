@@ -143,3 +143,17 @@ def test_an_extended_model_keeps_the_base_where_the_new_features_are_zero():
         extend_logistic(base, np.column_stack([Xb, -d]), yd, ("d",))
     with pytest.raises(ValueError, match=r"X must have shape \(N, 3\)"):
         extend_logistic(base, Xb, yd, ("d",))
+
+
+def test_extending_a_confident_base_converges():
+    """Where the base model is sure (log-odds 8) and the new feature's rows are mostly wrong,
+    Newton's full step overshoots back and forth (it stopped at weight +5, confidence 1.0);
+    the damped steps reach the penalised optimum: 100 (p − 0.1) + 2 w = 0."""
+    base = Calibrator(("a",), (0.0,), (1.0,), (-1.0,), (1.0,), (1.0,), 8.0)
+    X = np.column_stack([np.zeros(100), np.ones(100)])
+    y = (np.arange(100) < 10).astype(float)
+    ext = extend_logistic(base, X, y, ("d",), l2=2.0)
+    w = ext.coef[1]
+    p = float(ext.predict(X[:1])[0])
+    assert 100 * (p - 0.1) + 2 * w == pytest.approx(0.0, abs=1e-6)
+    assert p == pytest.approx(0.279, abs=0.001)
