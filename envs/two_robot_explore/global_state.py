@@ -1,4 +1,4 @@
-"""The env's global state for centralised critics (manual, State): both robots' true poses,
+"""The env's global state for centralised critics (manual, State): every robot's true pose,
 coverage and progress, and three coarse world-frame maps — swept, shared and reachable.
 
 The maps are ``STATE_MAP_SIZE²`` blocks over the world's extent; each block is the mean of
@@ -79,7 +79,7 @@ class GlobalState:
 
     def vector(self, poses: Sequence[tuple[float, float, float]], oracle: OracleCoverage,
                shared: SharedMap, steps: int, max_cycles: int) -> np.ndarray:
-        """The state now, from both robots' true ``poses`` ``(x, y, θ)``, the coverage, the
+        """The state now, from every robot's true ``poses`` ``(x, y, θ)``, the coverage, the
         shared map and the step count (manual, State)."""
         x0, y0, x1, y1 = self.extent
         n = len(poses)

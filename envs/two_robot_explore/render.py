@@ -1,9 +1,10 @@
 """Rendering with pygame-ce (the ``render`` extra): four panels in one frame.
 
 Top left, the world: free space, what the team has truly seen (tinted), the wall segments,
-both robots with their sonar cones drawn out to each reading. Top right, the shared map in
-robot 0's frame with the merged topological map (once a merge is accepted). Bottom, each
-robot's own occupancy grid and topological map in its own frame.
+every robot with its sonar cones drawn out to each reading. Top right, the shared map in
+robot 0's frame with the merged topological map (once a merge is accepted). Bottom, robot 0's
+and robot 1's own occupancy grids and topological maps, each in its own frame (in a larger
+team the others' own maps are not drawn).
 
 pygame is imported here, never at package import; without it rendering raises an
 ``ImportError`` that names the extra to install. ``"rgb_array"`` needs no display;
