@@ -20,9 +20,11 @@ of 0.9 or more ("confident wrong"), and the robots' odometry drift at the end (m
 larger of the two). ``--drift-correction [KEY=VALUE ...]`` turns on the robots' own drift correction
 (``robot.drift_correction``, ``envs.two_robot_explore.localize``; e.g. ``sigma=1.0`` sets
 ``robot.drift_correction_sigma``). ``--drift-prior`` gives every merge the grids' ``drift_prior``
-(``fusion.grid_merge.drift_prior`` of the odometry noise — ``sqrt(α1)`` for the alphas — and
-the env's steps), as the env's merging should: the benchmark wraps ``fusion.hybrid``'s
-``hybrid_merge`` and ``recheck`` to do it. Per episode: the first step merged, steps
+(``fusion.grid_merge.drift_prior`` of the odometry noise level — the largest ``sqrt(αk)`` for
+the alphas — and the env's steps) by wrapping ``fusion.hybrid``'s ``hybrid_merge`` and
+``recheck``: the env's merging has passed that same prior itself since 1dde75e, so the flag
+changes nothing at later commits and is kept to run older checkouts as they are measured in
+``benchmarks/drift.md``. Per episode: the first step merged, steps
 merged, steps wrong (and the first wrong transform's errors), the first step on a right
 transform (not wrong), transforms installed (each accepted merge that changed the one in use),
 merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them (the
