@@ -632,9 +632,10 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model,
                                      robots=n)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
-        self._merging = TeamMerging(n, cfg.mapping, odometry_noise_level(cfg.robot))
+        noise = odometry_noise_level(cfg.robot)
+        self._merging = TeamMerging(n, cfg.mapping, noise)
         self._correctors = [None] * n
-        if cfg.robot.drift_correction and odometry_noise_level(cfg.robot) > 0.0:
+        if cfg.robot.drift_correction and noise > 0.0:
             self._correctors = [
                 DriftCorrector(cfg.robot, s.angles, s.mount_radius, cfg.sonar.max_range,
                                m.geometry.shape, m.geometry.origin, m.geometry.resolution)
@@ -825,7 +826,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         truth, the largest over its teammates; NaN when it has none; drift-aware with odometry
         noise (:func:`envs.two_robot_explore.infos.merge_errors`)."""
         return merge_errors(self.shared.members, self.robots, self._truths[0], self._merging,
-                            self.views, odometry_noise_level(self.config.robot) > 0.0)
+                            self.views, self._merging.noise > 0.0)
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         """This step's infos (manual, Infos; :func:`envs.two_robot_explore.infos.step_infos`)."""

@@ -263,6 +263,7 @@ class TeamMerging:
     def __init__(self, n: int, config: MappingConfig, noise: float = 0.0) -> None:
         self.n = n
         self.config = config
+        self.noise = noise
         self.pairs = {(i, j): PairLoop(i, j, config, noise) for i in range(n)
                       for j in range(i + 1, n)}
         self.result: Any = None
