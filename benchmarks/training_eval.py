@@ -108,6 +108,10 @@ def heldout_worlds(n: int, real: bool = True, team: dict[str, Any] | None = None
 # ------------------------------------------------------------------------------- episodes
 POLICY_KINDS = ("run:", "sample:", "best-run:", "best-sample:")
 """Prefixes of a trained policy's explorer name (:func:`_team`)."""
+KNOWN_POSES = "@known"
+"""Suffix of a scripted explorer's name (``coordinated_frontier@known``): the same explorer
+with the relative start poses known (no merging needed: the coordination it gets from the
+start, a reference for what merging late costs)."""
 
 
 def _policy_path(run: str | Path, best: bool) -> Path:
@@ -151,8 +155,10 @@ def _policy(run: str, best: bool = False, n: int | None = None) -> tuple[Any, di
 def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
     """The team of ``n`` robots of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same
     policy sampling its actions —, ``best-run:PATH`` / ``best-sample:PATH`` — the run's best
-    policy —, ``rule:NAME`` or a scripted name) and the env config it runs with (before the
-    world is set)."""
+    policy —, ``rule:NAME`` or a scripted name; a scripted one or a rule with
+    :data:`KNOWN_POSES` appended runs with the robots' relative start poses known,
+    ``mapping.merge_method="known"``) and the env config it runs with (before the world is
+    set)."""
     from agents.goals import SectorRule
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
@@ -162,6 +168,9 @@ def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
         kind, _, run = explorer.partition(":")
         policy, config = _policy(run, kind.startswith("best-"), n)
         return sb3_team(policy, deterministic=kind.endswith("run"), n_robots=n), config
+    if explorer.endswith(KNOWN_POSES):
+        team, config = _team(explorer.removesuffix(KNOWN_POSES), n)
+        return team, {**config, "mapping": {"merge_method": "known"}}
     if explorer.startswith("rule:"):
         board = Blackboard()
         return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(n)}, {}
@@ -351,7 +360,8 @@ def main() -> None:
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
     parser.add_argument("--rules", nargs="*", default=["ahead"], choices=SECTOR_RULES)
     parser.add_argument("--baselines", nargs="*", default=["random_walk"],
-                        help="scripted explorers besides frontier")
+                        help="scripted explorers besides frontier; NAME@known: with the "
+                             "robots' relative start poses known")
     parser.add_argument("--reference", default="frontier",
                         help="scripted explorer the T ratios are taken to (it is evaluated too)")
     parser.add_argument("--n-robots", type=int, default=2,

@@ -24,9 +24,10 @@ REWARD_MODES = ("shared", "oracle", "individual")
 ACTION_TYPES = ("continuous", "discrete")
 """``EnvConfig.action_type`` values."""
 
-MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "none")
+MERGE_METHODS = ("hybrid", "auto", "paper_icp", "exhaustive", "multistart_icp", "known", "none")
 """``MappingConfig.merge_method`` values: ``"hybrid"`` (``fusion.hybrid.hybrid_merge``: the
-structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method, or
+structural merge, then the occupancy-grid alignment), a ``fusion.merge_maps`` method,
+``"known"`` (the robots know their relative start poses: no merging, the true transforms) or
 ``"none"`` (never merges: each robot alone)."""
 
 
@@ -338,8 +339,9 @@ class MappingConfig:
         topo: settings of the extraction (``topo.ExtractConfig``, or a dict of its fields;
             ``None`` for its defaults).
         merge_every: merge the two topological maps every this many steps (``0`` never).
-        merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, or ``"none"``
-            (:data:`MERGE_METHODS`).
+        merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, ``"known"``
+            (every pair's true start-frame transform from the first step: the known-poses
+            baseline) or ``"none"`` (:data:`MERGE_METHODS`).
         grid_merge_every: with ``"hybrid"``, the (slower, ~25–100 ms) occupancy-grid alignment
             runs on merge steps that are multiples of this: to find a merge, and once one is in
             use to re-examine it (replace or drop it, see the env's manual); ``0`` never. A

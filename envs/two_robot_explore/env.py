@@ -120,7 +120,11 @@ accepted (``fusion.hybrid.recheck``): an accepted alignment replaces the transfo
 (refined, or a different one), and a rejected one whose best alignment is clearly different
 from the transform in use drops it (info ``merge_drops``): the shared map is robot 0's cells
 alone again until the next accepted merge. Other values run one ``fusion.merge_maps`` method
-(its own accept rule; ``accept_threshold`` is not used); ``"none"`` never merges.
+(its own accept rule; ``accept_threshold`` is not used); ``"none"`` never merges;
+``"known"`` merges nothing either: every pair's true start-frame transform is in use from the
+first step (confidence 1, ``merge_source`` "known"), the known-initial-poses setting of most
+multi-robot exploration work — a reference for what not knowing the poses costs (with
+odometry noise the maps still drift away from it; maps are still exchanged only in contact).
 ``"exhaustive"`` (the paper's search) suits small maps only: beyond
 ``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of about 166 path endpoints) it
 raises a ``ValueError`` from ``step()`` instead of running for minutes.
@@ -221,7 +225,7 @@ TorchRL turns every entry into a tensor). Per robot:
 | ``collisions`` | int | contacts of this robot so far |
 | ``merge_accepted`` | bool | a merge transform is in use |
 | ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) (g) |
-| ``merge_source`` | int | ``MERGE_SOURCES[code]``: what supplied it (1 structural, 2 grid) (g) |
+| ``merge_source`` | int | ``MERGE_SOURCES[code]``: its source (1 structural, 2 grid, 3 known) (g) |
 | ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
 | ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
 | ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
@@ -345,7 +349,7 @@ are a ``ValueError``.
 | ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
 | ``mapping.topo_growth`` | float | 0.02 | map growth before a re-extraction (see Maps) |
 | ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
-| ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps; or a ``merge_maps`` method, ``"none"`` |
+| ``mapping.merge_method`` | str | ``"hybrid"`` | Maps: ``merge_maps`` methods, ``"known"`` |
 | ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
 | ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
 | ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (see Maps) |
@@ -633,7 +637,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
                                      robots=n)
         self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
         noise = odometry_noise_level(cfg.robot)
-        self._merging = TeamMerging(n, cfg.mapping, noise)
+        self._merging = TeamMerging(n, cfg.mapping, noise, self._truths)
         self._correctors = [None] * n
         if cfg.robot.drift_correction and noise > 0.0:
             self._correctors = [

@@ -14,6 +14,7 @@ is dropped (the shared map is robot 0's alone).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,9 +30,10 @@ from fusion.team import CycleCheck, Edge, consistent_edges, frames_from
 from topo.graph import TopoMap
 from topo.grid import OccupancyGrid
 
-MERGE_SOURCES = ("none", "structural", "grid")
+MERGE_SOURCES = ("none", "structural", "grid", "known")
 """The ``merge_source`` info's codes: what supplied the transform in use — the structural merge
-of the topological maps (checked by the grids in ``"hybrid"``) or the grid alignment."""
+of the topological maps (checked by the grids in ``"hybrid"``), the grid alignment, or the
+true start poses (``mapping.merge_method="known"``)."""
 
 MERGE_METHODS = ("none", *(m for m in CONFIG_MERGE_METHODS if m != "none"))
 """The ``merge_method`` info's codes: ``MERGE_METHODS[info["merge_method"]]`` is the ``method`` of
@@ -189,6 +191,13 @@ class PairLoop:
             self._grid_tried_at = known
         return try_grids
 
+    def adopt(self, steps: int, transform: Rigid2D) -> None:
+        """Use ``transform`` from step ``steps`` on, known rather than merged
+        (``mapping.merge_method="known"``): confidence 1, no merge call counted."""
+        self.method = self.source = "known"
+        self.transform = transform
+        self.history.append((steps, transform, 1.0))
+
     def run(self, steps: int, map_i: RobotMap, map_j: RobotMap, try_grids: bool) -> bool:
         """Merge the two maps now and keep the result; returns whether the transform in use
         changed (a new one accepted, or the one in use dropped)."""
@@ -246,9 +255,11 @@ class TeamMerging:
     Every ``merge_every`` steps, pairs in contact are considered, at most
     ``max(1, N // 2)`` merged per merge step (so a robot's share of the merge cost does not
     grow with the team): first pairs that would join two robots not yet in one fused map,
-    then the least recently merged. Robot ``i`` knows a pair's transform as it was at the
-    later of its last contacts with the pair's two robots, and fuses the maps it holds
-    (``TeamViews``) along the pairs that pass the cycle check (``fusion.team``).
+    then the least recently merged (with ``mapping.merge_method="known"`` nothing is merged:
+    every pair's transform is its true one, ``truths``, from the first step). Robot ``i``
+    knows a pair's transform as it was at the later of its last contacts with the pair's two
+    robots, and fuses the maps it holds (``TeamViews``) along the pairs that pass the cycle
+    check (``fusion.team``).
 
     Attributes:
         pairs: ``{(i, j): PairLoop}``.
@@ -260,8 +271,13 @@ class TeamMerging:
         check: the team's cycle check with everything known (for ``merge_state``).
     """
 
-    def __init__(self, n: int, config: MappingConfig, noise: float = 0.0) -> None:
+    def __init__(self, n: int, config: MappingConfig, noise: float = 0.0,
+                 truths: Sequence[Sequence[Rigid2D]] | None = None) -> None:
+        if config.merge_method == "known" and truths is None:
+            raise ValueError('mapping.merge_method "known" needs the true transforms '
+                             '(truths), got None')
         self.n = n
+        self._truths = truths
         self.config = config
         self.noise = noise
         self.pairs = {(i, j): PairLoop(i, j, config, noise) for i in range(n)
@@ -296,6 +312,13 @@ class TeamMerging:
     def step(self, steps: int, views: TeamViews) -> bool:
         """Merge the pairs due at step ``steps``; returns whether a pair's transform changed."""
         cfg = self.config
+        if cfg.merge_method == "known":
+            # known from the start (history step 0): a robot learns a pair's transform with
+            # its first contact with either robot, and fuses only the maps it holds
+            fresh = [p for p in self.pairs.values() if p.transform is None]
+            for pair in fresh:
+                pair.adopt(0, self._truths[pair.i][pair.j])
+            return bool(fresh)
         if not cfg.merge_every or cfg.merge_method == "none" or steps % cfg.merge_every:
             return False
         changed = False
@@ -384,7 +407,8 @@ class TeamMerging:
         out = set() if self.check is None else {*self.check.disputed, *self.check.rejected,
                                                 *self.check.unconfirmed}
         pairs = {k: PairState(p.transform, float(getattr(p.result, "confidence", 0.0))
-                              if p.result is not None else 0.0, p.method, p.source, p.calls,
+                              if p.result is not None else p.confidence, p.method, p.source,
+                              p.calls,
                               p.drops, p.transform is not None and k not in out)
                  for k, p in self.pairs.items()}
         p01 = self.pair01

@@ -86,3 +86,11 @@ def test_only_team_policies_are_evaluated_with_another_team_size(tmp_path, monke
             te.main()
         assert (f"was trained with {trained} robots, --n-robots is {n}: only an SB3 team "
                 "policy") in capsys.readouterr().err
+
+
+def test_known_poses_suffix_runs_the_same_explorer_with_the_poses_known():
+    team, config = te._team("coordinated_frontier@known", 3)
+    plain, plain_config = te._team("coordinated_frontier", 3)
+    assert config == {**plain_config, "mapping": {"merge_method": "known"}}
+    assert sorted(team) == sorted(plain) == ["robot_0", "robot_1", "robot_2"]
+    assert type(team["robot_0"]) is type(plain["robot_0"])

@@ -12,6 +12,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from envs import multi_robot_explore_v0, two_robot_explore_v0
 from envs.two_robot_explore.global_state import state_scalars
+from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES
 from envs.two_robot_explore.observations import TEAMMATE_FEATURES
 
 TEAM = {**SMALL, "world": {"size": (12.0, 12.0)}, "sonar": {"rays": 1},
@@ -161,7 +162,38 @@ def test_a_merge_found_in_contact_reaches_a_third_robot_only_through_contact():
     assert env.merge_state().fused == ((0,), (1,), (2,))
 
 
+def test_known_poses_fuse_every_robot_in_contact_with_the_true_transforms():
+    known = {**TEAM["mapping"], "merge_method": "known"}
+    env = multi_robot_explore_v0.parallel_env(n_robots=4, **{**TEAM, "mapping": known})
+    _, infos = env.reset(seed=2)
+    for _ in range(3):
+        _, _, _, _, infos = env.step({a: np.array([0.5, 0.2], dtype=np.float32)
+                                      for a in env.agents})
+    state = env.merge_state()
+    assert state.fused == ((0, 1, 2, 3),) * 4 and state.merges == 0
+    for (i, j), pair in state.pairs.items():
+        assert pair.method == "known" and pair.confidence == 1.0 and pair.kept
+        assert pair.transform.allclose(env.true_transform(i, j))
+    info = infos["robot_0"]
+    assert info["merge_accepted"] and info["merge_rotation_error_deg"] == 0.0
+    assert MERGE_SOURCES[info["merge_source"]] == "known"
+    assert MERGE_METHODS[info["merge_method"]] == "known"
+
+
+def test_known_poses_still_need_contact_to_fuse_a_map():
+    known = {**TEAM["mapping"], "merge_method": "known"}
+    env = multi_robot_explore_v0.parallel_env(n_robots=3, comm={"range": 0.1},
+                                              **{**TEAM, "mapping": known})
+    env.reset(seed=1)
+    for _ in range(12):
+        env.step({a: np.zeros(2, dtype=np.float32) for a in env.agents})
+    assert env.merge_state().fused == ((0,), (1,), (2,))
+    assert not env.shared.members
+
+
 @pytest.mark.parametrize("kwargs, match", [
+    ({"mapping": {"merge_method": "truth"}}, r"mapping.merge_method must be one of \[.*"
+                                             r"'known', 'none'\], got 'truth'"),
     ({"n_robots": 1}, r"n_robots must be between 2 and 8, got 1"),
     ({"n_robots": 9}, r"n_robots must be between 2 and 8, got 9"),
     ({"n_robots": 3.0}, r"n_robots must be an integer, got float"),
