@@ -102,6 +102,10 @@ class Args:
     comm_range: float | None = None
     """Robots closer than this many metres are in contact and exchange maps (the env's
     ``comm.range``, multi-hop); default: always in contact."""
+    known_poses: bool = False
+    """The robots know their relative start poses (the env's ``mapping.merge_method="known"``:
+    teammates are placed from the first step, no merging), in training and evaluation; the
+    setting most multi-robot exploration work assumes (``benchmarks/training.md``)."""
     level: Literal["goals", "motion"] = "goals"
     """What the policy decides: a frontier sector every ``hold`` steps (a planner drives), or
     the velocity command every step."""
@@ -230,6 +234,8 @@ class Args:
         EnvConfig(n_robots=self.n_robots)  # n_robots: an integer, 2 to 8 (names the value)
         if self.comm_range is not None:
             CommConfig(range=self.comm_range)  # comm.range: a real > 0 (names the value)
+        if not isinstance(self.known_poses, bool):
+            raise TypeError(f"known_poses must be True or False, got {self.known_poses!r}")
         if self.hold is None:
             self.hold = default_hold(self.level)
         if self.n_steps is None:
@@ -345,6 +351,8 @@ class Args:
             cfg["n_robots"] = self.n_robots
         if self.comm_range is not None:
             cfg["comm"] = {"range": float(self.comm_range)}
+        if self.known_poses:
+            cfg["mapping"] = {"merge_method": "known"}
         for key, value in self.env_kwargs.items():
             if isinstance(value, dict) and isinstance(cfg.get(key), dict):
                 cfg[key] = {**cfg[key], **value}

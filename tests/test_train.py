@@ -286,6 +286,8 @@ def test_team_env_config_and_two_robot_config_unchanged():
     team = Args(n_robots=4, comm_range=5.0).env_config()
     assert team["n_robots"] == 4 and team["comm"] == {"range": 5.0}
     assert Args(comm_range=3).env_config()["comm"] == {"range": 3.0}
+    assert Args(known_poses=True).env_config()["mapping"] == {"merge_method": "known"}
+    assert "mapping" not in Args().env_config()
 
 
 @pytest.mark.parametrize(("kwargs", "error", "match"), [
@@ -293,6 +295,7 @@ def test_team_env_config_and_two_robot_config_unchanged():
     ({"n_robots": 9}, ValueError, "n_robots must be between 2 and 8, got 9"),
     ({"n_robots": 2.5}, TypeError, "n_robots must be an integer, got"),
     ({"comm_range": -1.0}, ValueError, "comm.range must be"),
+    ({"known_poses": 1}, TypeError, "known_poses must be True or False, got 1"),
 ])
 def test_bad_team_arguments_name_the_field(kwargs, error, match):
     with pytest.raises(error, match=match):
