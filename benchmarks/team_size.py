@@ -8,8 +8,10 @@ One episode of ``multi_robot_explore_v0`` per cell × seed: ``n_robots`` N, a pr
 ``size`` m building (``world.size = (size, size)``), communication unlimited (``comm.range =
 None``) or range-limited (``comm.range`` metres), ``max_cycles = cycles_per_metre · size``
 (3000 steps at 20 m, 6000 at 40 m), defaults otherwise, driven by a scripted team: ``frontier``
-(one :class:`agents.scripted.Frontier` per robot, each on its own map) or
-``coordinated_frontier`` (``agents.team.make_team``). Per episode: T50 / T85 / T95, the first
+(one :class:`agents.scripted.Frontier` per robot, each on its own map),
+``coordinated_frontier`` (``agents.team.make_team``) or ``coordinated_frontier@known`` (the
+same with the relative start poses known, ``mapping.merge_method="known"``: teammates placed
+from the first step instead of by merging). Per episode: T50 / T85 / T95, the first
 step the true coverage (``info["true_coverage"]``) reaches 50 / 85 / 95 % (the episode ends at
 95 %), the final coverage, the first step robot 0's fused map holds the whole team, and the
 CPU seconds.
@@ -67,8 +69,11 @@ from topo.fileio import atomic_write_bytes  # noqa: E402
 LEVELS = (0.5, 0.85, 0.95)
 """The coverage levels timed (T50, T85, T95)."""
 LEVEL_KEYS = ("t50", "t85", "t95")
-EXPLORER_NAMES = ("frontier", "coordinated_frontier")
+EXPLORER_NAMES = ("frontier", "coordinated_frontier", "coordinated_frontier@known")
+"""``@known``: the same team with the robots' relative start poses known
+(``mapping.merge_method="known"``): what not knowing them costs."""
 DEFAULT_OUT = Path(tempfile.gettempdir()) / "topomerge-team_size.jsonl"
+KNOWN = "@known"
 QUICK = {"ns": [2, 4, 8], "seeds": 2}
 """What ``--quick`` sets: teams of 2, 4 and 8, two seeds a cell."""
 
@@ -134,7 +139,7 @@ def build_team(explorer: str, env: Any) -> dict[str, Any]:
         return team
     from agents.team import make_team
 
-    team = make_team(explorer, env=env)
+    team = make_team(explorer.removesuffix(KNOWN), env=env)
     if sorted(team) != sorted(env.possible_agents):
         raise ValueError(f"make_team({explorer!r}) gave explorers for {sorted(team)}, the env "
                          f"has {env.possible_agents}")
@@ -154,6 +159,8 @@ def run_cell(explorer: str, size: float, comm: str, n: int, seed: int,
 
     kwargs = {"world": {"size": (size, size)}, "comm": {"range": comm_range(comm)},
               "max_cycles": max_cycles}
+    if explorer.endswith(KNOWN):
+        kwargs["mapping"] = {"merge_method": "known"}
     row = {"explorer": explorer, "size": size, "comm": comm, "n": n, "seed": seed,
            "max_cycles": max_cycles, "env": "multi_robot_explore_v0", "t50": None,
            "t85": None, "t95": None, "fused_all": None}
@@ -175,7 +182,8 @@ def run_cell(explorer: str, size: float, comm: str, n: int, seed: int,
     try:
         out = run_episode(env, build_team(explorer, env), seed=seed, callback=watch)
     except KeyError as exc:
-        if not (explorer == "coordinated_frontier" and n == 2 and "teammate" in str(exc)):
+        if not (explorer.startswith("coordinated_frontier") and n == 2
+                and "teammate" in str(exc)):
             raise
         # a coordinated team that reads the two-robot layout (one ``teammate`` observation):
         # the same env as the N = 2 subclass
@@ -339,7 +347,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--sizes", type=float, nargs="+", default=[20.0, 40.0],
                         help="building sides, m")
     parser.add_argument("--explorers", nargs="+", choices=EXPLORER_NAMES,
-                        default=list(EXPLORER_NAMES))
+                        default=list(EXPLORER_NAMES[:2]))
     parser.add_argument("--comms", nargs="+", default=["unlimited", "5"],
                         help="'unlimited' or comm.range in m")
     parser.add_argument("--seeds", type=int, default=None, help="seeds a cell (default 3)")

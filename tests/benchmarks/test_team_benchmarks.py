@@ -47,6 +47,13 @@ def test_team_size_runs_resumes_and_prints(tmp_path, capsys):
     assert len(ts.read_rows(out)) == 2
 
 
+def test_team_size_known_poses_team_fuses_from_the_start():
+    row = ts.run_cell("coordinated_frontier@known", 10.0, "unlimited", 3, 0, 5)
+    assert row["fused_all"] == 1 and row["explorer"] == "coordinated_frontier@known"
+    plain = ts.run_cell("coordinated_frontier", 10.0, "unlimited", 3, 0, 5)
+    assert plain["fused_all"] is None
+
+
 def test_team_size_ratios_pair_seeds_and_mark_censored_medians():
     rows = [_row(2, 100, 40), _row(2, 101, 50), _row(4, 100, 20), _row(4, 101, 30),
             _row(4, 102, 10)]  # seed 102 has no N = 2 episode: not paired
