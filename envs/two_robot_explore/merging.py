@@ -408,8 +408,7 @@ class TeamMerging:
                                                 *self.check.unconfirmed}
         pairs = {k: PairState(p.transform, float(getattr(p.result, "confidence", 0.0))
                               if p.result is not None else p.confidence, p.method, p.source,
-                              p.calls,
-                              p.drops, p.transform is not None and k not in out)
+                              p.calls, p.drops, p.transform is not None and k not in out)
                  for k, p in self.pairs.items()}
         p01 = self.pair01
         return MergeState(transform, p01.method, p01.source, self.result, self.calls,
