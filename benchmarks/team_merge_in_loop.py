@@ -168,8 +168,11 @@ def tables(rows: list[dict[str, Any]]) -> str:
         merged = sum(r["merged"] for r in rs)
         wrong = sum(r["wrong"] for r in rs)
         # rows written before the gross count existed have none
-        gross = "–" if any("gross" not in r for r in rs) else \
-            f"{sum(r['gross'] for r in rs)} ({sum(r['gross'] for r in rs) / max(merged, 1):.2%})"
+        if any("gross" not in r for r in rs):
+            gross = "–"
+        else:
+            n_gross = sum(r["gross"] for r in rs)
+            gross = f"{n_gross} ({n_gross / max(merged, 1):.2%})"
         lines.append(
             f"| {'on' if check else 'off'} | {len(rs)} | {merged} | {wrong} | "
             f"{wrong / max(merged, 1):.2%} | {sum(r['wrong'] > 0 for r in rs)} | "
