@@ -11,8 +11,9 @@ from conftest import SMALL
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from envs import multi_robot_explore_v0, two_robot_explore_v0
+from envs.two_robot_explore.config import MappingConfig
 from envs.two_robot_explore.global_state import state_scalars
-from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES
+from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES, TeamMerging
 from envs.two_robot_explore.observations import TEAMMATE_FEATURES
 
 TEAM = {**SMALL, "world": {"size": (12.0, 12.0)}, "sonar": {"rays": 1},
@@ -189,6 +190,13 @@ def test_known_poses_still_need_contact_to_fuse_a_map():
         env.step({a: np.zeros(2, dtype=np.float32) for a in env.agents})
     assert env.merge_state().fused == ((0,), (1,), (2,))
     assert not env.shared.members
+
+
+def test_known_poses_merging_needs_the_true_transforms():
+    config = MappingConfig(merge_method="known")
+    with pytest.raises(ValueError, match=r'mapping.merge_method "known" needs the true '
+                                         r"transforms \(truths\), got None"):
+        TeamMerging(3, config)
 
 
 @pytest.mark.parametrize("kwargs, match", [
