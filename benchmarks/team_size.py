@@ -62,6 +62,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from _poses import split_poses, with_merge_method
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from topo.fileio import atomic_write_bytes  # noqa: E402
@@ -73,7 +75,6 @@ EXPLORER_NAMES = ("frontier", "coordinated_frontier", "coordinated_frontier@know
 """``@known``: the same team with the robots' relative start poses known
 (``mapping.merge_method="known"``): what not knowing them costs."""
 DEFAULT_OUT = Path(tempfile.gettempdir()) / "topomerge-team_size.jsonl"
-KNOWN = "@known"
 QUICK = {"ns": [2, 4, 8], "seeds": 2}
 """What ``--quick`` sets: teams of 2, 4 and 8, two seeds a cell."""
 
@@ -139,7 +140,7 @@ def build_team(explorer: str, env: Any) -> dict[str, Any]:
         return team
     from agents.team import make_team
 
-    team = make_team(explorer.removesuffix(KNOWN), env=env)
+    team = make_team(split_poses(explorer)[0], env=env)
     if sorted(team) != sorted(env.possible_agents):
         raise ValueError(f"make_team({explorer!r}) gave explorers for {sorted(team)}, the env "
                          f"has {env.possible_agents}")
@@ -159,8 +160,7 @@ def run_cell(explorer: str, size: float, comm: str, n: int, seed: int,
 
     kwargs = {"world": {"size": (size, size)}, "comm": {"range": comm_range(comm)},
               "max_cycles": max_cycles}
-    if explorer.endswith(KNOWN):
-        kwargs["mapping"] = {"merge_method": "known"}
+    kwargs = with_merge_method(kwargs, split_poses(explorer)[1])
     row = {"explorer": explorer, "size": size, "comm": comm, "n": n, "seed": seed,
            "max_cycles": max_cycles, "env": "multi_robot_explore_v0", "t50": None,
            "t85": None, "t95": None, "fused_all": None}

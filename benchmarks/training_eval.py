@@ -22,7 +22,11 @@ deterministic policy (``--sample``: sampling its actions, seeded per episode; a 
 motion-level policy's most likely command can loop) on its own env config (world replaced),
 and once per world ``Frontier``,
 ``RandomWalk`` and the goal-level rules of :class:`agents.goals.SectorRule` (``--rules``; by
-default ``ahead``: always the frontier in front), plus ``--baselines``.
+default ``ahead``: always the frontier in front), plus ``--baselines``. ``NAME@known`` (a
+baseline, or ``--reference``) runs an explorer with the robots' relative start poses known;
+``--poses known`` / ``--poses merged`` runs the trained policies with the poses known or found
+by merging whatever they were trained with (``train.py --known-poses`` weights in the standard
+env: ``--poses merged``).
 
 **Teams.** ``--n-robots N`` (and ``--comm-range R``) evaluates every explorer with N robots
 (``multi_robot_explore_v0`` for N > 2) on the same worlds; a run trained with two robots
@@ -58,6 +62,7 @@ from typing import Any
 
 import numpy as np
 from _maps import MAPS, REAL_MAX_CYCLES, real_worlds
+from _poses import POSE_SUFFIXES, split_poses, with_merge_method
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -108,10 +113,6 @@ def heldout_worlds(n: int, real: bool = True, team: dict[str, Any] | None = None
 # ------------------------------------------------------------------------------- episodes
 POLICY_KINDS = ("run:", "sample:", "best-run:", "best-sample:")
 """Prefixes of a trained policy's explorer name (:func:`_team`)."""
-KNOWN_POSES = "@known"
-"""Suffix of a scripted explorer's name (``coordinated_frontier@known``): the same explorer
-with the relative start poses known (no merging needed: the coordination it gets from the
-start, a reference for what merging late costs)."""
 
 
 def _policy_path(run: str | Path, best: bool) -> Path:
@@ -155,22 +156,23 @@ def _policy(run: str, best: bool = False, n: int | None = None) -> tuple[Any, di
 def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
     """The team of ``n`` robots of ``explorer`` (``run:PATH``, ``sample:PATH`` — the same
     policy sampling its actions —, ``best-run:PATH`` / ``best-sample:PATH`` — the run's best
-    policy —, ``rule:NAME`` or a scripted name; a scripted one or a rule with
-    :data:`KNOWN_POSES` appended runs with the robots' relative start poses known,
-    ``mapping.merge_method="known"``) and the env config it runs with (before the world is
+    policy —, ``rule:NAME`` or a scripted name; any of them with ``@known`` or ``@merged``
+    appended runs with the robots' relative start poses known or found by merging whatever
+    it was trained with, :mod:`_poses`) and the env config it runs with (before the world is
     set)."""
     from agents.goals import SectorRule
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
     from agents.team import make_team
 
+    base, merge_method = split_poses(explorer)
+    if merge_method is not None:
+        team, config = _team(base, n)
+        return team, with_merge_method(config, merge_method)
     if explorer.startswith(POLICY_KINDS):
         kind, _, run = explorer.partition(":")
         policy, config = _policy(run, kind.startswith("best-"), n)
         return sb3_team(policy, deterministic=kind.endswith("run"), n_robots=n), config
-    if explorer.endswith(KNOWN_POSES):
-        team, config = _team(explorer.removesuffix(KNOWN_POSES), n)
-        return team, {**config, "mapping": {"merge_method": "known"}}
     if explorer.startswith("rule:"):
         board = Blackboard()
         return {f"robot_{i}": SectorRule(explorer[5:], blackboard=board) for i in range(n)}, {}
@@ -207,7 +209,7 @@ def _key(explorer: str, world: World) -> str:
     """Cache key: the explorer (a run with its model file's size and mtime) and the world."""
     tag = explorer
     if explorer.startswith(POLICY_KINDS):
-        kind, _, run = explorer.partition(":")
+        kind, _, run = split_poses(explorer)[0].partition(":")
         st = _policy_path(run, kind.startswith("best-")).stat()
         tag = f"{explorer}@{st.st_size}:{st.st_mtime_ns}"
     return json.dumps([tag, world.id, world.config, world.seed, world.max_cycles],
@@ -362,6 +364,11 @@ def main() -> None:
     parser.add_argument("--baselines", nargs="*", default=["random_walk"],
                         help="scripted explorers besides frontier; NAME@known: with the "
                              "robots' relative start poses known")
+    parser.add_argument("--poses", choices=[k.lstrip("@") for k in POSE_SUFFIXES],
+                        default=None,
+                        help="run the trained policies with the robots' relative start poses "
+                             "known or found by merging, whatever they were trained with "
+                             "(default: as trained)")
     parser.add_argument("--reference", default="frontier",
                         help="scripted explorer the T ratios are taken to (it is evaluated too)")
     parser.add_argument("--n-robots", type=int, default=2,
@@ -412,6 +419,9 @@ def main() -> None:
                 _policy_path(run, opts.best)
             except SystemExit as missing:
                 parser.error(str(missing))
+    if opts.poses is not None:
+        groups = {name: [f"{m}@{opts.poses}" for m in members]
+                  for name, members in groups.items()}
     ref = opts.reference
     scripted = list(dict.fromkeys(["frontier", ref, *opts.baselines,
                                    *(f"rule:{r}" for r in opts.rules)]))

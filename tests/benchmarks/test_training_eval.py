@@ -55,6 +55,8 @@ def test_policy_path_picks_the_final_or_the_best_policy(tmp_path):
     # the best policy is another explorer, cached apart from the final one
     world = te.heldout_worlds(1, real=False)[0]
     assert te._key(f"run:{tmp_path}", world) != te._key(f"best-run:{tmp_path}", world)
+    # and so is the same policy run with the poses found by merging (benchmarks/_poses.py)
+    assert te._key(f"run:{tmp_path}", world) != te._key(f"run:{tmp_path}@merged", world)
 
 
 @pytest.mark.parametrize(("trained", "n", "ok"), [(2, 4, False), (4, 2, False), (3, 6, True),
@@ -94,3 +96,41 @@ def test_known_poses_suffix_runs_the_same_explorer_with_the_poses_known():
     assert config == {**plain_config, "mapping": {"merge_method": "known"}}
     assert sorted(team) == sorted(plain) == ["robot_0", "robot_1", "robot_2"]
     assert type(team["robot_0"]) is type(plain["robot_0"])
+
+
+def test_pose_suffixes_set_the_merge_method_and_keep_the_rest_of_mapping():
+    from _poses import split_poses, with_merge_method
+
+    assert split_poses("coordinated_frontier@known") == ("coordinated_frontier", "known")
+    assert split_poses("run:runs/a@merged") == ("run:runs/a", "hybrid")
+    assert split_poses("frontier") == ("frontier", None)
+    trained = {"max_cycles": 9, "mapping": {"merge_method": "known", "grid_merge_every": 25}}
+    assert with_merge_method(trained, "hybrid") == {
+        "max_cycles": 9, "mapping": {"merge_method": "hybrid", "grid_merge_every": 25}}
+    assert with_merge_method(trained, None) is trained
+
+
+def test_poses_flag_runs_the_trained_policies_with_the_poses_found_by_merging(
+        tmp_path, monkeypatch):
+    import json
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "args.json").write_text(json.dumps({"n_robots": 4, "known_poses": True}))
+    (run / "model.zip").write_bytes(b"not read before the episodes")
+    seen = {}
+
+    class Checked(Exception):
+        """The checks passed: the episodes would run now."""
+
+    def run_all(explorers, *_args):
+        seen["explorers"] = explorers
+        raise Checked
+
+    monkeypatch.setattr(te, "run_all", run_all)
+    monkeypatch.setattr(sys, "argv", ["training_eval.py", str(run), "--n-robots", "4",
+                                      "--poses", "merged", "--worlds", "1", "--skip-real",
+                                      "--baselines", "--rules", "--out", str(tmp_path / "out")])
+    with pytest.raises(Checked):
+        te.main()
+    assert f"run:{run}@merged" in seen["explorers"] and "frontier" in seen["explorers"]
