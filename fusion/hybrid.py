@@ -60,7 +60,7 @@ class HybridResult(MergeResult):
 
 def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
                  try_grids: bool = True, config: gm.GridMergeConfig | None = None,
-                 in_use: Rigid2D | None = None) -> HybridResult:
+                 in_use: Rigid2D | None = None, vouch: bool = False) -> HybridResult:
     """The structural merge first (:func:`fusion.merge_maps`, ``"auto"``, at
     ``config.accept_threshold``): kept if it is accepted and the grids agree with it
     (:func:`fusion.grid_merge.check_with_grids`, a hard sanity gate), then refined on the grids'
@@ -72,10 +72,14 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     or without grids the structural one, with the reasons; ``score`` is the log-odds of
     ``confidence`` for a grid alignment, the structural score otherwise.
 
-    With ``config.drift_prior > 0`` (odometry that drifts) an accepted structural merge also
-    needs the grids' calibrated confidence, which weighs the drift, to reach
-    ``accept_threshold`` when their best alignment is the same one (one grid alignment more
-    per accepted structural merge).
+    With ``vouch``, or ``config.drift_prior > 0`` (odometry that drifts), an accepted
+    structural merge also needs the grids to vouch for it: their best alignment the same one,
+    with a calibrated confidence of at least ``accept_threshold`` (one grid alignment more per
+    such merge). Under drift the structural confidence knows nothing of the drift and the
+    grids' weighs it. The env asks ``vouch`` of a pair's first merge: early in an episode the
+    two maps often share no place at all — far more often than in the map pairs the
+    structural confidence was calibrated on — and a room row then fits its twin (a
+    structural confidence of 0.97 on maps with no true overlap, ``benchmarks/fusion.md``).
 
     With ``in_use``, the transform the caller uses now, an accepted result clearly different
     from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
@@ -84,10 +88,13 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     the building must not replace an alignment of the whole maps.
 
     Raises:
-        TypeError: ``in_use`` is neither ``None`` nor a :class:`fusion.Rigid2D`.
+        TypeError: ``in_use`` is neither ``None`` nor a :class:`fusion.Rigid2D`; ``vouch``
+            is not a bool.
     """
     _check_in_use(in_use, allow_none=True)
-    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config, in_use)
+    if not isinstance(vouch, bool):
+        raise TypeError(f"vouch must be a bool, got {type(vouch).__name__}")
+    return _hybrid(map_a, map_b, grid_a, grid_b, try_grids, config, in_use, vouch)
 
 
 def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
@@ -159,22 +166,21 @@ def _keeps(grid_a: Any, grid_b: Any, new: Rigid2D, in_use: Rigid2D,
             f"against {then.support:.0f})")
 
 
-def _drifted(grid: gm.GridMergeResult, transform: Rigid2D,
-             cfg: gm.GridMergeConfig) -> str | None:
-    """Why a structural merge's ``transform`` is not trusted on maps that may have drifted
-    (``cfg.drift_prior > 0``): the grids' best alignment is another one, or the same one with
-    a calibrated confidence, which weighs the drift, below ``accept_threshold``; ``None``
-    otherwise. The structural merge's own confidence knows nothing of drift, so under drift
-    only the grids can vouch for it."""
+def _unvouched(grid: gm.GridMergeResult, transform: Rigid2D,
+               cfg: gm.GridMergeConfig) -> str | None:
+    """Why the grids do not vouch for a structural merge's ``transform``: their best alignment
+    is another one, or the same one with a calibrated confidence (which weighs
+    ``cfg.drift_prior``) below ``accept_threshold``; ``None`` if they do (or have no
+    alignment to judge by)."""
     if grid.centre is None:
         return None
     if gm.distinct(grid.transform, transform, grid.centre, cfg):
-        return (f"with drift_prior {cfg.drift_prior:g} the grids' best alignment is another "
-                f"one")
+        return "the grids' best alignment is another one"
     if grid.confidence >= cfg.accept_threshold:
         return None
-    return (f"with drift_prior {cfg.drift_prior:g} the grids' confidence in it is "
-            f"{grid.confidence:.2f} < accept_threshold={cfg.accept_threshold}")
+    return (f"the grids' confidence in it is {grid.confidence:.2f} < "
+            f"accept_threshold={cfg.accept_threshold}"
+            + (f" (drift_prior {cfg.drift_prior:g})" if cfg.drift_prior > 0 else ""))
 
 
 def _log_odds(p: float) -> float:
@@ -183,7 +189,8 @@ def _log_odds(p: float) -> float:
 
 
 def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
-            config: gm.GridMergeConfig | None, in_use: Rigid2D | None = None) -> HybridResult:
+            config: gm.GridMergeConfig | None, in_use: Rigid2D | None = None,
+            vouch: bool = False) -> HybridResult:
     t0 = time.perf_counter()
     cfg = config or gm.GridMergeConfig()
 
@@ -205,9 +212,9 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
         if why is None:  # and the walls place it to the cells' precision
             refined = gm.refine_with_grids(grid_a, grid_b, topo.transform, cfg)
             why = kept(refined)
-            if why is None and cfg.drift_prior > 0:
+            if why is None and (vouch or cfg.drift_prior > 0):
                 grid = gm.merge_grids(grid_a, grid_b, cfg)
-                why = _drifted(grid, refined, cfg)
+                why = _unvouched(grid, refined, cfg)
             if why is None:
                 merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
                 return HybridResult(**{**fields, "transform": refined, "merged": merged,

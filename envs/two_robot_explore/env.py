@@ -78,6 +78,15 @@ probability 0.5 (specular reflection). A sonar reads its nearest surviving echo;
 echo. ``sonar.measure_every = 0.1`` scans only
 every 10 cm of travel, as the paper's robots did.
 
+Odometry is exact by default. ``robot.odometry_noise`` (σ per step's motion) or
+``robot.odometry_model="rot_trans_rot"`` (Thrun's α1–α4; ``odometry_alphas="pioneer3dx"``:
+Stage's Pioneer, 1–2.5 % of the distance driven) make it drift, and each map then **bends**:
+cells are drawn where the odometry thought the robot was, so no rigid transform fits two maps
+everywhere; merges are judged at the robots' current places (Infos, note f), and the hybrid
+merge's confidence weighs the drift the maps may hold (``fusion.grid_merge.drift_prior``). It
+refuses most merges of bent maps: of 20 held-out 3000-step Frontier episodes, 11 merge at
+σ 0.01 and 3 at σ 0.02 (``benchmarks/drift.md``).
+
 ## Maps
 
 ``world.source = "procedural"`` (default): a seeded ``world.size`` building (20 × 20 m) of
@@ -110,7 +119,9 @@ grids' own cells; the costly part, so only once the maps have grown by ``grid_me
 maps of the same place differ too much for the structural merge to be confident. Every merge
 result carries a **confidence**, the calibrated probability that its transform is right
 (rotation < 2°, translation < 0.3 m; fitted on tuning map pairs, ``fusion.calibration``), and
-is accepted only when ``confidence >= mapping.accept_threshold`` (default 0.9: no wrong
+is accepted only when ``confidence >= mapping.accept_threshold`` (a pair's first structural
+merge also needs the grids' own alignment to be the same one at that confidence: early maps
+may share no place, and a room row fits its twin; default 0.9: no wrong
 accept on the 156 held-out map pairs, 70 % of the pairs sharing ≥ 40 % merged right; lower it
 to merge sooner and more often at the price of wrong merges — 0.7: 80 % and 1.7 % — see the
 threshold table in ``benchmarks/fusion.md``). Small maps of a self-similar building
@@ -379,7 +390,8 @@ radians) places the robots; other keys are ignored with a warning.
   re-extracted (places, gateways, dead ends, clearance and frontier flags), so
   ``graph_nodes`` has 9 features and merges, hence rewards, differ; sonar readings beyond
   ``mapping.usable_range`` no longer draw walls or free space past it, so maps, coverage and
-  rewards differ.)
+  rewards differ; a pair's first structural merge needs the grids to agree, so some merges
+  come later.)
 """
 
 from __future__ import annotations

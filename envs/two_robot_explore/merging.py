@@ -104,7 +104,8 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
               drift_prior: float = 0.0) -> tuple[Any, str | None]:
     """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"`` (the
     grids are aligned only when ``try_grids``; ``in_use`` is the transform the env uses now,
-    and with the grids ``fusion.hybrid.recheck`` re-examines it; accepted when the confidence
+    and with the grids ``fusion.hybrid.recheck`` re-examines it; without it, a pair's first
+    merge, the grids must vouch for a structural merge, ``vouch``; accepted when the confidence
     reaches ``accept_threshold``, ``None``: the library's default; ``drift_prior``: how far
     the maps' odometry may have drifted, ``fusion.grid_merge.drift_prior``, 0 for perfect
     odometry), else
@@ -120,8 +121,9 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
             config = GridMergeConfig(**fields, drift_prior=drift_prior)
         if try_grids and in_use is not None:
             return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
+        # a pair's first merge needs the grids to vouch for a structural one (hybrid_merge)
         return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
-                            config=config, in_use=in_use), None
+                            config=config, in_use=in_use, vouch=in_use is None), None
     from fusion.merge import merge_maps
 
     return merge_maps(map_a, map_b, method=method), None

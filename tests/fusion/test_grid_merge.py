@@ -460,10 +460,10 @@ def test_drop_margin_is_checked():
         GridMergeConfig(drop_margin=1.5)
 
 
-def test_with_a_drift_prior_a_structural_merge_needs_the_grids_confidence(monkeypatch):
-    """Drifting odometry: the structural merge's confidence knows nothing of drift, so an
-    accepted structural merge also needs the grids' best alignment to be the same one, at
-    their calibrated confidence (which weighs the drift prior); without a prior they are not
+def test_with_vouch_or_drift_a_structural_merge_needs_the_grids_to_vouch(monkeypatch):
+    """With ``vouch`` (the env's first merge of a pair) and with drifting odometry, an
+    accepted structural merge also needs the grids' best alignment to be the same one at
+    their calibrated confidence (which weighs the drift prior); otherwise they are not
     asked."""
     import dataclasses
 
@@ -483,28 +483,41 @@ def test_with_a_drift_prior_a_structural_merge_needs_the_grids_confidence(monkey
                                    reason="low confidence")
 
     monkeypatch.setattr(gm, "merge_grids", low)
-    res = hybrid_merge(TINY, TINY, a, b, try_grids=False)
-    assert res.accepted and res.supplied_by == "structural" and not calls
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, vouch=True)
+    assert not res.accepted and calls == [0.0]
+    assert ("structural merge refuted by the grids: the grids' confidence in it is 0.30 < "
+            "accept_threshold=0.9;") in res.reason + ";"
+    for in_use in (None, truth):  # without vouch or drift the grids are not asked
+        res = hybrid_merge(TINY, TINY, a, b, try_grids=False, in_use=in_use)
+        assert res.accepted and res.supplied_by == "structural" and calls == [0.0]
     drifting = GridMergeConfig(drift_prior=0.04)
-    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
-    assert not res.accepted and calls == [0.04]
-    assert ("structural merge refuted by the grids: with drift_prior 0.04 the grids' "
-            "confidence in it is 0.30 < accept_threshold=") in res.reason
+    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting, in_use=truth)
+    assert not res.accepted and calls == [0.0, 0.04]
+    assert ("structural merge refuted by the grids: the grids' confidence in it is 0.30 < "
+            "accept_threshold=0.9 (drift_prior 0.04)") in res.reason
     res = hybrid_merge(TINY, TINY, a, b, try_grids=True, config=drifting)
-    assert not res.accepted and calls == [0.04, 0.04]  # the grids aligned once, not twice
+    assert not res.accepted and calls == [0.0, 0.04, 0.04]  # the grids aligned once, not twice
     monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
         real(ga, gb, config), accepted=True, confidence=0.99, reason=None))
     res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
     assert res.accepted and res.supplied_by == "structural"
+    assert hybrid_merge(TINY, TINY, a, b, try_grids=False).accepted
     # confident grids whose best alignment is another one do not vouch for it either
     turned = Rigid2D.from_degrees(180.0) @ truth
     monkeypatch.setattr(gm, "merge_grids", lambda ga, gb, config=None: dataclasses.replace(
         real(ga, gb, config), transform=turned, accepted=True, confidence=0.99, reason=None))
-    res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=drifting)
-    assert not res.accepted
-    assert ("structural merge refuted by the grids: with drift_prior 0.04 the grids' best "
-            "alignment is another one") in res.reason
-    assert hybrid_merge(TINY, TINY, a, b, try_grids=False).accepted  # no drift: not asked
+    for config, vouch in ((None, True), (drifting, False)):
+        res = hybrid_merge(TINY, TINY, a, b, try_grids=False, config=config, vouch=vouch)
+        assert not res.accepted
+        assert ("structural merge refuted by the grids: the grids' best alignment is another "
+                "one") in res.reason
+    # the env's entry point asks it of a pair's first merge (no transform in use) only
+    from envs.two_robot_explore.merging import run_merge
+
+    assert not run_merge(TINY, TINY, "hybrid", a, b)[0].accepted
+    assert run_merge(TINY, TINY, "hybrid", a, b, in_use=truth)[0].accepted
+    with pytest.raises(TypeError, match="vouch must be a bool, got int"):
+        hybrid_merge(TINY, TINY, a, b, vouch=1)
 
 
 def test_drift_prior_is_the_noise_over_the_steps_and_a_feature():
