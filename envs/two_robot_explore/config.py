@@ -365,6 +365,11 @@ class MappingConfig:
             merge that no consistent triangle confirms is used only at this confidence or more
             (a team has many pairs, so many chances of one confident look-alike), in
             ``[0, 1]``. No effect with two robots.
+        first_merge_check: with ``"hybrid"``, a pair's first merge (no transform in use, also
+            after a drop) from the structural merge also needs the grids' own alignment to be
+            the same one at ``accept_threshold`` (``fusion.hybrid.hybrid_merge``'s ``vouch``):
+            early maps that share no place let a room row fit its twin. ``False`` merges
+            sooner in large buildings, with look-alikes (``benchmarks/fusion.md``).
     """
 
     grid_resolution: float = 0.1
@@ -382,6 +387,7 @@ class MappingConfig:
     max_nodes: int = 32
     cycle_check: bool = True
     team_accept_threshold: float = 0.97
+    first_merge_check: bool = True
 
     def __post_init__(self) -> None:
         _set(self, "grid_resolution", check_real(self.grid_resolution,
@@ -420,6 +426,7 @@ class MappingConfig:
         if self.max_nodes > 256:
             raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
         _check_bool(self.cycle_check, "mapping.cycle_check")
+        _check_bool(self.first_merge_check, "mapping.first_merge_check")
         _set(self, "team_accept_threshold", check_real(
             self.team_accept_threshold, "mapping.team_accept_threshold", low=0.0,
             low_inclusive=True, high=1.0))

@@ -120,8 +120,9 @@ maps of the same place differ too much for the structural merge to be confident.
 result carries a **confidence**, the calibrated probability that its transform is right
 (rotation < 2°, translation < 0.3 m; fitted on tuning map pairs, ``fusion.calibration``), and
 is accepted only when ``confidence >= mapping.accept_threshold`` (a pair's first structural
-merge also needs the grids' own alignment to be the same one at that confidence: early maps
-may share no place, and a room row fits its twin; default 0.9: no wrong
+merge also needs the grids' own alignment to be the same one at that confidence,
+``mapping.first_merge_check``: early maps may share no place, and a room row fits its twin;
+default 0.9: no wrong
 accept on the 156 held-out map pairs, 70 % of the pairs sharing ≥ 40 % merged right; lower it
 to merge sooner and more often at the price of wrong merges — 0.7: 80 % and 1.7 % — see the
 threshold table in ``benchmarks/fusion.md``). Small maps of a self-similar building
@@ -340,6 +341,7 @@ are a ``ValueError``.
 | ``comm.line_of_sight`` | bool | False | contact also needs no wall between |
 | ``mapping.cycle_check`` | bool | True | cycle consistency (see Merging N maps) |
 | ``mapping.team_accept_threshold`` | float | 0.97 | unconfirmed merges in teams (likewise) |
+| ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
 | ``robot.radius`` | float | 0.25 | disc radius, m |
 | ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
 | ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |

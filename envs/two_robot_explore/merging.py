@@ -101,11 +101,13 @@ class MergeState:
 def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,
               grid_b: OccupancyGrid | None = None, try_grids: bool = False,
               in_use: Rigid2D | None = None, accept_threshold: float | None = None,
-              drift_prior: float = 0.0) -> tuple[Any, str | None]:
+              drift_prior: float = 0.0, first_merge_check: bool = True
+              ) -> tuple[Any, str | None]:
     """The one place fusion is called: ``fusion.hybrid.hybrid_merge`` for ``"hybrid"`` (the
     grids are aligned only when ``try_grids``; ``in_use`` is the transform the env uses now,
     and with the grids ``fusion.hybrid.recheck`` re-examines it; without it, a pair's first
-    merge, the grids must vouch for a structural merge, ``vouch``; accepted when the confidence
+    merge, the grids must vouch for a structural merge when ``first_merge_check``
+    (``mapping.first_merge_check``); accepted when the confidence
     reaches ``accept_threshold``, ``None``: the library's default; ``drift_prior``: how far
     the maps' odometry may have drifted, ``fusion.grid_merge.drift_prior``, 0 for perfect
     odometry), else
@@ -121,9 +123,9 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
             config = GridMergeConfig(**fields, drift_prior=drift_prior)
         if try_grids and in_use is not None:
             return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
-        # a pair's first merge needs the grids to vouch for a structural one (hybrid_merge)
         return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
-                            config=config, in_use=in_use, vouch=in_use is None), None
+                            config=config, in_use=in_use,
+                            vouch=first_merge_check and in_use is None), None
     from fusion.merge import merge_maps
 
     return merge_maps(map_a, map_b, method=method), None
@@ -208,7 +210,8 @@ class PairLoop:
         result, refuted = run_merge(map_i.topomap, map_j.topomap, cfg.merge_method,
                                     map_i.grid, map_j.grid, try_grids=try_grids,
                                     in_use=self.transform,
-                                    accept_threshold=cfg.accept_threshold, drift_prior=prior)
+                                    accept_threshold=cfg.accept_threshold, drift_prior=prior,
+                                    first_merge_check=cfg.first_merge_check)
         self.result = result
         self.calls += 1
         self.last_run = steps

@@ -210,6 +210,8 @@ def test_known_poses_merging_needs_the_true_transforms():
     ({"comm": {"radius": 3}}, r"radius"),
     ({"mapping": {"team_accept_threshold": 1.5}},
      r"mapping.team_accept_threshold must be <= 1.0, got 1.5"),
+    ({"mapping": {"first_merge_check": "yes"}},
+     r"mapping.first_merge_check must be True or False, got 'yes'"),
 ])
 def test_bad_team_settings_are_refused(kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):

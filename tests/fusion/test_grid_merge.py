@@ -516,6 +516,7 @@ def test_with_vouch_or_drift_a_structural_merge_needs_the_grids_to_vouch(monkeyp
 
     assert not run_merge(TINY, TINY, "hybrid", a, b)[0].accepted
     assert run_merge(TINY, TINY, "hybrid", a, b, in_use=truth)[0].accepted
+    assert run_merge(TINY, TINY, "hybrid", a, b, first_merge_check=False)[0].accepted
     with pytest.raises(TypeError, match="vouch must be a bool, got int"):
         hybrid_merge(TINY, TINY, a, b, vouch=1)
 
