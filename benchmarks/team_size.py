@@ -182,7 +182,7 @@ def run_cell(explorer: str, size: float, comm: str, n: int, seed: int,
     try:
         out = run_episode(env, build_team(explorer, env), seed=seed, callback=watch)
     except KeyError as exc:
-        if not (explorer.startswith("coordinated_frontier") and n == 2
+        if not (split_poses(explorer)[0] == "coordinated_frontier" and n == 2
                 and "teammate" in str(exc)):
             raise
         # a coordinated team that reads the two-robot layout (one ``teammate`` observation):
