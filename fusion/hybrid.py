@@ -78,8 +78,8 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     such merge). Under drift the structural confidence knows nothing of the drift and the
     grids' weighs it. The env asks ``vouch`` of a pair's first merge: early in an episode the
     two maps often share no place at all — far more often than in the map pairs the
-    structural confidence was calibrated on — and a room row then fits its twin (a
-    structural confidence of 0.97 on maps with no true overlap, ``benchmarks/fusion.md``).
+    structural confidence was calibrated on — and a room row then fits its twin with a high
+    structural confidence (``benchmarks/fusion.md``).
 
     With ``in_use``, the transform the caller uses now, an accepted result clearly different
     from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
