@@ -45,7 +45,7 @@ demo: $(VENV)/.deps-base
 	rm -rf out/pairs_demo
 	$(PY) -m agents.dataset generate --explorer sb3:out/runs/demo/model.zip --pairs 9 \
 		--snapshots 3 --max-cycles 800 --world-size 16 16 --out out/pairs_demo
-	$(PY) -m fusion.evaluate out/pairs_demo --methods hybrid,grid,auto,paper_icp \
+	$(PY) -m fusion.evaluation out/pairs_demo --methods hybrid,grid,auto,paper_icp \
 		--out out/fusion_demo
 	@echo "figures: out/paper_fig8_merged.png out/demo.png out/runs/demo/eval_coverage.png out/fusion_demo/"
 

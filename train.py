@@ -229,7 +229,7 @@ class Args:
             if get_origin(hints[f.name]) is Literal and value not in choices:
                 raise ValueError(f"{f.name} must be one of {list(choices)}, got {value!r}")
         goals = self.level == "goals"
-        from envs.two_robot_explore.config import CommConfig, EnvConfig
+        from envs.explore.config import CommConfig, EnvConfig
 
         EnvConfig(n_robots=self.n_robots)  # n_robots: an integer, 2 to 8 (names the value)
         if self.comm_range is not None:
@@ -304,7 +304,7 @@ class Args:
             raise ValueError(f"run_name must be a plain folder name, got {self.run_name!r}")
         if self.resume is not None and not Path(self.resume).exists():
             raise ValueError(f"resume: no run folder or checkpoint at {str(self.resume)!r}")
-        from agents.team import EXPLORERS
+        from agents.registry import EXPLORERS
 
         for name in self.eval_baselines:
             if name not in EXPLORERS:

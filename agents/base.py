@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.two_robot_explore.env import DISCRETE_ACTIONS
+from envs.explore.env import DISCRETE_ACTIONS
 
 ACTION_TYPES = ("continuous", "discrete")
 

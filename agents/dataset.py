@@ -21,7 +21,8 @@ snapshots of an episode are taken at distinct moments); an episode that terminat
 its remaining snapshots at its last step. Episodes are independent tasks, so the pairs are the
 same whatever the number of workers or the backend, and an interrupted run resumes with the
 same command: episodes whose pairs all exist are skipped, the others are re-run and rewrite
-exactly the same pairs. The format is :mod:`fusion.pairs`; ``fusion.evaluate DIR`` reads it.
+exactly the same pairs. The format is :mod:`fusion.evaluation.pairs`; ``fusion.evaluation.evaluate
+DIR`` reads it.
 
 Ray: ``--backend ray`` runs one task per episode on ``ray.init()`` (a local cluster with
 ``--workers`` CPUs) or on an existing cluster (``--address``); tasks write their pair files into
@@ -61,7 +62,7 @@ import tyro
 from tqdm.auto import tqdm
 
 from agents.base import run_episode
-from fusion.pairs import (
+from fusion.evaluation.pairs import (
     FORMAT,
     FORMAT_VERSION,
     LOCK_FILE,
@@ -147,7 +148,7 @@ class GenerateArgs:
     def __post_init__(self) -> None:
         """Check every setting; a bad one is a :class:`SettingsError` (a ``ValueError``)
         naming it."""
-        from envs.two_robot_explore.config import EnvConfig, WorldConfig
+        from envs.explore.config import EnvConfig, WorldConfig
 
         for name, low in (("pairs", 1), ("snapshots", 1), ("workers", 1), ("seed", 0),
                           ("max_cycles", 10)):
@@ -171,7 +172,7 @@ class GenerateArgs:
             with _setting("world_size"):
                 WorldConfig(size=self.world_size)
         if not self.explorer.startswith("sb3:"):
-            from agents.team import EXPLORERS
+            from agents.registry import EXPLORERS
 
             if self.explorer not in EXPLORERS:
                 raise SettingsError("explorer", f"explorer must be one of {sorted(EXPLORERS)} "
@@ -259,7 +260,7 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     """Run episode ``episode`` and write its pairs (ids ``episode · snapshots + k`` below
     ``n_pairs``) into dataset ``root``. Returns how many pairs it wrote. Top-level and
     argument-only so that process pools and Ray can ship it."""
-    from agents.team import make_team
+    from agents.registry import make_team
     from envs import parallel_env_for
 
     snapshots = settings["snapshots"]
@@ -376,7 +377,7 @@ def _preflight(args: GenerateArgs) -> None:
         env = parallel_env_for(env_kwargs(args.settings()))
         env.close()
     if args.explorer.startswith("sb3:"):
-        from agents.team import make_team
+        from agents.registry import make_team
 
         try:
             make_team(args.explorer, env=env)
@@ -452,7 +453,8 @@ def generate(args: GenerateArgs) -> dict[str, Any]:
         SettingsError: a setting the env or the explorer refuses; ``out`` is a file, a folder
             that is not a dataset, a dataset made with other settings, or being written by
             another run (its lock is held).
-        fusion.pairs.DatasetError: a corrupt ``dataset.json`` or a foreign file in ``pairs/``.
+        fusion.evaluation.pairs.DatasetError: a corrupt ``dataset.json`` or a foreign file in
+        ``pairs/``.
     """
     root = Path(args.out)
     settings = args.settings()

@@ -55,10 +55,11 @@ def eval_worlds(env_config: Mapping[str, Any], seed: int, episodes: int,
 def run_explorer(team: Mapping[str, Explorer] | str, config: Mapping[str, Any],
                  seeds: Sequence[int]) -> list[dict[str, Any]]:
     """Metrics (:meth:`agents.metrics.EpisodeRecorder.summary`) of ``team`` (one explorer per
-    robot, or an explorer's name for :func:`agents.team.make_team`) on the env ``config`` describes
+    robot, or an explorer's name for :func:`agents.registry.make_team`) on the env ``config``
+    describes
     (``two_robot_explore_v0``, or ``multi_robot_explore_v0`` for its ``n_robots`` > 2:
     :func:`envs.parallel_env_for`), one episode per seed."""
-    from agents.team import make_team
+    from agents.registry import make_team
     from envs import parallel_env_for
 
     out = []
@@ -103,7 +104,7 @@ def evaluate(team: Mapping[str, Explorer], run_dir: str | Path, step: int, *,
              baselines: Sequence[str] = ("frontier", "random_walk"),
              name: str = "ppo") -> dict[str, Any]:
     """Evaluate ``team`` (the policy, one explorer per robot) and the scripted ``baselines``
-    (names of :data:`agents.team.EXPLORERS`) on the fixed worlds of
+    (names of :data:`agents.registry.EXPLORERS`) on the fixed worlds of
     :func:`eval_worlds`; write the files of the module docstring into ``run_dir``.
 
     Args:

@@ -152,7 +152,7 @@ class SB3Explorer(Explorer):
 
 def _check_team_size(n_robots: Any) -> None:
     """Raise unless ``n_robots`` is an integer from 2 to 8 (the env's team sizes)."""
-    from envs.two_robot_explore.config import MAX_ROBOTS
+    from envs.explore.config import MAX_ROBOTS
 
     if not 2 <= check_int(n_robots, "n_robots") <= MAX_ROBOTS:
         raise ValueError(f"n_robots must be between 2 and {MAX_ROBOTS}, got {n_robots}")

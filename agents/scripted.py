@@ -1,5 +1,5 @@
 """Scripted explorers: random walk, wall following, frontier exploration and its coordinated
-team version, for teams of any size (:func:`agents.team.make_team` builds a team of any of
+team version, for teams of any size (:func:`agents.registry.make_team` builds a team of any of
 them by name).
 
 All drive from the robot's own sensing: the ``sonar`` observation, read with the bound env's
@@ -389,7 +389,7 @@ class CoordinatedFrontier(Frontier):
 
     Args:
         index: ``k`` of the robot ``robot_k`` it drives (frame of its own map).
-        blackboard: shared by the robots of a team (:func:`agents.team.make_team` wires it).
+        blackboard: shared by the robots of a team (:func:`agents.registry.make_team` wires it).
         config: see :class:`Frontier`.
         mate_penalty: metres of path cost added to a frontier at a teammate's goal or
             position, or between two robots' targets (less farther out, none beyond

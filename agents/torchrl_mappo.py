@@ -97,7 +97,7 @@ class MappoArgs:
     """The env's ``comm.range``, metres (default: always in contact)."""
 
     def __post_init__(self) -> None:
-        from envs.two_robot_explore.config import EnvConfig
+        from envs.explore.config import EnvConfig
 
         EnvConfig.from_kwargs(**self.env_config())  # n_robots, comm.range: named when bad
         for name in ("frames", "frames_per_batch", "epochs", "minibatch", "cells", "max_cycles"):

@@ -5,13 +5,14 @@
 
 ``--model grid`` (the default) fits ``fusion.merge_grids``' confidence (model ``"grid"`` of
 ``fusion/calibration.json``), as below. ``--model structural`` fits the structural merge's
-confidence (model ``"structural"``: ``fusion.merge.CALIBRATION_FEATURES`` of
+confidence (model ``"structural"``: ``fusion.structural.CALIBRATION_FEATURES`` of
 ``merge_maps(method="auto")``'s result) on the tuning env pairs, their maps extracted again
 with the current ``topo.extract_topomap``, and ``--synthetic N`` synthetic pairs per noise level
-(``fusion.evaluate.synthetic_pairs``, seed 100: the evaluation's seeds are 0 and 7), with the
+(``fusion.evaluation.evaluate.synthetic_pairs``, seed 100: the evaluation's seeds are 0 and 7),
+with the
 same cross-validation and threshold rule. ``--model ranking`` fits the weights that rank the
-structural search's candidates (``fusion.merge.CONFIDENCE_WEIGHTS``: every candidate of
-``fusion.merge.candidate_features`` labelled right or wrong, near misses within 5° and 1 m left
+structural search's candidates (``fusion.structural.CONFIDENCE_WEIGHTS``: every candidate of
+``fusion.structural.candidate_features`` labelled right or wrong, near misses within 5° and 1 m left
 out) and prints them to paste, with how often the top-ranked candidate is right under the old
 and the new weights.
 
@@ -20,7 +21,7 @@ those of ``data/env_pairs/test``) the grids are
 aligned both ways (B onto A and A onto B: two alignments per pair) and each alignment's
 evidence features (``GridMergeResult.features()``) are kept with whether the alignment is right
 (rotation error < 2°, translation error < 0.3 m at the moved map's node centroid, or its wall
-centroid when it has no nodes: ``fusion.evaluate``'s rule). A ridge-penalised logistic
+centroid when it has no nodes: ``fusion.evaluation.evaluate``'s rule). A ridge-penalised logistic
 regression (``fusion.calibration.fit_logistic``) is fitted on them; a leave-one-world-out
 cross-validation gives the reliability table and Brier score of predictions on worlds the fit
 did not see. The default ``accept_threshold`` is the smallest on a 0.05 grid at which no more
@@ -58,7 +59,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion.grid_merge as gm  # noqa: E402
-import fusion.merge as fm  # noqa: E402
+import fusion.structural as fm  # noqa: E402
 from fusion.calibration import (  # noqa: E402
     brier_score,
     extend_logistic,
@@ -69,9 +70,9 @@ from fusion.calibration import (  # noqa: E402
     reliability_table,
     write_model,
 )
-from fusion.eval_results import ROTATION_OK_DEG, TRANSLATION_OK_M  # noqa: E402
-from fusion.evaluate import synthetic_pairs  # noqa: E402
-from fusion.pairs import load_pairs  # noqa: E402
+from fusion.evaluation.evaluate import synthetic_pairs  # noqa: E402
+from fusion.evaluation.pairs import load_pairs  # noqa: E402
+from fusion.evaluation.results import ROTATION_OK_DEG, TRANSLATION_OK_M  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402
 from topo.fileio import atomic_write_json  # noqa: E402
 
@@ -213,7 +214,7 @@ def top_right(rows: list[dict], weights: np.ndarray, synthetic: bool) -> tuple[i
 
 
 def fit_ranking(rows: list[dict], l2: float) -> dict[str, float]:
-    """Weights of :data:`fusion.merge.CONFIDENCE_WEIGHTS` (raw feature units) from a logistic
+    """Weights of :data:`fusion.structural.CONFIDENCE_WEIGHTS` (raw feature units) from a logistic
     fit on the candidates (the bias column is the intercept)."""
     names = list(fm.CONFIDENCE_WEIGHTS)[1:]
     kept = [r for r in rows if r["label"] != -1]

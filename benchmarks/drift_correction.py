@@ -25,10 +25,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.base import run_episode  # noqa: E402
-from agents.team import EXPLORERS, make_team  # noqa: E402
+from agents.registry import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-from envs.two_robot_explore import localize  # noqa: E402
-from envs.two_robot_explore.robot import start_frame_pose  # noqa: E402
+from envs.explore import localize  # noqa: E402
+from envs.explore.robot import start_frame_pose  # noqa: E402
 
 
 def pose_errors(env) -> list[tuple[float, float]]:

@@ -14,14 +14,15 @@ Two splits, so that what is tuned on is never what is reported:
   - ``real_<map>``: 6 pairs (2 episodes × 3 snapshots) on each real map of ``../shared/maps``
     (DungeonMaps at 0.1 m/pixel, ROS maps at their own resolution), split between the two.
 
-Each folder is a ``fusion.pairs`` dataset written by ``python -m agents.dataset generate``, so an
+Each folder is a ``fusion.evaluation.pairs`` dataset written by ``python -m agents.dataset
+generate``, so an
 interrupted run resumes with the same command. ``benchmarks/topo_repeatability.py`` reads it.
 
 ``--odometry-noise σ …`` instead makes, per σ, ``drift/<split>/sigma_<σ>`` (apart from the
 split folders, which ``benchmarks/calibrate_merge.py`` reads by default): frontier pairs
 (``--episodes`` × 3 snapshots, 1500 steps, 20 m buildings, the dataset CLI's episode seeds and
 snapshot rule) driven with ``robot.odometry_noise = (σ, σ)``, whose ``transform`` is the
-**drift-aware** truth at the snapshot (``envs.two_robot_explore.drift.drift_aware_truth``: the
+**drift-aware** truth at the snapshot (``envs.explore.drift.drift_aware_truth``: the
 robots' current odometry frames), not the start-frame one the dataset CLI stores — with drift no
 rigid transform matches the start frames, and the current frames are where the maps are right
 now. Finished episodes are skipped, so a rerun resumes. The ``tune`` split (seed 0) unless
@@ -42,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 
 from agents.dataset import coverage_levels, episode_seed  # noqa: E402
 from agents.dataset import main as dataset_main  # noqa: E402
-from fusion.pairs import (  # noqa: E402
+from fusion.evaluation.pairs import (  # noqa: E402
     FORMAT,
     FORMAT_VERSION,
     GridSnapshot,
@@ -104,8 +105,8 @@ def drift_episode(root: Path, episode: int, noise: float, seed: int) -> int:
     """Run frontier episode ``episode`` with ``robot.odometry_noise = (noise, noise)`` and write
     its snapshots (pair ids ``episode · 3 + k``) with the drift-aware truth; returns how many."""
     from agents.base import run_episode
-    from agents.team import make_team
-    from envs.two_robot_explore.drift import drift_aware_truth
+    from agents.registry import make_team
+    from envs.explore.drift import drift_aware_truth
     from envs.two_robot_explore_v0 import parallel_env
 
     ep_seed = episode_seed(seed, episode)

@@ -8,7 +8,7 @@ It is measured two ways:
 - casting through pymunk's public ``Space.segment_query_first`` — the issue's definition ("about
   3,000 steps/s here" when it was written), the floor the 40 % target is read against;
 - casting as the env does (its own ``Sonar._cast``: the world's compiled ray caster,
-  ``envs/two_robot_explore/raycast.py``, a whole scan in one call), several times faster: what
+  ``envs/explore/raycast.py``, a whole scan in one call), several times faster: what
   physics and casts cost the env itself.
 
 The env is reported as steps/s and as its ratio to each.
@@ -51,8 +51,8 @@ from _actions import fixed_actions
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs import two_robot_explore_v0  # noqa: E402
-from envs.two_robot_explore import env as env_module  # noqa: E402
-from envs.two_robot_explore import mapping, merging, raycast, robot, sonar  # noqa: E402
+from envs.explore import env as env_module  # noqa: E402
+from envs.explore import mapping, merging, raycast, robot, sonar  # noqa: E402
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,7 +3,7 @@
 ``fusion.exhaustive_search`` refuses more than ``DEFAULT_MAX_EVALUATIONS`` placements and states
 an estimated time from ``fusion.search.SECONDS_PER_EVALUATION``; this prints the measured cost
 per placement over map sizes so that the constant can be checked on a machine. Maps are
-synthetic topological maps (``fusion.synthetic.make_pair``, 80 % overlap: many coinciding
+synthetic topological maps (``fusion.evaluation.synthetic.make_pair``, 80 % overlap: many coinciding
 endpoints, the dense case) and uniform random points in a 40 m square (sparse); the rotation
 step is chosen so that each search scores about ``--placements`` placements (the cost of one
 angle does not depend on the step). Times are medians of ``--repeats`` runs after a warm-up.
@@ -18,6 +18,7 @@ import argparse
 import numpy as np
 from _timing import median_time
 
+from fusion.evaluation.synthetic import make_pair
 from fusion.search import (
     DEFAULT_MAX_EVALUATIONS,
     SECONDS_PER_EVALUATION,
@@ -25,7 +26,6 @@ from fusion.search import (
     exhaustive_search,
     search_angles,
 )
-from fusion.synthetic import make_pair
 
 
 def step_for(n_a: int, n_b: int, placements: int) -> float:

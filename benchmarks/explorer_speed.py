@@ -41,7 +41,7 @@ def _env(size: float, steps: int, robots: int | None):
 def measure(explorer: str, size: float, steps: int, seed: int,
             robots: int | None = None) -> dict:
     """One timed episode and its replay on the raw env (module docstring)."""
-    from agents.team import make_team
+    from agents.registry import make_team
 
     env = _env(size, steps, robots)
     team = make_team(explorer, env=env)

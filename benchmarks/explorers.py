@@ -60,7 +60,7 @@ def episode(job: tuple[str, str, str, dict, int]) -> dict:
     torch.set_num_threads(1)
     from agents.base import run_episode
     from agents.metrics import EpisodeRecorder
-    from agents.team import make_team
+    from agents.registry import make_team
     from envs.two_robot_explore_v0 import parallel_env
 
     explorer, group, world_id, spec, max_cycles = job

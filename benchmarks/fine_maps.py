@@ -29,9 +29,9 @@ from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from fusion.evaluation.pairs import GridSnapshot  # noqa: E402
 from fusion.grid_merge import GridMergeConfig, _native_walls, merge_grids  # noqa: E402
 from fusion.icp import icp_svd  # noqa: E402
-from fusion.pairs import GridSnapshot  # noqa: E402
 from fusion.rigid import Rigid2D  # noqa: E402
 from topo.maps import load_floor_plan  # noqa: E402
 

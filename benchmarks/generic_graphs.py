@@ -3,7 +3,8 @@
     python benchmarks/generic_graphs.py [--seed 900 | --seeds 900,901] [--pairs 75]
         [--noise 0,0.05,0.1,0.15] [--methods auto,ransac] [--sweep] [--json out.json]
 
-Pairs: :func:`fusion.synthetic.generic_pairs` (:data:`fusion.synthetic.GENERIC_CONFIG`: a more
+Pairs: :func:`fusion.evaluation.synthetic.generic_pairs`
+(:data:`fusion.evaluation.synthetic.GENERIC_CONFIG`: a more
 regular lattice than the one the merge was tuned on, 12–50 explored world nodes a robot,
 overlap 0.2–1, 10 % dropped nodes, spurious spurs, frontier stubs, any rotation), ``--pairs``
 per noise level of which 80 % overlap and 20 % do not. **Seeds**: the reported figures use seed
@@ -17,14 +18,15 @@ a two-point RANSAC over all node pairs with kind-gated inliers, scored and accep
 inliers alone: at least :data:`PLAIN_MIN_INLIERS` matched nodes, not collinear — a RANSAC
 without the calibrated evidence) and the ``oracle`` (SVD on the true correspondences, always
 accepted). A merge **succeeds** when accepted, < 2° and < 0.3 m at B's centroid
-(``fusion.eval_results.is_success``); an accepted merge of a no-overlap pair is a **false
+(``fusion.evaluation.results.is_success``); an accepted merge of a no-overlap pair is a **false
 accept**. ``ceiling`` is the pairs on which ``auto`` or ``ransac`` found the right transform,
 accepted or not: what a better accept rule could reach with these searches.
 
 Printed: success per noise level and per overlap band (0.2–0.4, 0.4–0.7, 0.7–1) for every
 method, false accepts and wrong accepts (accepted, not right, of overlapping pairs), and the
 median time. ``--sweep`` adds, per method with a confidence, what other accept thresholds
-would give (the hard gates of :func:`fusion.merge.decide` kept; the merges are not re-run): success,
+would give (the hard gates of :func:`fusion.structural.decide` kept; the merges are not re-run):
+success,
 wrong and false accepts per threshold, the smallest threshold with at most
 :data:`MAX_FALSE_ACCEPTS` false accepts and its success against the oracle's, and the
 **ceiling** of any threshold: pairs whose alignment is right and passes the gates. ``--json``
@@ -50,14 +52,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fusion.eval_results import (  # noqa: E402
+from fusion.evaluation.results import (  # noqa: E402
     EvalPair,
     is_success,
     oracle_transform,
     transform_errors,
 )
-from fusion.merge import MergeConfig, decide, merge_maps  # noqa: E402
-from fusion.synthetic import generic_pairs  # noqa: E402
+from fusion.evaluation.synthetic import generic_pairs  # noqa: E402
+from fusion.structural import MergeConfig, decide, merge_maps  # noqa: E402
 from topo.fileio import atomic_write_json  # noqa: E402
 
 PLAIN_MIN_INLIERS = 9
@@ -72,7 +74,7 @@ MAX_FALSE_ACCEPTS = 0.01
 SWEEP = tuple(round(0.5 + 0.05 * k, 2) for k in range(10))
 """Accept thresholds of ``--sweep``: 0.5 to 0.95."""
 GATES_ONLY = MergeConfig(accept_threshold=0.0)
-""":func:`fusion.merge.decide` with this config applies only the hard gates."""
+""":func:`fusion.structural.decide` with this config applies only the hard gates."""
 
 
 def records(seed: int, pairs: int, noise_levels: list[float], methods: list[str]) -> list[dict]:

@@ -8,7 +8,7 @@ the grid alignment costs once a merge is in use.
 For each seed ``first_seed .. first_seed + worlds - 1`` (its own procedural ``size`` m
 building) one episode of ``--steps`` steps with a scripted team (``agents.scripted``), defaults
 otherwise. Every step with a transform in use is checked against the **drift-aware** truth
-(``envs.two_robot_explore.drift.drift_aware_error``: the robots' current odometry frames, the
+(``envs.explore.drift.drift_aware_error``: the robots' current odometry frames, the
 errors at the robots' current places; with perfect odometry the start-frame truth):
 **wrong** is more than 5° or 1 m off — a merge that puts robot 1's rooms on the wrong rooms.
 ``--odometry-noise S`` drives with ``robot.odometry_noise = (S, S)`` (the ``"increment"``
@@ -18,7 +18,7 @@ name); the table then adds the steps wrong against the env's start-frame truth
 the maps are bent, the accepted merge results more than 5° off (drift-aware) at a confidence
 of 0.9 or more ("confident wrong"), and the robots' odometry drift at the end (metres, the
 larger of the two). ``--drift-correction [KEY=VALUE ...]`` turns on the robots' own drift correction
-(``robot.drift_correction``, ``envs.two_robot_explore.localize``; e.g. ``sigma=1.0`` sets
+(``robot.drift_correction``, ``envs.explore.localize``; e.g. ``sigma=1.0`` sets
 ``robot.drift_correction_sigma``). ``--drift-prior`` gives every merge the grids' ``drift_prior``
 (``fusion.grid_merge.drift_prior`` of the odometry noise level — the largest ``sqrt(αk)`` for
 the alphas — and the env's steps) by wrapping ``fusion.hybrid``'s ``hybrid_merge`` and
@@ -56,11 +56,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import fusion.grid_merge as grid_merge  # noqa: E402
 import fusion.hybrid as hybrid  # noqa: E402
 from agents.base import run_episode  # noqa: E402
-from agents.team import EXPLORERS, make_team  # noqa: E402
+from agents.registry import EXPLORERS, make_team  # noqa: E402
 from envs import two_robot_explore_v0  # noqa: E402
-from envs.two_robot_explore.config import RobotConfig  # noqa: E402
-from envs.two_robot_explore.drift import drift_aware_error, odometry_noise_level  # noqa: E402
-from envs.two_robot_explore.robot import start_frame_pose  # noqa: E402
+from envs.explore.config import RobotConfig  # noqa: E402
+from envs.explore.drift import drift_aware_error, odometry_noise_level  # noqa: E402
+from envs.explore.robot import start_frame_pose  # noqa: E402
 
 WRONG_DEG, WRONG_M = 5.0, 1.0
 

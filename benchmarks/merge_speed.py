@@ -1,7 +1,8 @@
 """Merge time against map size for every ``fusion.merge_maps`` method, with ratios to the paper's
 exhaustive search measured in the same run.
 
-Pairs are synthetic (:mod:`fusion.synthetic`: lattice-like corridor worlds, node noise 0.15 m,
+Pairs are synthetic (:mod:`fusion.evaluation.synthetic`: lattice-like corridor worlds, node noise
+0.15 m,
 50% overlap, any rotation); each robot explores ``n`` world nodes, so the maps have about ``n``
 nodes (the table prints the median real count). Times are medians over the pairs, methods
 interleaved pair by pair in this one process, after one warm-up call (compiled kernels load on
@@ -40,14 +41,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.merge import METHODS, merge_maps
-from fusion.synthetic import SyntheticConfig, make_pair
+from fusion.evaluation.synthetic import SyntheticConfig, make_pair
+from fusion.structural import METHODS, merge_maps
 
 
 def grid_times(pairs_dir: Path, rev: str | None = None) -> None:
     """Print the time of the grid merges on every pair of ``pairs_dir`` (with ``rev``, also
     those of the ``fusion`` package at that git revision, interleaved pair by pair)."""
-    from fusion.evaluate import load_pair_dir
+    from fusion.evaluation.evaluate import load_pair_dir
     from fusion.grid_merge import merge_grids
     from fusion.hybrid import hybrid_merge
 
@@ -96,7 +97,7 @@ def _reference_merge(rev: str, into: Path):
     names = subprocess.run(["git", "-C", str(root), "ls-tree", "-r", "--name-only", rev,
                             "fusion/"], check=True, capture_output=True, text=True).stdout.split()
     package = into / "fusion_ref"
-    for name in names:  # subpackages (fusion/merge) and package data (calibration.json) too
+    for name in names:  # subpackages (fusion/structural) and package data (calibration.json) too
         if not name.endswith((".py", ".json")):
             continue
         text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{name}"], check=True,
@@ -146,8 +147,8 @@ def _env_merge_calls(steps: int) -> list[dict]:
     ``benchmarks/_actions.py`` (its :func:`episode`), the grids copied as they were then."""
     from _actions import episode
 
-    from envs.two_robot_explore import merging
-    from fusion.pairs import GridSnapshot
+    from envs.explore import merging
+    from fusion.evaluation.pairs import GridSnapshot
 
     calls: list[dict] = []
     run_merge = merging.run_merge

@@ -9,7 +9,7 @@ One episode of ``multi_robot_explore_v0`` per cell × seed: ``n_robots`` N, a pr
 None``) or range-limited (``comm.range`` metres), ``max_cycles = cycles_per_metre · size``
 (3000 steps at 20 m, 6000 at 40 m), defaults otherwise, driven by a scripted team: ``frontier``
 (one :class:`agents.scripted.Frontier` per robot, each on its own map),
-``coordinated_frontier`` (``agents.team.make_team``) or ``coordinated_frontier@known`` (the
+``coordinated_frontier`` (``agents.registry.make_team``) or ``coordinated_frontier@known`` (the
 same with the relative start poses known, ``mapping.merge_method="known"``: teammates placed
 from the first step instead of by merging). Per episode: T50 / T85 / T95, the first
 step the true coverage (``info["true_coverage"]``) reaches 50 / 85 / 95 % (the episode ends at
@@ -138,7 +138,7 @@ def build_team(explorer: str, env: Any) -> dict[str, Any]:
         for a, x in team.items():
             x.bind(env, a)
         return team
-    from agents.team import make_team
+    from agents.registry import make_team
 
     team = make_team(split_poses(explorer)[0], env=env)
     if sorted(team) != sorted(env.possible_agents):

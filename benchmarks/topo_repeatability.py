@@ -11,7 +11,8 @@ extraction of the commit that generated them; ``--true-views`` relabels every ce
 from the world itself before extracting: noise-free sonar on the same partial views, the
 ceiling of the extraction when only what each robot has seen differs), then
 
-* **node repeatability** (``fusion.repeatability.node_repeatability``) at 0.5 and 1.0 m, its
+* **node repeatability** (``fusion.evaluation.repeatability.node_repeatability``) at 0.5 and 1.0 m,
+its
   chance level, the node count in the shared region and the pairs with at least 3 mutually
   nearest repeatable nodes (a pair with fewer than 3 nodes in the region counts as a miss),
   over pairs with overlap ≥ 0.2, and the pooled share of all pairs' region nodes repeated;
@@ -19,7 +20,8 @@ ceiling of the extraction when only what each robot has seen differs), then
   ``--plan-ceiling`` adds the pairs whose world's *whole* floor plan, extracted the same way,
   has ≥ 3 nodes in the shared region: the ≥ 3 mutual figure this node design reaches with
   perfect, complete maps;
-* **merges** (``fusion.evaluate.evaluate``) per overlap bin: success (accepted, < 2°, < 0.3 m)
+* **merges** (``fusion.evaluation.evaluate.evaluate``) per overlap bin: success (accepted, < 2°, <
+0.3 m)
   and wrong accepts (accepted and not a success) over all pairs, no-overlap pairs included, and
   how many of the accepted merges are within 2° of the true rotation (look-alikes included).
 
@@ -47,10 +49,10 @@ sys.path.insert(0, str(ROOT))
 
 from agents.dataset import env_kwargs  # noqa: E402
 from envs.two_robot_explore_v0 import parallel_env  # noqa: E402
-from fusion.eval_results import ROTATION_OK_DEG, EvalPair  # noqa: E402
-from fusion.evaluate import evaluate  # noqa: E402
-from fusion.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
-from fusion.repeatability import in_region, node_repeatability, shared_region  # noqa: E402
+from fusion.evaluation.evaluate import evaluate  # noqa: E402
+from fusion.evaluation.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
+from fusion.evaluation.repeatability import in_region, node_repeatability, shared_region  # noqa: E402
+from fusion.evaluation.results import ROTATION_OK_DEG, EvalPair  # noqa: E402
 from topo.extract import extract_topomap  # noqa: E402
 from topo.grid import CellState  # noqa: E402
 
@@ -233,7 +235,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--pairs", type=Path, default=ROOT / "data" / "env_pairs")
     parser.add_argument("--split", default="test", choices=["tune", "test"])
     parser.add_argument("--methods", default="auto,hybrid,grid",
-                        help="comma-separated fusion.evaluate methods ('' for none)")
+                        help="comma-separated fusion.evaluation.evaluate methods ('' for none)")
     parser.add_argument("--stored-maps", action="store_true",
                         help="use the maps stored in the pair files (the generating commit's)")
     parser.add_argument("--true-views", action="store_true",

@@ -80,7 +80,7 @@ def main() -> None:
 def env_windows(steps: int = 1500, every: int = 25) -> list[tuple[np.ndarray, float, tuple]]:
     """``(states, resolution, origin)`` of both robots' known windows every ``every`` steps of a
     Frontier episode (seed 0, 20 m building), copied."""
-    from agents.team import make_team
+    from agents.registry import make_team
     from envs import two_robot_explore_v0
 
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, mapping={"merge_every": 0,

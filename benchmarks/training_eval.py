@@ -161,9 +161,9 @@ def _team(explorer: str, n: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
     it was trained with, :mod:`_poses`) and the env config it runs with (before the world is
     set)."""
     from agents.goals import SectorRule
+    from agents.registry import make_team
     from agents.sb3_explorer import sb3_team
     from agents.scripted import Blackboard
-    from agents.team import make_team
 
     base, merge_method = split_poses(explorer)
     if merge_method is not None:

@@ -13,7 +13,7 @@ that::
     single = gymnasium.make("topomerge/TwoRobotExplore-v0")   # both robots as one agent
     four = gymnasium.make("topomerge/MultiRobotExplore-v0", n_robots=4)  # four as one agent
 
-The Gymnasium envs (:mod:`envs.two_robot_explore.centralised`) are centralised views of the
+The Gymnasium envs (:mod:`envs.explore.centralised`) are centralised views of the
 same envs: joint action, every robot's observation, the team reward. The entry points are
 import strings: the env modules (pymunk, scikit-image...) load on the first ``make``.
 :func:`parallel_env_for` picks the PettingZoo env for a config's ``n_robots``.
@@ -65,7 +65,7 @@ def _register() -> None:
         if gym_id not in gymnasium.registry:
             # the env ends its episodes itself (max_cycles): no TimeLimit on top
             gymnasium.register(gym_id,
-                               entry_point=f"envs.two_robot_explore.centralised:{cls}")
+                               entry_point=f"envs.explore.centralised:{cls}")
 
 
 _register()

@@ -22,8 +22,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agents.registry import make_team  # noqa: E402
 from agents.scripted import Frontier  # noqa: E402
-from agents.team import make_team  # noqa: E402
 from envs import multi_robot_explore_v0, two_robot_explore_v0  # noqa: E402
 from topo.fileio import atomic_write  # noqa: E402
 
@@ -35,7 +35,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out"))
     parser.add_argument("--no-gif", action="store_true")
     parser.add_argument("--explorer", default="coordinated_frontier",
-                        help="agents.team.EXPLORERS name of the explorer driving both robots")
+                        help="agents.registry.EXPLORERS name of the explorer driving both robots")
     parser.add_argument("--team", type=int, default=4,
                         help="robots of the multi-robot episode (2-8; 0 skips it)")
     args = parser.parse_args()

@@ -1,7 +1,11 @@
 """fusion: align two robots' topological maps (the paper's ICP-SVD and global merges)."""
 
+from fusion.evaluation.synthetic import SyntheticConfig, SyntheticPair, generate_pairs, make_pair
 from fusion.icp import IcpResult, icp_svd, svd_rotation
-from fusion.merge import (
+from fusion.paper import PaperExample, paper_example
+from fusion.rigid import Rigid2D, wrap_angle
+from fusion.search import Placement, SearchResult, exhaustive_search, similarity
+from fusion.structural import (
     METHODS,
     MergeConfig,
     MergeEvidence,
@@ -10,10 +14,6 @@ from fusion.merge import (
     fuse_maps,
     merge_maps,
 )
-from fusion.paper import PaperExample, paper_example
-from fusion.rigid import Rigid2D, wrap_angle
-from fusion.search import Placement, SearchResult, exhaustive_search, similarity
-from fusion.synthetic import SyntheticConfig, SyntheticPair, generate_pairs, make_pair
 
 __all__ = [
     "METHODS",

@@ -6,7 +6,8 @@ A merge method computes a few evidence features of its best alignment (for
 :func:`fusion.merge_grids`: its correlation score, its margin over the best distinct rival, how
 B's walls land on A's walls and free space, the overlap ...). :class:`Calibrator` turns them into
 the probability that the alignment is right (rotation error < 2°, translation error < 0.3 m at
-B's centroid: :func:`fusion.evaluate.is_success`), and a merge is accepted when that probability
+B's centroid: :func:`fusion.evaluation.evaluate.is_success`), and a merge is accepted when that
+probability
 reaches the caller's ``accept_threshold``. Why logistic regression rather than isotonic: a few
 hundred tuning pairs fit a handful of coefficients well, the model is monotone and smooth in each
 feature (isotonic regression would need one score to be sorted on first, and its steps over a few

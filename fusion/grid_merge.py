@@ -36,7 +36,8 @@ more evidence — every wall cell — so this method aligns them directly:
 (what the environment runs); :func:`fusion.hybrid.recheck` re-runs both for maps already
 merged, to replace or refute the transform in use as the maps grow.
 
-All inputs are duck-typed grids: :class:`topo.OccupancyGrid` or :class:`fusion.pairs.GridSnapshot`
+All inputs are duck-typed grids: :class:`topo.OccupancyGrid` or
+:class:`fusion.evaluation.pairs.GridSnapshot`
 (anything with cell-state codes — ``states()`` or ``states`` — ``resolution`` and ``origin``).
 """
 

@@ -25,8 +25,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fusion import grid_merge as gm
-from fusion.merge import MergeResult, fuse_maps, merge_maps
 from fusion.rigid import Rigid2D
+from fusion.structural import MergeResult, fuse_maps, merge_maps
 
 HYBRID_EPS = 0.6
 """Node fusion radius (m) when a grid alignment builds the merged topological map: sonar

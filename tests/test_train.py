@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from agents.dataset import GenerateArgs, generate
-from fusion.pairs import load_pairs
+from fusion.evaluation.pairs import load_pairs
 from train import Args, main
 
 torch.set_num_threads(1)
@@ -348,8 +348,8 @@ def test_goal_level_team_of_three_trains_one_policy(tmp_path):
     import torch
 
     from agents.base import run_episode
+    from agents.registry import make_team
     from agents.sb3_explorer import SB3Explorer, sb3_team
-    from agents.team import make_team
     from envs import multi_robot_explore_v0
 
     with pytest.raises(ValueError, match=r"n_robots=5: the policy's observations are for a "

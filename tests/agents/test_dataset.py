@@ -23,7 +23,7 @@ from agents.dataset import (
     main,
 )
 from fusion import Rigid2D
-from fusion.pairs import LOCK_FILE, load_pairs, pair_files
+from fusion.evaluation.pairs import LOCK_FILE, load_pairs, pair_files
 from topo.fileio import exclusive_lock
 from topo.grid import CellState
 

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from agents.evaluation import eval_seeds, eval_worlds, evaluate, summarise
-from agents.team import make_team
+from agents.registry import make_team
 
 
 def test_eval_seeds_are_fixed_per_run_seed_and_differ_between_seeds():

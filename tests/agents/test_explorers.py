@@ -6,8 +6,8 @@ import pytest
 from agents.base import run_episode
 from agents.frontier_planning import FrontierConfig
 from agents.metrics import EpisodeRecorder
+from agents.registry import EXPLORERS, make_team
 from agents.scripted import RandomWalk, WallFollower
-from agents.team import EXPLORERS, make_team
 from envs.two_robot_explore_v0 import parallel_env
 
 SMALL = {"world": {"size": (10.0, 10.0)}}

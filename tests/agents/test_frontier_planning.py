@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from agents.frontier_planning import FrontierConfig, frontier_map
 from agents.scripted import Blackboard, CoordinatedFrontier, Frontier
-from envs.two_robot_explore.config import RobotConfig, SonarConfig
+from envs.explore.config import RobotConfig, SonarConfig
 from fusion import Rigid2D
 from topo.grid import OccupancyGrid
 

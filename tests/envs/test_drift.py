@@ -6,8 +6,8 @@ import pytest
 from conftest import SMALL
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.config import RobotConfig
-from envs.two_robot_explore.drift import (
+from envs.explore.config import RobotConfig
+from envs.explore.drift import (
     drift_aware_error,
     drift_aware_truth,
     odometry_noise_level,

@@ -10,7 +10,7 @@ from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render
 
 import envs
 from envs import two_robot_explore_v0
-from envs.two_robot_explore import EnvConfig, TwoRobotExploreEnv
+from envs.explore import EnvConfig, TwoRobotExploreEnv
 
 
 def test_parallel_api():
@@ -216,7 +216,7 @@ def test_reset_options():
 
 
 def test_grid_merge_every_must_be_a_multiple_of_merge_every():
-    from envs.two_robot_explore.config import MappingConfig
+    from envs.explore.config import MappingConfig
 
     with pytest.raises(ValueError, match=r"mapping.grid_merge_every must be 0 or a multiple of "
                                          r"mapping.merge_every \(25\), got 30"):

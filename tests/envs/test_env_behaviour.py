@@ -9,8 +9,8 @@ import pytest
 from conftest import SMALL
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.env import MERGE_METHODS
-from envs.two_robot_explore.mapping import compose_pose
+from envs.explore.env import MERGE_METHODS
+from envs.explore.mapping import compose_pose
 from fusion.rigid import Rigid2D
 
 
@@ -279,7 +279,7 @@ def test_the_accept_threshold_reaches_the_grid_alignment(monkeypatch):
     """``mapping.accept_threshold`` is the threshold the env's merges are decided with, and
     its default is the library's."""
     import fusion.grid_merge as gm
-    from envs.two_robot_explore.config import MappingConfig
+    from envs.explore.config import MappingConfig
 
     assert MappingConfig().accept_threshold == gm.DEFAULT_ACCEPT_THRESHOLD
     seen = []

@@ -15,7 +15,7 @@ from gymnasium import spaces
 from pettingzoo.test import parallel_seed_test, seed_test
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.env import (
+from envs.explore.env import (
     MERGE_METHODS,
     MERGE_SOURCES,
     STATE_MAP_SIZE,

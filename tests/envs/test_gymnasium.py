@@ -15,7 +15,7 @@ from gymnasium.wrappers import FlattenObservation, RecordVideo, RenderCollection
 
 import envs
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.centralised import (
+from envs.explore.centralised import (
     GYMNASIUM_ID,
     MULTI_GYMNASIUM_ID,
     CentralisedExploreEnv,

@@ -1,4 +1,4 @@
-"""Drift correction against the robot's own map (``envs.two_robot_explore.localize``): the
+"""Drift correction against the robot's own map (``envs.explore.localize``): the
 scan-to-map match on a synthetic room, the config fields, and the env hook (off without odometry
 noise, deterministic with it)."""
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from envs import two_robot_explore_v0
-from envs.two_robot_explore.config import RobotConfig
-from envs.two_robot_explore.localize import DriftCorrector
+from envs.explore.config import RobotConfig
+from envs.explore.localize import DriftCorrector
 
 RES = 0.1
 ORIGIN = (-10.0, -10.0)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from envs.two_robot_explore.mapping import (
+from envs.explore.mapping import (
     LOCAL_MAP_VALUES,
     Geometry,
     LocalMapSampler,
@@ -214,9 +214,9 @@ def test_env_extracts_each_robots_whole_known_map():
 def test_structural_merge_on_a_small_env_pair():
     """Two Frontier robots in a 12 m building, 600 steps: the structural merge of their own
     topological maps (no grids) is accepted and within 2° and 0.3 m of the truth."""
-    from agents.team import make_team
+    from agents.registry import make_team
     from envs import two_robot_explore_v0
-    from fusion.merge import merge_maps
+    from fusion.structural import merge_maps
 
     env = two_robot_explore_v0.parallel_env(max_cycles=600, world={"size": (12, 12)},
                                             mapping={"merge_every": 0})
@@ -241,7 +241,7 @@ def test_structural_merge_on_a_small_env_pair():
 def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max, theta):
     """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip,
     any heading."""
-    from envs.two_robot_explore._map_kernels import nearest_nodes
+    from envs.explore._map_kernels import nearest_nodes
 
     rng = np.random.default_rng(seed)
     xy = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
@@ -268,7 +268,7 @@ def test_nearest_nodes_kernel_is_the_numpy_form(seed, n, n_max, theta):
 @given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.integers(0, 80), st.integers(1, 40))
 def test_adjacency_kernel_is_the_numpy_form(seed, n, n_edges, n_max):
     """Edges between listed nodes only, both directions, parallel edges, any order."""
-    from envs.two_robot_explore._map_kernels import adjacency
+    from envs.explore._map_kernels import adjacency
 
     rng = np.random.default_rng(seed)
     order = rng.permutation(n)[:n_max]

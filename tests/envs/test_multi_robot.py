@@ -11,10 +11,10 @@ from conftest import SMALL
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from envs import multi_robot_explore_v0, two_robot_explore_v0
-from envs.two_robot_explore.config import MappingConfig
-from envs.two_robot_explore.global_state import state_scalars
-from envs.two_robot_explore.merging import MERGE_METHODS, MERGE_SOURCES, TeamMerging
-from envs.two_robot_explore.observations import TEAMMATE_FEATURES
+from envs.explore.config import MappingConfig
+from envs.explore.global_state import state_scalars
+from envs.explore.merging import MERGE_METHODS, MERGE_SOURCES, TeamMerging
+from envs.explore.observations import TEAMMATE_FEATURES
 
 TEAM = {**SMALL, "world": {"size": (12.0, 12.0)}, "sonar": {"rays": 1},
         "mapping": {"merge_every": 10, "grid_merge_every": 20, "topo_every": 10}}
@@ -242,7 +242,7 @@ def test_the_two_robot_env_is_a_team_of_two():
 def test_grid_alignments_follow_a_pairs_own_turns(monkeypatch):
     """With more pairs than merge slots, each pair tries the grids on every
     grid_merge_every / merge_every-th turn of its own, not on every turn it gets."""
-    import envs.two_robot_explore.merging as merging
+    import envs.explore.merging as merging
 
     calls = []
     real = merging.run_merge

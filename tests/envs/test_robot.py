@@ -5,16 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from envs.two_robot_explore.config import ODOMETRY_PRESETS, RobotConfig, WorldConfig
-from envs.two_robot_explore.drift import drift_aware_error, drift_aware_truth
-from envs.two_robot_explore.robot import (
+from envs.explore.config import ODOMETRY_PRESETS, RobotConfig, WorldConfig
+from envs.explore.drift import drift_aware_error, drift_aware_truth
+from envs.explore.robot import (
     Robot,
     build_space,
     sample_odometry,
     simulate,
     start_frame_pose,
 )
-from envs.two_robot_explore.worlds import procedural_world
+from envs.explore.worlds import procedural_world
 from fusion.rigid import Rigid2D
 
 

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from raycast_reference import cast_rays
 
-from envs.two_robot_explore.config import RobotConfig, SonarConfig, WorldConfig
-from envs.two_robot_explore.raycast import RayCaster
-from envs.two_robot_explore.robot import Robot, build_space
-from envs.two_robot_explore.sonar import Sonar
-from envs.two_robot_explore.worlds import procedural_world
+from envs.explore.config import RobotConfig, SonarConfig, WorldConfig
+from envs.explore.raycast import RayCaster
+from envs.explore.robot import Robot, build_space
+from envs.explore.sonar import Sonar
+from envs.explore.worlds import procedural_world
 
 
 def caster_of(segments, robots):

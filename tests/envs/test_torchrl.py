@@ -11,7 +11,7 @@ from torchrl.envs.libs.pettingzoo import PettingZooWrapper  # noqa: E402
 from torchrl.envs.utils import check_env_specs  # noqa: E402
 
 from envs import two_robot_explore_v0  # noqa: E402
-from envs.two_robot_explore.env import STATE_MAP_SIZE, STATE_SCALARS  # noqa: E402
+from envs.explore.env import STATE_MAP_SIZE, STATE_SCALARS  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -50,7 +50,7 @@ def test_rollout_resets_across_episode_ends():
 @pytest.mark.parametrize("n_robots", [3, 4])
 def test_pettingzoo_wrapper_groups_a_team(n_robots):
     from envs import multi_robot_explore_v0
-    from envs.two_robot_explore.env import state_scalars
+    from envs.explore.env import state_scalars
 
     env = PettingZooWrapper(
         env=multi_robot_explore_v0.parallel_env(

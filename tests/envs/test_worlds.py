@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from envs.two_robot_explore.config import RobotConfig, WorldConfig
-from envs.two_robot_explore.robot import Robot, build_space
-from envs.two_robot_explore.worlds import (
+from envs.explore.config import RobotConfig, WorldConfig
+from envs.explore.robot import Robot, build_space
+from envs.explore.worlds import (
     World,
     load_houseexpo_json,
     load_world,

@@ -1,11 +1,11 @@
-"""fusion.diagnose: the classes of auto's misses."""
+"""fusion.evaluation.diagnose: the classes of auto's misses."""
 
 import numpy as np
 
-from fusion.diagnose import CLASSES, classify, diagnose, main
-from fusion.eval_results import EvalPair
-from fusion.merge import MergeConfig
-from fusion.synthetic import make_pair
+from fusion.evaluation.diagnose import CLASSES, classify, diagnose, main
+from fusion.evaluation.results import EvalPair
+from fusion.evaluation.synthetic import make_pair
+from fusion.structural import MergeConfig
 
 
 def _pair(seed: int = 3, overlap: float = 0.8) -> EvalPair:

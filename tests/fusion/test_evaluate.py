@@ -7,16 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from fusion import evaluate as evaluate_module
-from fusion.eval_results import (
-    ROTATION_OK_DEG,
-    TRANSLATION_OK_M,
-    EvalPair,
-    is_success,
-    oracle_transform,
-    summarise,
-)
-from fusion.evaluate import (
+from fusion.evaluation import evaluate as evaluate_module
+from fusion.evaluation.evaluate import (
     check_exhaustive,
     evaluate,
     load_pair_dir,
@@ -24,7 +16,15 @@ from fusion.evaluate import (
     parse_methods,
     synthetic_pairs,
 )
-from fusion.synthetic import make_pair
+from fusion.evaluation.results import (
+    ROTATION_OK_DEG,
+    TRANSLATION_OK_M,
+    EvalPair,
+    is_success,
+    oracle_transform,
+    summarise,
+)
+from fusion.evaluation.synthetic import make_pair
 from topo import TopoMap
 from topo.fileio import atomic_write_json
 
@@ -144,7 +144,7 @@ def test_summary_counts_false_accepts_and_bins():
 
 
 def test_reads_a_map_pair_dataset(tmp_path):
-    import fusion.pairs as pairs_mod
+    import fusion.evaluation.pairs as pairs_mod
 
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
     atomic_write_json(tmp_path / "dataset.json",
@@ -161,7 +161,7 @@ def test_reads_a_map_pair_dataset(tmp_path):
 
 
 def test_grid_methods_need_grids():
-    from fusion.evaluate import evaluate, parse_methods, synthetic_pairs
+    from fusion.evaluation.evaluate import evaluate, parse_methods, synthetic_pairs
 
     assert parse_methods("hybrid,grid,auto") == ["hybrid", "grid", "auto"]
     pairs = synthetic_pairs(2, seed=3, noise_levels=(0.05,))
@@ -171,7 +171,7 @@ def test_grid_methods_need_grids():
 
 
 def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
-    from fusion.eval_results import Record
+    from fusion.evaluation.results import Record
 
     err = (0.5, 0.1) if right else (30.0, 3.0)
     return Record(name, "m", kind, overlap, None, 10.0, conf >= 0.5, *err,
@@ -179,7 +179,7 @@ def _rec(name, conf, right, kind="overlap", overlap=0.5, gated=True):
 
 
 def test_threshold_sweep_counts_what_each_threshold_accepts():
-    from fusion.eval_results import calibration_summary, is_right, threshold_sweep
+    from fusion.evaluation.results import calibration_summary, is_right, threshold_sweep
 
     records = [_rec("p0", 0.95, True), _rec("p1", 0.7, True), _rec("p2", 0.6, False),
                _rec("p3", 0.8, False, kind="no_overlap", overlap=0.0),
@@ -201,7 +201,7 @@ def test_threshold_sweep_counts_what_each_threshold_accepts():
 
 
 def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
-    import fusion.pairs as pairs_mod
+    import fusion.evaluation.pairs as pairs_mod
 
     grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
     for folder in ("one", "two"):

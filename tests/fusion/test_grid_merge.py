@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from fusion import Rigid2D
+from fusion.evaluation.pairs import GridSnapshot
 from fusion.grid_merge import (
     GridMergeConfig,
     check_with_grids,
@@ -19,7 +20,6 @@ from fusion.grid_merge import (
     refine_with_grids,
 )
 from fusion.hybrid import hybrid_merge, recheck
-from fusion.pairs import GridSnapshot
 from topo import TopoMap
 
 RES = 0.1
@@ -512,7 +512,7 @@ def test_with_vouch_or_drift_a_structural_merge_needs_the_grids_to_vouch(monkeyp
         assert ("structural merge refuted by the grids: the grids' best alignment is another "
                 "one") in res.reason
     # the env's entry point asks it of a pair's first merge (no transform in use) only
-    from envs.two_robot_explore.merging import run_merge
+    from envs.explore.merging import run_merge
 
     assert not run_merge(TINY, TINY, "hybrid", a, b)[0].accepted
     assert run_merge(TINY, TINY, "hybrid", a, b, in_use=truth)[0].accepted

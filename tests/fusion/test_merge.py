@@ -10,7 +10,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fusion.merge import (
+from fusion.evaluation.synthetic import SyntheticConfig, make_pair
+from fusion.rigid import Rigid2D
+from fusion.structural import (
     METHODS,
     MergeConfig,
     MergeEvidence,
@@ -19,8 +21,6 @@ from fusion.merge import (
     fuse_maps,
     merge_maps,
 )
-from fusion.rigid import Rigid2D
-from fusion.synthetic import SyntheticConfig, make_pair
 from topo.graph import TopoMap
 
 QUIET = SyntheticConfig(noise=0.05, drop_rate=0.05)
@@ -294,13 +294,13 @@ def test_zero_length_paths_do_not_crash_the_evidence_kernel():
 
 
 def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
-    """The refitted coarse score (fusion.merge._search_kernels.refined_scores): a hypothesis 0.5° and
+    """The refitted coarse score (fusion.structural._search_kernels.refined_scores): a hypothesis 0.5° and
     0.1 m off the motion that made B from A lands on it after one fit, every B node exactly on
     its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
     scored 0. ``landed`` counts the nodes each paired before its refit."""
-    from fusion.merge import _search_kernels as K
-    from fusion.merge.hypotheses import hit_grid
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural import _search_kernels as K
+    from fusion.structural.hypotheses import hit_grid
+    from fusion.structural.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
@@ -324,9 +324,9 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
 def test_likelihood_rewards_tight_matches(pair):
     """MergeEvidence.likelihood: exact matches score the tightest spread's full log-ratio each;
     the same matches 0.3 m off score less (a chance-like distance), and the score with them."""
-    from fusion.merge import _evidence_kernels as K
-    from fusion.merge.evidence import evaluate
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural import _evidence_kernels as K
+    from fusion.structural.evidence import evaluate
+    from fusion.structural.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = pair.map_a
@@ -344,10 +344,10 @@ def test_likelihood_rewards_tight_matches(pair):
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_path_field_is_the_distance_to_the_nearest_segment(seed):
-    """fusion.merge._prepare_kernels.path_field against the obvious computation: every cell centre's
+    """fusion.structural._prepare_kernels.path_field against the obvious computation: every cell centre's
     squared distance to every segment (horizontal, vertical and zero-length ones included),
     capped at reach²."""
-    from fusion.merge import _prepare_kernels as K
+    from fusion.structural import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     seg = rng.uniform(0.0, 12.0, (9, 4))
@@ -366,7 +366,7 @@ def test_path_field_is_the_distance_to_the_nearest_segment(seed):
 
 
 def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
-    """fusion.merge._prepare_kernels.path_field as it was written before its rows were laid out first
+    """fusion.structural._prepare_kernels.path_field as it was written before its rows were laid out first
     (54fa37b), in plain Python: each row's extent, then its cells, one row after the other."""
     d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
     for ux, uy, wx, wy in seg.tolist():
@@ -405,10 +405,10 @@ def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_path_field_is_the_row_by_row_walk_bit_for_bit(seed):
-    """fusion.merge._prepare_kernels.path_field lays a segment's rows out before walking them, for
+    """fusion.structural._prepare_kernels.path_field lays a segment's rows out before walking them, for
     speed: the same raster, bit for bit, as walking one row after the other (grid-aligned
     coordinates, so that horizontal, vertical, zero-length and shared-end segments occur)."""
-    from fusion.merge import _prepare_kernels as K
+    from fusion.structural import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     seg = np.round(rng.uniform(0.0, 12.0, (12, 4)) * 2.5) / 2.5
@@ -434,8 +434,8 @@ def test_path_evidence_counts_paths_on_and_beside_the_other_maps():
     each other's (the raster's cells, PATH_CELL wide, cost a few tenths of the soft weight);
     moved 1.2 m aside the corridors run beside each other (path_off), and only the branches
     that still overlap agree."""
-    from fusion.merge.evidence import evaluate
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural.evidence import evaluate
+    from fusion.structural.prepare import prepare_pair
 
     cfg = MergeConfig()
     a, b = prepare_pair(_corridors(), _corridors(), cfg)
@@ -449,8 +449,8 @@ def test_path_evidence_counts_paths_on_and_beside_the_other_maps():
 def test_path_evidence_follows_polylines():
     """A path's polyline, not the straight line between its nodes, is what lies on the other
     map: a path bowed 1.5 m out does not agree with a straight one; the same bow does."""
-    from fusion.merge.evidence import evaluate
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural.evidence import evaluate
+    from fusion.structural.prepare import prepare_pair
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]]
@@ -496,9 +496,9 @@ def test_final_fit_reads_path_points_only_for_maps_without_polylines(monkeypatch
     hugging one side of a corridor does not turn an exact node match."""
     import dataclasses
 
-    import fusion.merge.refine as refine
+    import fusion.structural.refine as refine
     from fusion.icp import rigid_fit
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural.prepare import prepare_pair
 
     cfg = MergeConfig()
     a = _corridors()
@@ -539,8 +539,8 @@ def test_final_fit_weighs_a_pair_by_its_distance():
     fit less than the plain SVD fit of the six pairs does, and exactly as the SVD fit
     with those weights."""
     from fusion.icp import rigid_fit
-    from fusion.merge import refine
-    from fusion.merge.prepare import prepare_pair
+    from fusion.structural import refine
+    from fusion.structural.prepare import prepare_pair
 
     xy = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0], [2.0, 1.5], [6.0, 1.0]])
     b = xy.copy()
@@ -562,8 +562,8 @@ def test_pixel_fine_polylines_are_read_as_chords():
     """Extracted maps carry a polyline point per grid cell; the path evidence reads them as
     chords about PATH_CHORD long that keep each polyline's ends and stay on its pixels, so a
     pixel-fine map scores like the same map drawn with straight pieces."""
-    from fusion.merge.evidence import evaluate
-    from fusion.merge.prepare import PATH_CHORD, path_segments, prepare_pair
+    from fusion.structural.evidence import evaluate
+    from fusion.structural.prepare import PATH_CHORD, path_segments, prepare_pair
 
     cfg = MergeConfig()
     xy = [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]
@@ -584,8 +584,8 @@ def test_pixel_fine_polylines_are_read_as_chords():
 
 
 def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
-    """The numpy form of fusion.merge._prepare_kernels.polyline_chords (what
-    fusion.merge.prepare.path_segments was)."""
+    """The numpy form of fusion.structural._prepare_kernels.polyline_chords (what
+    fusion.structural.prepare.path_segments was)."""
     pts = np.concatenate(paths).astype(np.float64)
     sizes = np.array([len(q) for q in paths])
     last = np.cumsum(sizes) - 1
@@ -609,10 +609,10 @@ def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), chord=st.sampled_from([0.05, 0.4, 1.3]))
 def test_polyline_chords_are_the_numpy_form(seed, chord):
-    """fusion.merge._prepare_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
+    """fusion.structural._prepare_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
     (cumulative arc length, a chord end at the first point past each multiple of ``chord``),
     single-point polylines and repeated points included."""
-    from fusion.merge import _prepare_kernels as K
+    from fusion.structural import _prepare_kernels as K
 
     rng = np.random.default_rng(seed)
     paths = [np.cumsum(rng.normal(0.0, 0.2, (int(rng.integers(1, 40)), 2)), axis=0)
@@ -624,10 +624,10 @@ def test_polyline_chords_are_the_numpy_form(seed, chord):
 
 def test_point_to_line_fit_takes_the_rotation_from_long_corridors():
     """Nodes off by 0.15 m leave a node fit about a degree off; the corridors' polylines, exact
-    here, bring it about halfway back (``fusion.merge.refine.line_fit``)."""
+    here, bring it about halfway back (``fusion.structural.refine.line_fit``)."""
     from fusion.icp import rigid_fit
-    from fusion.merge.prepare import prepare_pair
-    from fusion.merge.refine import line_fit
+    from fusion.structural.prepare import prepare_pair
+    from fusion.structural.refine import line_fit
 
     xy = np.array([(0, 0), (12, 0), (24, 0), (0, 9), (12, 9), (24, 9), (6, -5), (18, 14)],
                   dtype=float)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fusion import Rigid2D
-from fusion.pairs import (
+from fusion.evaluation.pairs import (
     DatasetError,
     GridSnapshot,
     MapPair,

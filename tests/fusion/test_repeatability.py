@@ -1,4 +1,4 @@
-"""fusion.repeatability: node repeatability of a map pair against its true transform."""
+"""fusion.evaluation.repeatability: node repeatability of a map pair against its true transform."""
 
 import math
 
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusion.pairs import GridSnapshot
-from fusion.repeatability import in_region, node_repeatability, shared_region
+from fusion.evaluation.pairs import GridSnapshot
+from fusion.evaluation.repeatability import in_region, node_repeatability, shared_region
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
 from topo.grid import CellState

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusion.synthetic import (
+from fusion.evaluation.synthetic import (
     GENERIC_CONFIG,
     PAIR_KINDS,
     SyntheticConfig,

@@ -1,5 +1,5 @@
 """Drawing topological maps: every node kind has its colour (a map from extract_topomap, with
-gateways, used to fail ``python -m fusion.evaluate``'s pictures)."""
+gateways, used to fail ``python -m fusion.evaluation``'s pictures)."""
 
 import matplotlib
 

@@ -1,0 +1,968 @@
+"""A team of sonar robots explores an unknown building and merges its maps.
+
+Two envs share this manual: ``multi_robot_explore_v0`` (teams of ``n_robots`` = 2–8, with
+range-limited communication: ``comm``) and ``two_robot_explore_v0``, the team of two with its
+original observation layout (one ``teammate`` row, no ``contacts``/``fused_robots`` infos).
+Where the manual says "two robots", a larger team does the same pairwise (Merging N maps).
+
+## Description
+
+Two Pioneer3-DX-like robots (``robot_0``, ``robot_1``; ``robot_0 … robot_{N-1}`` in a team of
+N) start at random, unknown-to-each-other
+poses in a 2-D indoor world simulated with pymunk. Each drives by a velocity command, senses
+with a ring of 8 sonars, and builds an occupancy grid and a topological map (places and the
+paths between them) **in its own odometry frame**. Every ``merge_every`` steps the two robots'
+maps are aligned (``mapping.merge_method``, default ``"hybrid"``: ``fusion.merge_maps`` on the
+topological maps, then an occupancy-grid alignment, see Maps); when a merge is accepted, robot
+1's map joins robot 0's in the **shared map**. The team is rewarded for growing the shared map,
+so a wrong merge costs reward. It is a cooperative PettingZoo ``ParallelEnv``; ``env()`` gives
+the AEC version; ``gymnasium.make("topomerge/TwoRobotExplore-v0")`` (after ``import envs``) is
+one Gymnasium agent driving both robots (joint action, both observations, the team reward:
+:mod:`envs.explore.centralised`), for Gymnasium's wrappers and vector envs;
+``gymnasium.make("topomerge/MultiRobotExplore-v0", n_robots=N)`` is the same for a team.
+
+## Action Space
+
+``Box(-1, 1, (2,), float32)`` per robot (``action_type="continuous"``):
+
+| index | meaning                  | unit              | min | max |
+|-------|--------------------------|-------------------|-----|-----|
+| 0     | forward speed ``v``      | × ``robot.max_speed`` (0.7 m/s)     | -1 | 1 |
+| 1     | turn rate ``ω`` (CCW)    | × ``robot.max_turn_rate`` (100°/s)  | -1 | 1 |
+
+Finite values outside ``[-1, 1]`` are clipped; NaN, inf or a wrong shape is a ``ValueError``.
+With ``action_type="discrete"``, ``Discrete(5)``: 0 stop, 1 forward, 2 turn left in place,
+3 turn right in place, 4 backward (full speed/turn rate).
+
+## Observation Space
+
+A ``Dict`` per robot (spaces built once; ``R`` = the frame radius, the world's diagonal plus
+the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size``):
+
+| key | shape, dtype | meaning | min | max |
+|---|---|---|---|---|
+| ``sonar`` | (8,) f32 | range / ``max_range`` per sonar (1 = no echo) | 0 | 1 |
+| ``odometry`` | (4,) f32 | ``x, y`` (m, own start frame), ``cos θ, sin θ`` | -R, -1 | R, 1 |
+| ``graph_nodes`` | (N, 9) f32 | per node, nearest first (a) | -2R, 0 | 2R, 16 |
+| ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
+| ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
+| ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
+| ``teammate`` | (5,) f32 | teammate's estimated pose (c; two robots) | -2R, -1, 0 | 2R, 1, 1 |
+| ``teammates`` | (N−1, 7) f32 | per teammate (h; teams) | -2R, -1, 0 | 2R, 1, 1 |
+
+(a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
+one-hot (junction, dead end, corner, gateway; 0–1), degree (0–16), clearance (m, 0–10), frontier
+flag (1 for a node that touches the unknown: where exploring goes on) — of the robot's own
+topological map (see Maps).
+(b) robot at the centre facing up, its left on the image's left, ``mapping.local_map_resolution``
+m/pixel; 0 occupied, 128 unknown, 255 free.
+(c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
+is accepted; all 0 before).
+(h) one row per teammate, in index order, skipping the robot itself: the five entries of (c)
+for that teammate (valid: it is in this robot's fused map; its pose is the one at their last
+contact when out of contact), then ``in_contact`` (0/1) and ``age``: steps since their last
+contact / ``max_cycles`` (0 in contact, 1 if never; clipped to 1).
+
+Before a merge is accepted a robot's ``local_map`` shows only its own map. The raw maps are
+read through the env (Infos, below).
+
+## Sensors
+
+The Pioneer front ring: 8 sonars at -90, -50, -30, -10, 10, 30, 50, 90° from the heading, on the
+robot's rim (ranges are measured from there). Each is a 15° cone sampled by ``sonar.rays`` rays
+(3); a ray is cast from the robot's centre against the walls and the teammate's disc (not the
+robot's own) — **the very shapes the robots collide with**, with pymunk's segment-query
+arithmetic (``envs.explore.raycast``). Range 0.15–5 m,
+Gaussian noise (σ = 0.01 m), an echo hitting a wall more than 60° off its normal is lost with
+probability 0.5 (specular reflection). A sonar reads its nearest surviving echo; 5 m means no
+echo. ``sonar.measure_every = 0.1`` scans only
+every 10 cm of travel, as the paper's robots did.
+
+Odometry is exact by default. ``robot.odometry_noise`` (σ per step's motion) or
+``robot.odometry_model="rot_trans_rot"`` (Thrun's α1–α4; ``odometry_alphas="pioneer3dx"``:
+Stage's Pioneer, 1–2.5 % of the distance driven) make it drift, and each map then **bends**:
+cells are drawn where the odometry thought the robot was, so no rigid transform fits two maps
+everywhere; merges are judged at the robots' current places (Infos, note f), and the hybrid
+merge's confidence weighs the drift the maps may hold (``fusion.grid_merge.drift_prior``). It
+refuses most merges of bent maps: of 20 held-out 3000-step Frontier episodes, 11 merge at
+σ 0.01 and 3 at σ 0.02 (``benchmarks/drift.md``).
+
+## Maps
+
+``world.source = "procedural"`` (default): a seeded ``world.size`` building (20 × 20 m) of
+rooms (3–6 m), corridors, doors and loops, with furniture; a new building every reset. Or a
+file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` m/pixel) or
+HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
+of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
+``mapping.grid_resolution``) covers a square of half-side ``R`` around its start and folds
+each scan in with a sonar-cone inverse model (free up to the echo, a wall along its arc); a
+reading longer than ``mapping.usable_range`` (2.5 m) only frees the cone up to that range and
+draws no wall, since far readings are where a lost echo reads through a wall and a 15° arc
+(1 m wide at 4 m) closes a doorway. The true coverage (Infos, note d) uses the same model. Its
+topological map (``topo.extract_topomap``, settings ``mapping.topo``) is re-extracted from the
+grid every ``mapping.topo_every`` steps once the map has grown by ``mapping.topo_growth`` (2 %)
+since the last extraction (and the structural merge of two unchanged maps is skipped):
+**places** at the maxima of the clearance from the
+walls the sonars have seen (room centres, corridor crossings and bends), **gateways** at the
+narrow passes between them and into rooms seen too little to be places (doorways), **dead
+ends** at corridor ends, and the paths between
+them; a node that touches the unknown is flagged (its ``frontier`` feature) and the structural
+merge leaves it out, since it moves as the map grows. Two robots that know the same rooms put
+the same places there, whatever else each has seen (``benchmarks/topo_repeatability.py``).
+
+Merging (``mapping.merge_method``): ``"hybrid"`` (default, ``fusion.hybrid.hybrid_merge``)
+runs the structural global merge ``fusion.merge_maps(method="auto")`` on the two topological
+maps every ``merge_every`` steps and every ``grid_merge_every`` steps also the occupancy-grid
+alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, refined on the
+grids' own cells; the costly part, so only once the maps have grown by ``grid_merge_growth``,
+20 %, since its last run), which is what succeeds on most sonar map pairs: sonar topological
+maps of the same place differ too much for the structural merge to be confident. Every merge
+result carries a **confidence**, the calibrated probability that its transform is right
+(rotation < 2°, translation < 0.3 m; fitted on tuning map pairs, ``fusion.calibration``), and
+is accepted only when ``confidence >= mapping.accept_threshold`` (a pair's first structural
+merge also needs the grids' own alignment to be the same one at that confidence,
+``mapping.first_merge_check``: early maps may share no place, and a room row fits its twin;
+default 0.9: no wrong
+accept on the 156 held-out map pairs, 70 % of the pairs sharing ≥ 40 % merged right; lower it
+to merge sooner and more often at the price of wrong merges — 0.7: 80 % and 1.7 % — see the
+threshold table in ``benchmarks/fusion.md``). Small maps of a self-similar building
+(the procedural buildings are lattices of rooms) can still be confidently wrong (a room row
+turned 180° or shifted onto its twin), so the grid alignment keeps running after a merge is
+accepted (``fusion.hybrid.recheck``): an accepted alignment replaces the transform in use
+(refined, or a different one), and a rejected one whose best alignment is clearly different
+from the transform in use drops it (info ``merge_drops``): the shared map is robot 0's cells
+alone again until the next accepted merge. Other values run one ``fusion.merge_maps`` method
+(its own accept rule; ``accept_threshold`` is not used); ``"none"`` never merges;
+``"known"`` merges nothing either: every pair's true start-frame transform is in use from the
+first step (confidence 1, ``merge_source`` "known"), the known-initial-poses setting of most
+multi-robot exploration work — a reference for what not knowing the poses costs (with
+odometry noise the maps still drift away from it; maps are still exchanged only in contact).
+``"exhaustive"`` (the paper's search) suits small maps only: beyond
+``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of about 166 path endpoints) it
+raises a ``ValueError`` from ``step()`` instead of running for minutes.
+
+## Communication
+
+``comm.range`` (metres, ``None`` = unlimited, the default) limits who exchanges maps: two
+robots whose centres are at most that far apart are in range (with ``comm.line_of_sight``, only
+if no wall crosses the segment between them); robots are **in contact** when a chain of
+in-range robots joins them (multi-hop relaying through teammates).
+What robot ``i`` knows of teammate ``j``'s map is ``j``'s live map while they are in contact and
+the copy from the end of their last step in contact afterwards: between contacts nothing
+streams (``env.teammate_map(agent, teammate)`` reads it; ``None`` if they never met). Pairs are
+merged only while in contact, on their live maps; a merge's transform becomes known to a robot
+with the maps, i.e. as it was at its last contact with either robot of the pair.
+
+## Merging N maps
+
+Every ``merge_every`` steps the pairs in contact are merged pairwise (the two-robot merge
+below, each pair with its own schedule), at most ``max(1, N // 2)`` pairs per merge step —
+first pairs that would join two fused maps, then the least recently merged — and the grid
+alignment on every ``grid_merge_every / merge_every``-th turn of a pair, so each robot's share
+of the merge cost does not grow with the team. Each robot assembles the pairs' transforms
+it knows into a graph of frames; with three or more robots **cycle consistency** rejects
+look-alike merges (``fusion.team``: A→B→C must agree with A→C within 5° and 1 m; the edges that
+break the most triangles are left out until none is broken; a merge no consistent triangle
+confirms — the bridge that first joins a robot to the others — needs
+``mapping.team_accept_threshold`` (0.97) confidence, as a team's many pairs give many chances
+of one confident look-alike; then a spanning forest by confidence). Robot ``i``'s **fused
+map** is its component of that forest: its own map and each member's (as it knows it) moved
+into its frame. ``mapping.cycle_check = False`` uses the
+pairwise decisions alone. ``merge_state()`` reports every pair (transform, confidence, kept by
+the cycle check), each robot's fused members and frames, and the contacts.
+
+## Rewards
+
+Team reward (both robots get it), every step:
+
+    coverage_reward · (new shared-map area, m²) − collision_penalty · (new contacts of either
+    robot) − time_penalty
+
+The shared map is robot 0's fused map: its known cells plus robot 1's moved by the latest
+accepted merge transform (in a team, plus every teammate's in robot 0's fused map, each by its
+frame: a teammate's cells count once it merges into robot 0's component, as robot 1's do with
+two robots; unmerged components do not count until they do, and with limited communication
+robot 0 counts what it knows, so bringing maps back to robot 0 pays).
+When a new merge changes the transform, or the transform is dropped, the shared map
+is rebuilt and the change of its area (possibly negative: a wrong merge overlaps what it should
+not, a dropped one takes robot 1's cells out) enters the reward.
+``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
+``true_coverage``); ``"individual"`` gives each robot its own new area and its own contacts.
+
+Shaping for learning velocity commands lives outside the env, so that every explorer is
+scored on the same reward: ``agents.motion.MotionEnv`` (``train.py --level motion --hold K
+--frontier-shaping k``) holds each command ``K`` steps and adds, per robot, the
+potential-based term ``k · (Φ(s') − Φ(s))`` with ``Φ`` minus the path length to the
+nearest frontier of the robot's own map: it pays progress towards unexplored space and sums
+to the change of ``Φ`` over an episode, so it cannot be farmed (undiscounted: a discounted
+``γ · Φ(s')`` would pay a robot for standing still).
+
+Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
+``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
+merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map grows by
+(120 + 50) · 0.01 = 1.7 m²; robot 1 also bumps a wall: reward = 0.1 · 1.7 − 0.5 · 1 − 0.01 =
+−0.34 for both robots.
+
+## Starting State
+
+``N`` random drivable cells (two for ``two_robot_explore_v0``) at least
+``world.start_clearance`` (0.45 m) from any wall and ``world.min_start_separation`` (2 m)
+apart, in the same connected region, random headings; each robot's odometry starts at
+``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first scan is taken at reset. A
+``reset`` that raises (bad ``start_poses``) leaves no episode: ``agents`` is empty and
+``step()`` raises until a ``reset`` succeeds.
+
+## Episode End
+
+* Termination: the true covered fraction of the reachable free area (``info["true_coverage"]``)
+  reaches ``target_coverage`` (0.95) — both robots terminate.
+* Truncation: ``max_cycles`` steps (1000) — both robots truncate.
+
+After that ``agents`` is empty and ``step()`` raises until ``reset()``.
+
+## Infos
+
+Small, numeric and comparable (no NaN, no wall clock, no live objects: under 1 kB pickled per
+step; equal episodes give equal infos, as PettingZoo's ``parallel_seed_test`` checks, and
+TorchRL turns every entry into a tensor). Per robot:
+
+| key | type | meaning |
+|---|---|---|
+| ``true_coverage`` | float | fraction of the reachable free area the sonars have truly swept (d) |
+| ``true_area_m2`` | float | area truly swept (walls included), m² |
+| ``shared_area_m2`` | float | known area of the shared map, m² |
+| ``shared_coverage`` | float | shared area / reachable area (the robots' estimate, e) |
+| ``own_area_m2`` | float | known area of the robot's own map, m² |
+| ``overlap`` | float | fraction of the smaller robot's true sweep the other also swept |
+| ``collisions`` | int | contacts of this robot so far |
+| ``merge_accepted`` | bool | a merge transform is in use |
+| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) (g) |
+| ``merge_source`` | int | ``MERGE_SOURCES[code]``: its source (1 structural, 2 grid, 3 known) (g) |
+| ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
+| ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
+| ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
+| ``merges`` | int | merge calls so far |
+| ``merge_drops`` | int | transforms dropped because the grids refuted them (see Maps) |
+| ``pose`` | (3,) f64 | true world pose ``x, y, θ`` (for metrics; explorers must not use it) |
+| ``odometry`` | (3,) f64 | odometry pose in the robot's own start frame |
+| ``contacts`` | int | teammates in contact now (``multi_robot_explore_v0``) |
+| ``fused_robots`` | int | robots in this robot's fused map, itself included (likewise) |
+
+(d) the world cells the robots' inverse sensor model updates for each scan taken from the
+robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
+dropped echo that "sees through" a wall, or odometry drift, does not count. (e) it includes
+walls, phantom free space behind dropped echoes and mis-merged area. (f) against ground
+truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare). With
+odometry noise the truth is drift-aware: the transform right at the robots' current places
+(each robot's current odometry frame, ``Robot.odometry_frame()``), the translation error the
+larger at the two robots' positions (``envs.explore.drift``); in a team, the largest
+over robot 0's fused teammates. (g) in a team, pair (robot_0, robot_1)'s;
+``merge_state().pairs`` has every pair's.
+
+The maps are read through the env, not handed out every step (a grid is megabytes; explorers
+need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
+:class:`~envs.explore.mapping.RobotMapSnapshot` of the robot's own maps (a copy of
+its ``topo.OccupancyGrid``, its ``topo.TopoMap``, odometry; later steps never change it; taken
+once per step, about 0.1 ms at the defaults), and ``env.unwrapped.merge_state()`` a
+:class:`MergeState` (the transform in use, the method that supplied it, the last
+``fusion.MergeResult``, counts and the last merge call's wall time, ``time_s``). Explorers
+that plan on maps are given read access this way (``agents.base.Explorer.bind``).
+
+## State
+
+``state()`` is a global view for centralised critics (MAPPO-style): a float32 vector in
+``state_space`` (a ``Box`` of ``state_scalars(N) + 3 · STATE_MAP_SIZE²`` values, 4N + 4 + 3072:
+3084 for two robots), in the
+world frame, the same layout for every world (positions as fractions of the world's extent):
+
+| index | meaning | min | max |
+|---|---|---|---|
+| 4i … 4i+3 | robot i's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
+| 4N | ``true_coverage`` | 0 | 1 |
+| 4N+1 | ``overlap`` | 0 | 1 |
+| 4N+2 | share of the teammates in robot 0's fused map (two robots: a merge in use, 0/1) | 0 | 1 |
+| 4N+3 | steps / ``max_cycles`` | 0 | 1 |
+| S + k | swept: share of world block ``k`` truly swept | 0 | 1 |
+| S + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
+| S + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
+
+``S = 4N + 4`` (12 for two robots). The world's extent is cut into ``STATE_MAP_SIZE ×
+STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
+· 32 + column``, row 0 at the bottom; each share is measured at 4 × 4 points evenly spread in
+the block. (g) the shared map placed in the world by robot 0's true start pose: a wrong merge
+shows as known cells where nothing was swept. The reachable channel is fixed per world.
+``state()`` costs about 80 µs; the AEC ``env()`` forwards ``state()`` and ``state_space``.
+
+## Copies
+
+The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as
+the original would (same observations, rewards and infos for the same actions), also after
+the episode's end (``agents`` empty) and into the next unseeded ``reset`` (its generator is
+where the original's is).
+
+A copy is made by **replay**, not by copying the physics: what is pickled is the config, the
+render mode, the loaded world file, the generator's state at the last ``reset``, the start
+poses given to it, each step's ``(v, ω)`` commands since (32 bytes a step: about 33 kB after
+1000 steps) and any later ``max_cycles`` change. Restoring builds a fresh env, resets it from
+that generator state and steps it through the commands, building no observations, no
+rendering and no warnings. Why: pymunk pickles bodies and contacts but not what a step leaves
+to the next (the solver's bias velocities and joint impulses, the broadphase's pair order), so
+an unpickled space drifts from the original after a contact; the env is deterministic given
+the generator, the start poses and the commands, so a replay rebuilds that state exactly.
+
+Cost: restoring takes about as long as the steps since ``reset`` took, less their outputs —
+about 0.35 s of CPU per 1000 steps at the defaults, 0.13 s with ``topo_every = merge_every =
+0`` (``benchmarks/copy_speed.py``) — and grows with the step count: copy early in an episode
+where copies are frequent (tree search, say), or keep the actions and replay them yourself.
+
+Not copied: the render window; the wall time in ``merge_state().time_s`` (the replay's own);
+changes made to the env's internals from outside ``step``/``reset``. The replay checks the
+step count, agents, poses, contact counts and generator state it ends in against the
+original's, and a copy that does not reproduce them raises ``RuntimeError``.
+
+## Arguments
+
+``parallel_env(config=None, *, render_mode=None, **kwargs)``; ``kwargs`` are
+:class:`~envs.explore.config.EnvConfig` fields, groups as dicts, e.g.
+``parallel_env(max_cycles=500, sonar={"rays": 1}, world={"size": (40, 40)})``. Unknown keys
+are a ``ValueError``.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| ``world.source`` | str | ``"procedural"`` | procedural building or a map file |
+| ``world.size`` | (float, float) | (20, 20) | procedural building size, m |
+| ``world.room_size`` | (float, float) | (3, 6) | procedural room side range, m |
+| ``world.corridor_prob`` | float | 0.25 | chance a room row/column is a corridor |
+| ``world.loop_prob`` | float | 0.3 | chance of an extra door (loops) |
+| ``world.obstacle_density`` | float | 0.5 | furniture boxes per 10 m² |
+| ``world.png_resolution`` | float | 0.1 | m/pixel of PNG maps |
+| ``n_robots`` | int | 2 | robots in the team, 2–8 (``two_robot_explore_v0``: 2) |
+| ``comm.range`` | float or None | None | contact range, m (see Communication) |
+| ``comm.line_of_sight`` | bool | False | contact also needs no wall between |
+| ``mapping.cycle_check`` | bool | True | cycle consistency (see Merging N maps) |
+| ``mapping.team_accept_threshold`` | float | 0.97 | unconfirmed merges in teams (likewise) |
+| ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
+| ``robot.radius`` | float | 0.25 | disc radius, m |
+| ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
+| ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |
+| ``robot.odometry_model`` | str | ``"increment"`` | or ``"rot_trans_rot"`` (Thrun's α1–α4 model) |
+| ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of ``"increment"`` odometry |
+| ``robot.odometry_alphas`` | 4 floats or str | 0s | α1–α4, or ``"pioneer3dx"`` |
+| ``robot.drift_correction`` | bool | False | experimental odometry correction (noisy only) |
+| ``robot.drift_correction_every`` | int | 25 | steps between matches (``localize``) |
+| ``robot.drift_correction_window`` / ``_age`` | int | 150 / 300 | echoes' steps, walls' age |
+| ``robot.drift_correction_sigma`` | float | 3 | m per echo of the match's information |
+| ``sonar.rays`` / ``cone`` | int / float | 3 / 15 | rays per cone, cone width (°) |
+| ``sonar.min_range`` / ``max_range`` | float | 0.15 / 5 | m |
+| ``sonar.noise_std`` | float | 0.01 | m |
+| ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout |
+| ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
+| ``mapping.grid_resolution`` | float | 0.1 | m/cell |
+| ``mapping.usable_range`` | float or None | 2.5 | m; longer readings only free (see Maps) |
+| ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
+| ``mapping.topo_growth`` | float | 0.02 | map growth before a re-extraction (see Maps) |
+| ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
+| ``mapping.merge_method`` | str | ``"hybrid"`` | Maps: ``merge_maps`` methods, ``"known"`` |
+| ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
+| ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
+| ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (see Maps) |
+| ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
+| ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
+| ``mapping.max_nodes`` | int | 32 | graph nodes observed |
+| ``max_cycles`` | int | 1000 | truncation |
+| ``target_coverage`` | float | 0.95 | termination |
+| ``reward_mode`` | str | ``"shared"`` | ``"shared"``, ``"oracle"``, ``"individual"`` |
+| ``coverage_reward`` | float | 0.1 | reward per new m² |
+| ``collision_penalty`` | float | 0.5 | per new contact |
+| ``time_penalty`` | float | 0.01 | per step |
+| ``action_type`` | str | ``"continuous"`` | or ``"discrete"`` |
+| ``render_mode`` | str or None | None | ``"human"`` (pygame-ce window) or ``"rgb_array"`` |
+
+Reset options: ``{"start_poses": [[x, y, θ], ...]}`` (one row per robot, world frame,
+radians) places the robots; other keys are ignored with a warning.
+
+## Version History
+
+* multi_robot_explore_v0: initial release (teams of 2–8, communication, the N-way merge; at
+  ``n_robots = 2``, ``comm.range = None`` the same episodes as two_robot_explore_v0 but for
+  the ``teammates`` layout and the two infos).
+* v0: initial release. (Unreleased changes within v0, dynamics unchanged: small numeric
+  infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact copies by replay,
+  the sonar cast by the env's own ray caster with the same readings; the topological maps
+  re-extracted (places, gateways, dead ends, clearance and frontier flags), so
+  ``graph_nodes`` has 9 features and merges, hence rewards, differ; sonar readings beyond
+  ``mapping.usable_range`` no longer draw walls or free space past it, so maps, coverage and
+  rewards differ; a pair's first structural merge needs the grids to agree, so some merges
+  come later.)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from envs.explore.actions import DISCRETE_ACTIONS, action_space, parse_actions
+from envs.explore.comm import TeamViews
+from envs.explore.config import EnvConfig
+from envs.explore.copies import History, ReplayCopies
+from envs.explore.drift import odometry_noise_level
+from envs.explore.global_state import (
+    STATE_MAP_SIZE,
+    STATE_SAMPLES,
+    STATE_SCALARS,
+    GlobalState,
+    state_scalars,
+    state_space,
+)
+from envs.explore.infos import merge_errors, step_infos
+from envs.explore.localize import DriftCorrector
+from envs.explore.mapping import (
+    OracleCoverage,
+    RobotMap,
+    RobotMapSnapshot,
+    SharedMap,
+)
+from envs.explore.merging import (
+    MERGE_METHODS,
+    MERGE_SOURCES,
+    MergeState,
+    PairState,
+    TeamMerging,
+)
+from envs.explore.observations import (
+    MAX_CLEARANCE,
+    MAX_DEGREE,
+    N_NODE_FEATURES,
+    TEAMMATE_FEATURES,
+    Observer,
+    observation_space,
+)
+from envs.explore.raycast import RayCaster
+from envs.explore.robot import Robot, build_space, simulate
+from envs.explore.sonar import Sonar
+from envs.explore.starts import check_start_poses, parse_reset_options
+from envs.explore.worlds import World, load_world, procedural_world
+from fusion.rigid import Rigid2D
+
+AGENTS = ("robot_0", "robot_1")
+"""The two-robot env's agents (``agent_names(2)``)."""
+
+
+def agent_names(n: int) -> tuple[str, ...]:
+    """The agents of an ``n``-robot team: ``robot_0 … robot_{n-1}``."""
+    return tuple(f"robot_{i}" for i in range(n))
+
+
+__all__ = ["AGENTS", "DISCRETE_ACTIONS", "MAX_CLEARANCE", "MAX_DEGREE", "MERGE_METHODS",
+           "MERGE_SOURCES", "N_NODE_FEATURES", "STATE_MAP_SIZE", "STATE_SAMPLES",
+           "STATE_SCALARS", "TEAMMATE_FEATURES", "MergeState", "MultiRobotExploreEnv",
+           "PairState", "TwoRobotExploreEnv", "agent_names", "env", "multi_env",
+           "multi_parallel_env", "parallel_env", "raw_env", "state_scalars"]
+
+
+class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
+    """The sonar exploration env for a team of ``n_robots``; the module docstring is its
+    manual.
+
+    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`teammate_map`,
+    :meth:`merge_state`; ground truth: :meth:`true_transform`; the global state for
+    centralised critics: :meth:`state`, :attr:`state_space`.
+
+    Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
+    every step; read, never modify): ``world``
+    (:class:`~envs.explore.worlds.World`), ``robots``, ``sonars``, ``maps``
+    (per-robot :class:`~envs.explore.mapping.RobotMap`), ``shared`` (robot 0's
+    fused map, :class:`~envs.explore.mapping.SharedMap`), ``views`` (who is in
+    contact and what each robot holds of the others' maps,
+    :class:`~envs.explore.comm.TeamViews`), ``oracle``
+    (:class:`~envs.explore.mapping.OracleCoverage`), ``frames`` (each robot's map
+    frame → world, ``fusion.Rigid2D``), ``true_merge`` (the true robot-1 → robot-0 frame
+    transform), ``merge`` (the last ``MergeResult``), ``steps``, ``n_robots``.
+
+    The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
+    the original would. A copy replays the episode since ``reset`` (manual, Copies), so
+    restoring one costs about 0.35 s of CPU per 1000 steps since ``reset`` at the defaults.
+    """
+
+    metadata = {
+        "name": "multi_robot_explore_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
+
+    two_robot = False
+    """The ``two_robot_explore_v0`` layout: one ``teammate`` observation (5,) instead of
+    ``teammates`` (N − 1, 7), and no ``contacts``/``fused_robots`` infos."""
+
+    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+                 **kwargs: Any) -> None:
+        if config is not None and not isinstance(config, EnvConfig):
+            raise TypeError(f"config must be an EnvConfig or None, got {type(config).__name__}")
+        if config is None:
+            config = EnvConfig.from_kwargs(**kwargs)
+        elif kwargs:
+            config = config.replace(**kwargs)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                f"got {render_mode!r}"
+            )
+        self._setup(config, render_mode, None)
+
+    def _setup(self, config: EnvConfig, render_mode: str | None,
+               file_world: World | None) -> None:
+        """Everything ``__init__`` builds from a checked config (a copy passes the world file
+        it already loaded: ``file_world``)."""
+        if self.two_robot and config.n_robots != 2:
+            raise ValueError(f"n_robots must be 2 for {self.metadata['name']}, got "
+                             f"{config.n_robots}; use multi_robot_explore_v0 for larger teams")
+        self.config = config
+        self.render_mode = render_mode
+        self.n_robots = config.n_robots
+        self.possible_agents = list(agent_names(config.n_robots))
+        self.agents: list[str] = []
+        self._max_cycles = config.max_cycles
+        cfg = config
+        # A world file is loaded (and validated) once, here; procedural worlds every reset.
+        self._file_world = file_world
+        if cfg.world.source != "procedural":
+            if self._file_world is None:
+                self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
+            x0, y0, x1, y1 = self._file_world.extent
+            diag = math.hypot(x1 - x0, y1 - y0)
+        else:
+            diag = math.hypot(*cfg.world.size)
+        self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
+        self._build_spaces()
+        self.state_space = state_space(config.n_robots)
+        self._observer = Observer(config, self.frame_radius, self.two_robot)
+        self._rng: np.random.Generator | None = None
+        self._renderer = None
+        self._ready = False
+        self._snapshots: list[RobotMapSnapshot | None] = [None] * config.n_robots
+        self._history: History | None = None  # how this episode came about (Copies)
+
+    # ------------------------------------------------------------------ spaces
+    def _build_spaces(self) -> None:
+        """One observation and one action space object per agent, built once."""
+        agents = self.possible_agents
+        self._observation_spaces = {a: observation_space(self.config, self.frame_radius,
+                                                         self.two_robot) for a in agents}
+        self._action_spaces = {a: action_space(self.config.action_type) for a in agents}
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object every call)."""
+        try:
+            return self._observation_spaces[agent]
+        except KeyError:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent`` (the same object every call)."""
+        try:
+            return self._action_spaces[agent]
+        except KeyError:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
+
+    @property
+    def max_cycles(self) -> int:
+        """Truncation step count (settable, as PettingZoo's test suite does)."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self.config = self.config.replace(max_cycles=value)
+        self._max_cycles = self.config.max_cycles
+        if self._history is not None:  # replayed by copies at this step
+            self._history.max_cycles_changes.append((self.steps, self._max_cycles))
+
+    @property
+    def merge(self) -> Any:
+        """The last merge call's result (``None`` before the first; :meth:`merge_state`)."""
+        self._require_reset()
+        return self._merging.result
+
+    @property
+    def world(self) -> World:
+        """The current episode's world (after ``reset``)."""
+        self._require_reset()
+        return self._world
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+        """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        self._begin(parse_reset_options(options, self.n_robots, self.metadata["name"]))
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), self._infos()
+
+    def _begin(self, starts: np.ndarray | None) -> None:
+        """Build a new episode from the generator as it is now, at the given start poses
+        (``None``: drawn), and start recording its history (Copies)."""
+        history = History(self._rng.bit_generator.state,
+                           None if starts is None else starts.copy(), self._max_cycles)
+        self._ready = False  # until the episode is built (a reset that raises leaves none)
+        self.agents = []
+        self._history = None
+        cfg = self.config
+        rng = self._rng
+        if self._file_world is not None:
+            self._world = self._file_world
+        else:
+            self._world = procedural_world(cfg.world, rng, robot_radius=cfg.robot.radius)
+        world = self._world
+        n = self.n_robots
+        if starts is None:
+            starts = world.sample_starts(rng, cfg.world.start_clearance,
+                                         cfg.world.min_start_separation, n)
+        else:
+            check_start_poses(starts, world, cfg.robot.radius)
+        self.robots = [Robot(i, starts[i], cfg.robot) for i in range(n)]
+        self.space = build_space(world.segments, self.robots)
+        self.caster = RayCaster(world.segments, cfg.robot.radius, robots=n)
+        self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(n)]
+        # map frames: each robot's start; the truth frame_i -> world is its start pose
+        self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
+        self._truths = [[f_i.inverse() @ f_j for f_j in self.frames] for f_i in self.frames]
+        self.true_merge = self._truths[0][1]
+        x0, y0, x1, y1 = world.extent
+        corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
+        self.maps = []
+        model = cfg.mapping.sensor_model
+        for s in starts:
+            reach = float(np.max(np.hypot(*(corners - s[:2]).T)))
+            radius = min(reach + cfg.sonar.max_range + 1.0, self.frame_radius)
+            self.maps.append(RobotMap((-radius, -radius, radius, radius),
+                                      cfg.mapping.grid_resolution, model))
+        self.shared = SharedMap(self.maps[0].geometry)
+        self.oracle = OracleCoverage(world.extent, world.resolution, world.reachable, model,
+                                     robots=n)
+        self._world_area = world.reachable_area  # fixed for the episode (a full-grid count)
+        noise = odometry_noise_level(cfg.robot)
+        self._merging = TeamMerging(n, cfg.mapping, noise, self._truths)
+        self._correctors = [None] * n
+        if cfg.robot.drift_correction and noise > 0.0:
+            self._correctors = [
+                DriftCorrector(cfg.robot, s.angles, s.mount_radius, cfg.sonar.max_range,
+                               m.geometry.shape, m.geometry.origin, m.geometry.resolution)
+                for s, m in zip(self.sonars, self.maps, strict=True)]
+        self.views = TeamViews(self.maps, cfg.comm)
+        self._extracted_at = [0] * n  # known cells of each map at its last extraction
+        self.steps = 0
+        self._snapshots = [None] * n
+        self._state = GlobalState(world.extent, self.frames[0], self.oracle, self.shared)
+        self._shared_delta = 0
+        self._own_delta = [0] * n
+        self._oracle_delta = 0
+        self._coll_delta = [0] * n
+        self._observer.reset(n)
+        self.agents = list(self.possible_agents)
+        self._ready = True
+        self._contacts_changed = False
+        self._contact(0)
+        self._sense_and_map(travelled=[0.0] * n)
+        self._history = history
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance every robot one step (``robot.dt`` seconds); see the manual."""
+        self._require_reset()
+        if not self.agents:
+            raise RuntimeError(
+                "step() called after the episode ended (all agents terminated or truncated); "
+                "call reset() to start a new episode")
+        self._advance(parse_actions(actions, self.agents, self.possible_agents,
+                                    self.config.action_type))
+        rewards = self._rewards()
+        terminations = self._terminations()
+        truncations = self._truncations()
+        observations = self._observe()
+        infos = self._infos()
+        if any(terminations.values()) or any(truncations.values()):
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def _advance(self, commands: list[tuple[float, float]]) -> None:
+        """One step's state change from every robot's parsed ``(v, ω)`` commands (recorded
+        for copies): physics, contacts, odometry, sensing, mapping, merging; no outputs."""
+        self._apply_actions(commands)
+        self._simulate()
+        self.steps += 1
+        n = self.n_robots
+        self._snapshots = [None] * n
+        self._shared_delta = 0
+        self._contact(self.steps)
+        travelled = [0.0] * n
+        for i, robot in enumerate(self.robots):
+            before = robot.travelled
+            robot.update_odometry(self.config.robot.odometry_noise, self._rng)
+            travelled[i] = robot.travelled - before
+        self._sense_and_map(travelled)
+        self._fuse()
+        self._history.commands.append(commands)
+
+    def _require_reset(self) -> None:
+        if not self._ready:
+            raise RuntimeError("call reset() before step(), render() or world")
+
+    def _apply_actions(self, commands: list[tuple[float, float]]) -> None:
+        rcfg = self.config.robot
+        w_max = math.radians(rcfg.max_turn_rate)
+        for robot, (v, w) in zip(self.robots, commands, strict=True):
+            robot.command(v * rcfg.max_speed, w * w_max)
+
+    def _simulate(self) -> None:
+        rcfg = self.config.robot
+        self._coll_delta = simulate(self.space, self.robots, rcfg.dt, rcfg.substeps)
+
+    def _sense_and_map(self, travelled: list[float]) -> None:
+        cfg = self.config
+        scfg = cfg.sonar
+        half = math.radians(scfg.cone) / 2.0
+        self._oracle_delta = 0
+        poses = [robot.true_pose() for robot in self.robots]
+        for i, pose in enumerate(poses):
+            self.caster.discs[i] = pose[:2]
+        for i, (pose, sonar) in enumerate(zip(poses, self.sonars, strict=True)):
+            sonar.measure(self.caster, pose, i, self._rng, travelled[i])
+            if self._correctors[i] is not None:
+                self._correctors[i].step(self.steps, self.robots[i].odometry,
+                                         sonar.last if sonar.fresh else None,
+                                         self.maps[i].grid.log_odds)
+            if not sonar.fresh:
+                self._own_delta[i] = 0
+                continue
+            rmap = self.maps[i]
+            fresh = rmap.integrate(self.robots[i].odometry, sonar.last, sonar.angles,
+                                   sonar.mount_radius, scfg.max_range, half)
+            n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
+            self._own_delta[i] = n_fresh
+            if n_fresh and (i == 0 or self.views.in_contact(0, i)):
+                self._shared_delta += self.shared.add(i, rmap, (slice(r0, r1), slice(c0, c1)))
+            self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
+                                                  sonar.angles, sonar.mount_radius,
+                                                  scfg.max_range, half)
+        every = cfg.mapping.topo_every
+        if every and self.steps % every == 0:
+            for i, rmap in enumerate(self.maps):
+                if rmap.n_ever and rmap.n_ever >= self._extracted_at[i] * (
+                        1.0 + cfg.mapping.topo_growth):
+                    self._extracted_at[i] = rmap.n_ever
+                    rmap.extract(cfg.mapping.topo)
+                    self._observer.graphs[i].refresh(rmap.topomap)
+
+    def _contact(self, step: int) -> None:
+        """Who is in contact now (before this step's odometry and scans enter the maps);
+        robot 0's fused map takes in what a merged teammate met again mapped meanwhile."""
+        gained, changed = self.views.update(
+            step, np.array([r._pose()[:2] for r in self.robots]),
+            [r.odometry for r in self.robots], self.space)
+        self._contacts_changed |= changed
+        for i, j in gained:
+            if i == 0 and j in self.shared.members:
+                self._shared_delta += self.shared.add(j, self.maps[j],
+                                                      self.maps[j].known_window())
+
+    def _fuse(self) -> None:
+        """Merge the pairs due; when what a robot knows changes, its fused map (robot 0's
+        is rebuilt)."""
+        changed = self._merging.step(self.steps, self.views)
+        if not (changed or self._contacts_changed):
+            return
+        self._contacts_changed = False
+        centres = {i: c for i, m in enumerate(self.maps) if (c := m.known_centre()) is not None}
+        if 0 in self._merging.refresh(self.views, centres):
+            members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
+            known = {j: self.views.view(0, j) for j in (0, *members)}
+            self._shared_delta += self.shared.rebuild(known, members)
+
+    # ------------------------------------------------------------------ rewards, ends
+    def _rewards(self) -> dict[str, float]:
+        cfg = self.config
+        coll = self._coll_delta
+        if cfg.reward_mode == "individual":
+            return {a: float(cfg.coverage_reward * self._own_delta[i]
+                             * self.maps[i].geometry.resolution ** 2
+                             - cfg.collision_penalty * coll[i] - cfg.time_penalty)
+                    for i, a in enumerate(self.agents)}
+        if cfg.reward_mode == "shared":
+            gained = self._shared_delta * self.shared.geometry.resolution ** 2
+        else:
+            gained = self._oracle_delta * self.oracle.geometry.resolution ** 2
+        r = float(cfg.coverage_reward * gained - cfg.collision_penalty * sum(coll)
+                  - cfg.time_penalty)
+        return dict.fromkeys(self.agents, r)
+
+    def _terminated(self) -> bool:
+        return bool(self.oracle.fraction >= self.config.target_coverage)
+
+    def _truncated(self) -> bool:
+        return self.steps >= self._max_cycles
+
+    def _terminations(self) -> dict[str, bool]:
+        return dict.fromkeys(self.agents, self._terminated())
+
+    def _truncations(self) -> dict[str, bool]:
+        return dict.fromkeys(self.agents, self._truncated())
+
+    # ------------------------------------------------------------------ observations
+    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+        live = [r.odometry for r in self.robots]
+        return {a: self._observe_one(i, live) for i, a in enumerate(self.possible_agents)
+                if a in self.agents}
+
+    def _observe_one(self, i: int, live: list[np.ndarray] | None = None
+                     ) -> dict[str, np.ndarray]:
+        """Robot ``i``'s observation (``live``: every robot's odometry now)."""
+        return self._observer.observe(i, self.robots, self.sonars, self.maps,
+                                      self._merging.frames, self.views, self.steps,
+                                      self._max_cycles, live)
+
+    # ------------------------------------------------------------------ infos
+    def true_transform(self, i: int, j: int) -> Rigid2D:
+        """The true transform from robot ``j``'s map frame into robot ``i``'s (their start
+        poses; the same object for the whole episode)."""
+        return self._truths[i][j]
+
+    def merge_errors(self) -> tuple[float, float]:
+        """Rotation error (degrees) and translation error (metres, at the centroid of the
+        teammate's map) of the merge transforms in use in robot 0's fused map against ground
+        truth, the largest over its teammates; NaN when it has none; drift-aware with odometry
+        noise (:func:`envs.explore.infos.merge_errors`)."""
+        return merge_errors(self.shared.members, self.robots, self._truths[0], self._merging,
+                            self.views, self._merging.noise > 0.0)
+
+    def _infos(self) -> dict[str, dict[str, Any]]:
+        """This step's infos (manual, Infos; :func:`envs.explore.infos.step_infos`)."""
+        errors = self.merge_errors() if self.shared.members else (0.0, 0.0)
+        return step_infos(self.agents, self.possible_agents, self.robots, self.maps,
+                          self.oracle, self.shared, self._world_area, self._merging,
+                          self.views, errors, not self.two_robot)
+
+    # ------------------------------------------------------------------ snapshots, state
+    def robot_map(self, agent: str) -> RobotMapSnapshot:
+        """``agent``'s own maps now: a read-only
+        :class:`~envs.explore.mapping.RobotMapSnapshot` (a copy of its occupancy
+        grid, its topological map, odometry) that later steps never change.
+
+        What map-planning explorers read (manual, Infos); the copy is taken on the first call
+        of a step and shared by that step's later calls.
+        """
+        self._require_reset()
+        i = self._index(agent, "agent")
+        snap = self._snapshots[i]
+        if snap is None:
+            snap = RobotMapSnapshot.of(self.maps[i], self.robots[i].odometry, self.steps)
+            self._snapshots[i] = snap
+        return snap
+
+    def _index(self, agent: str, name: str) -> int:
+        try:
+            return self.possible_agents.index(agent)
+        except ValueError:
+            raise ValueError(f"{name} must be one of {self.possible_agents}, got "
+                             f"{agent!r}") from None
+
+    def teammate_map(self, agent: str, teammate: str) -> RobotMapSnapshot | None:
+        """``teammate``'s map as ``agent`` knows it (manual, Communication): a read-only
+        :class:`~envs.explore.mapping.RobotMapSnapshot` of its live map while the
+        two are in contact, of the copy from their last contact after that (``step`` says
+        when), ``None`` if they never were in contact. ``teammate == agent``: its own map."""
+        self._require_reset()
+        i, j = self._index(agent, "agent"), self._index(teammate, "teammate")
+        if self.views.in_contact(i, j):
+            return self.robot_map(teammate)
+        view = self.views.view(i, j)
+        if view is None:
+            return None
+        return RobotMapSnapshot.of(view, self.views.odometry(i, j, []), int(self.views.seen[i, j]))
+
+    def merge_state(self) -> MergeState:
+        """The merge state now (:class:`MergeState`: the robot-1 → robot-0 transform in use,
+        what supplied it, the last merge result, counts, the last merge call's wall time; each
+        pair's state, each robot's fused map and frames, the contacts)."""
+        self._require_reset()
+        return self._merging.state(self.views, self.shared.transform)
+
+    def state(self) -> np.ndarray:
+        """The global state for centralised critics: a ``(state_scalars(N) + 3 ·
+        STATE_MAP_SIZE²,)`` float32 vector in :attr:`state_space` (manual, State)."""
+        self._require_reset()
+        return self._state.vector([r._pose() for r in self.robots], self.oracle, self.shared,
+                                  self.steps, self._max_cycles)
+
+    # ------------------------------------------------------------------ render, close
+    def render(self) -> np.ndarray | None:
+        """``"rgb_array"``: an ``(H, W, 3)`` uint8 image; ``"human"``: draw to a window."""
+        if self.render_mode is None:
+            gymnasium.logger.warn(
+                "You are calling render method without specifying any render mode. "
+                "Pass render_mode='rgb_array' or 'human' to the env.")
+            return None
+        self._require_reset()
+        if self._renderer is None:
+            from envs.explore.render import Renderer
+
+            self._renderer = Renderer(self.render_mode, self.metadata["render_fps"])
+        return self._renderer.draw(self)
+
+    def close(self) -> None:
+        """Close the render window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class TwoRobotExploreEnv(MultiRobotExploreEnv):
+    """``two_robot_explore_v0``: the team of two (``n_robots`` must be 2) with the layout its
+    users rely on — one ``teammate`` observation (5,) and no ``contacts``/``fused_robots``
+    infos; everything else is :class:`MultiRobotExploreEnv` (the manual)."""
+
+    metadata = {**MultiRobotExploreEnv.metadata, "name": "two_robot_explore_v0"}
+    two_robot = True
+
+
+def parallel_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+                 **kwargs: Any) -> TwoRobotExploreEnv:
+    """The native ``ParallelEnv`` of ``two_robot_explore_v0`` (arguments: see the manual's
+    Arguments table)."""
+    return TwoRobotExploreEnv(config, render_mode=render_mode, **kwargs)
+
+
+raw_env = TwoRobotExploreEnv
+"""The unwrapped two-robot env class (native parallel; there is no separate AEC
+implementation)."""
+
+
+def env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+        **kwargs: Any) -> AECEnv:
+    """The AEC version: PettingZoo's ``parallel_to_aec`` (order-enforcing) around
+    :func:`parallel_env`."""
+    return parallel_to_aec(parallel_env(config, render_mode=render_mode, **kwargs))
+
+
+def multi_parallel_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+                       **kwargs: Any) -> MultiRobotExploreEnv:
+    """The native ``ParallelEnv`` of ``multi_robot_explore_v0`` (``n_robots`` 2–8; arguments:
+    see the manual's Arguments table)."""
+    return MultiRobotExploreEnv(config, render_mode=render_mode, **kwargs)
+
+
+def multi_env(config: EnvConfig | None = None, *, render_mode: str | None = None,
+              **kwargs: Any) -> AECEnv:
+    """The AEC version of :func:`multi_parallel_env`."""
+    return parallel_to_aec(multi_parallel_env(config, render_mode=render_mode, **kwargs))
