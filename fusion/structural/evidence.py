@@ -8,32 +8,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion.calibration import load_weights
 from fusion.icp import moments_degeneracy
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.structural import _evidence_kernels as EK
 from fusion.structural.config import MergeConfig, config_of
 from fusion.structural.prepare import PATH_CELL, PATH_OFF, PATH_REACH, PATH_TOL, Prepared
 
-CONFIDENCE_WEIGHTS: dict[str, float] = {
-    "bias": -9.382,
-    "closeness": 0.8123,
-    "inliers": 0.717,
-    "matched_edges": -0.3446,
-    "conflicts": -0.9122,
-    "crossings": -0.6341,
-    "branches_agree": 0.1891,
-    "branches_disagree": -0.3845,
-    "near_misses": -0.2835,
-    "log_pairs": -0.0014,
-    "likelihood": 0.2887,
-    "path_agree": 0.0799,
-    "path_off": -0.0509,
-}
+CONFIDENCE_WEIGHTS: dict[str, float] = load_weights("ranking")
 """Weights of :attr:`MergeEvidence.score`, which ranks the search's candidates: a logistic
 regression of right (< 2°, < 0.3 m) against wrong candidates of the search, so the score is the
 log-odds of a candidate being right, and low (most candidates are wrong). The accept rule reads
-the calibrated :attr:`MergeEvidence.confidence`, not the score. ``benchmarks/calibrate_merge.py
---model ranking`` refits them; how these were fitted: ``benchmarks/merge_tuning.md``."""
+the calibrated :attr:`MergeEvidence.confidence`, not the score. Fitted data, read once from
+``fusion/calibration.json`` (weights ``"ranking"``, with where they were fitted);
+``python -m fusion.calibration fit --model ranking --write`` refits them."""
 
 
 _SCORE_WEIGHTS = tuple(CONFIDENCE_WEIGHTS.values())

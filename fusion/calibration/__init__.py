@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-TABLE_PATH = Path(__file__).with_name("calibration.json")
-"""Where the fitted models are stored (package data)."""
+TABLE_PATH = Path(__file__).resolve().parent.with_name("calibration.json")
+"""Where the fitted models and weights are stored (package data, ``fusion/calibration.json``)."""
 TABLE_FORMAT = "topomerge.calibration"
 TABLE_VERSION = 1
 
@@ -331,20 +331,70 @@ def load_model(name: str, path: str | Path | None = None) -> Calibrator:
 def read_table(path: str | Path | None = None) -> dict[str, Calibrator]:
     """Every model of a calibration table (default :data:`TABLE_PATH`)."""
     path = Path(path or TABLE_PATH)
+    return {name: Calibrator.from_dict(d) for name, d in _read_raw(path)["models"].items()}
+
+
+def load_weights(name: str, path: str | Path | None = None) -> dict[str, float]:
+    """The stored weight vector ``name`` (``"ranking"``: the structural search's
+    :data:`fusion.structural.CONFIDENCE_WEIGHTS`), in its stored order (a fresh dict).
+
+    Raises:
+        ValueError: the table holds no such weights (the message lists those it has), or
+            its names and values differ in length.
+    """
+    path = Path(path or TABLE_PATH)
+    stored = _read_raw(path).get("weights", {})
+    if name not in stored:
+        raise ValueError(f"no weights {name!r} in {path}; it has {sorted(stored)}")
+    names, values = stored[name]["names"], stored[name]["values"]
+    if len(names) != len(values):
+        raise ValueError(f"{path}: weights {name!r} have {len(names)} names and "
+                         f"{len(values)} values")
+    return {str(n): float(v) for n, v in zip(names, values, strict=True)}
+
+
+def _read_raw(path: Path) -> dict[str, Any]:
     data = json.loads(path.read_text())
     if data.get("format") != TABLE_FORMAT or data.get("version") != TABLE_VERSION:
         raise ValueError(f"{path}: not a {TABLE_FORMAT} version {TABLE_VERSION} table")
-    return {name: Calibrator.from_dict(d) for name, d in data["models"].items()}
+    return data
+
+
+def _write_raw(path: Path, models: dict[str, Any], weights: dict[str, Any]) -> Path:
+    from topo.fileio import atomic_write_json
+
+    _LOADED.clear()
+    data = {"format": TABLE_FORMAT, "version": TABLE_VERSION, "models": models}
+    if weights:
+        data["weights"] = weights
+    return atomic_write_json(path, data, allow_nan=False)
 
 
 def write_model(name: str, model: Calibrator, path: str | Path | None = None) -> Path:
     """Store ``model`` as ``name`` in the table at ``path`` (default :data:`TABLE_PATH`),
-    keeping the other models; written atomically."""
-    from topo.fileio import atomic_write_json
-
+    keeping the other models and the weights; written atomically."""
     path = Path(path or TABLE_PATH)
-    models = {n: m.to_dict() for n, m in read_table(path).items()} if path.exists() else {}
+    data = _read_raw(path) if path.exists() else {}
+    models = {n: Calibrator.from_dict(m).to_dict() for n, m in data.get("models", {}).items()}
     models[name] = model.to_dict()
-    _LOADED.clear()
-    return atomic_write_json(path, {"format": TABLE_FORMAT, "version": TABLE_VERSION,
-                                    "models": models}, allow_nan=False)
+    return _write_raw(path, models, data.get("weights", {}))
+
+
+def write_weights(name: str, weights: Mapping[str, float], path: str | Path | None = None,
+                  meta: Mapping[str, Any] | None = None) -> Path:
+    """Store the weight vector ``weights`` (its order kept) as ``name`` in the table at
+    ``path`` (default :data:`TABLE_PATH`), keeping everything else; written atomically. The
+    package reads its weights when imported: a new process sees them.
+
+    Raises:
+        ValueError: a weight that is not finite.
+    """
+    values = [float(v) for v in weights.values()]
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"weights must be finite, got {dict(weights)}")
+    path = Path(path or TABLE_PATH)
+    data = _read_raw(path) if path.exists() else {}
+    stored = dict(data.get("weights", {}))
+    stored[name] = {"names": [str(n) for n in weights], "values": values,
+                    "meta": dict(meta or {})}
+    return _write_raw(path, data.get("models", {}), stored)
