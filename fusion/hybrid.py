@@ -5,12 +5,28 @@ checked by the grids, and the occupancy-grid alignment with its calibrated confi
 The structural merge (:func:`fusion.merge_maps` on the robots' topological maps) runs first;
 the grids check what it accepts, and the grid alignment (:func:`fusion.grid_merge.merge_grids`)
 searches when it finds nothing. Every result carries ``confidence``, the probability that its
-transform is right (< 2°, < 0.3 m); one threshold, ``accept_threshold``
-(:class:`fusion.grid_merge.GridMergeConfig`), decides for both, with the hard gates (the grid
-alignment's ``min_overlap_m2``; for a structural merge, its matches and the grids' check), so a
-rejected result may still report a confidence above the threshold. Given the transform in
-use, a result clearly different from it replaces it unless the grids support the one in use
-clearly better (``in_use``, :data:`IN_USE_MARGIN`).
+transform is right (< 2°, < 0.3 m). Every decision is a step of one rule,
+:class:`fusion.decision.MergeRule` (read from :class:`fusion.grid_merge.GridMergeConfig`): one
+threshold, ``accept_threshold``, decides for both, with the hard gates (the grid alignment's
+``min_overlap_m2``; for a structural merge, its matches and the grids' check), so a rejected
+result may still report a confidence above the threshold. Given the transform in use, a
+result clearly different from it replaces it unless the grids support the one in use clearly
+better (``in_use``, :attr:`fusion.decision.MergeRule.in_use_margin`).
+
+The steps of :func:`hybrid_merge`:
+
+1. the structural merge (:func:`fusion.merge_maps`) at ``accept_threshold``;
+2. if accepted: the grids' check (:meth:`~fusion.decision.MergeRule.grid_check`), the
+   refinement on the grids' walls, the transform in use kept if the grids support it clearly
+   better (:meth:`~fusion.decision.MergeRule.keeps`), and when asked or on drifting odometry
+   the grids' vouching (:meth:`~fusion.decision.MergeRule.vouches`): all passed, it is the
+   result (``supplied_by="structural"``);
+3. otherwise, with the grids tried, the grid alignment
+   (:meth:`~fusion.decision.MergeRule.grid`) and the transform in use kept likewise: passed,
+   it is the result (``supplied_by="grid"``), else the rejection with both reasons.
+
+:func:`recheck` adds the drop rule (:meth:`~fusion.decision.MergeRule.drops`,
+:meth:`~fusion.decision.MergeRule.refutes`).
 """
 
 from __future__ import annotations
@@ -25,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fusion import grid_merge as gm
+from fusion.decision import DEFAULT_RULE, MergeRule
 from fusion.rigid import Rigid2D
 from fusion.structural import MergeResult, fuse_maps, merge_maps
 
@@ -32,13 +49,10 @@ HYBRID_EPS = 0.6
 """Node fusion radius (m) when a grid alignment builds the merged topological map: sonar
 topological maps of the same place put their nodes ~0.5 m apart."""
 
-IN_USE_MARGIN = 1.5
+IN_USE_MARGIN = DEFAULT_RULE.in_use_margin
 """A confident result clearly different from the transform in use replaces it unless the grids
 support the one in use more than this many times better
-(:attr:`fusion.grid_merge.GridAgreement.support`).
-Support grows with the area two maps overlap, so in a building of repeated rooms a look-alike
-placed over more of the other map can out-support the truth while their true overlap is small;
-only a clear difference overrules the merge's own evidence (``benchmarks/fusion.md``)."""
+(:attr:`fusion.decision.MergeRule.in_use_margin`, where the reason is documented)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,8 +124,8 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
     look-alikes keep the one in use) and its calibrated confidence has fallen below
     ``accept_threshold − drop_margin`` (:class:`fusion.grid_merge.GridMergeConfig`):
     drifting odometry bends the maps until no rigid transform is right, and the merge must
-    then be dropped, not kept on old evidence. (Without drift this rule dropped a right merge
-    for 50 steps in one of ten held-out worlds, ``benchmarks/drift.md``: it is off there.)
+    then be dropped, not kept on old evidence. Without drift the rule is off: there the grids'
+    confidence in a right merge can dip for a while (``benchmarks/drift.md``).
 
     An accepted result (the same alignment refined, or a distinct one the grids do not support
     ``in_use`` clearly better than: :func:`hybrid_merge`'s ``in_use``) is for the caller to use
@@ -125,24 +139,17 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
     """
     _check_in_use(in_use, allow_none=False)
     cfg = config or gm.GridMergeConfig()
+    rule = MergeRule.of(cfg)
     result = _hybrid(map_a, map_b, grid_a, grid_b, True, cfg, in_use)
     grid = result.grid
     if result.accepted or grid is None or grid.centre is None:
         return result, None
-    if not gm.distinct(grid.transform, in_use, grid.centre, cfg):
-        floor = cfg.accept_threshold - cfg.drop_margin
-        if (cfg.drift_prior <= 0 or grid.confidence >= floor
-                or not grid.margin > gm.TIE_MARGIN):
-            return result, None
-        why = (f"the grids no longer trust the transform in use: their alignment of it has "
-               f"confidence {grid.confidence:.2f} < accept_threshold - drop_margin = "
-               f"{floor:.2f}")
-        return dataclasses.replace(result, reason=f"{result.reason}; {why}"), why
-    if _keeps(grid_a, grid_b, grid.transform, in_use, cfg) is not None:
+    if not rule.distinct(grid.transform, in_use, grid.centre):
+        why = rule.drops(grid)
+    else:
+        why = rule.refutes(grid, in_use, _keeps(grid_a, grid_b, grid.transform, in_use, cfg))
+    if why is None:
         return result, None
-    why = (f"the grids refute the transform in use: their best alignment is "
-           f"{math.degrees(grid.transform.rotation_error(in_use)):.0f}° / "
-           f"{grid.transform.translation_error(in_use, at=grid.centre):.1f} m from it")
     return dataclasses.replace(result, reason=f"{result.reason}; {why}"), why
 
 
@@ -156,31 +163,12 @@ def _check_in_use(in_use: Any, allow_none: bool) -> None:
 
 def _keeps(grid_a: Any, grid_b: Any, new: Rigid2D, in_use: Rigid2D,
            cfg: gm.GridMergeConfig) -> str | None:
-    """Why ``in_use`` stays rather than ``new`` replacing it (the grids support it clearly
-    better), ``None`` if ``new`` may replace it."""
+    """Why ``in_use`` stays rather than ``new`` replacing it
+    (:meth:`fusion.decision.MergeRule.keeps` of the grids' agreement with each), ``None`` if
+    ``new`` may replace it."""
     now = gm.grid_agreement(grid_a, grid_b, in_use, cfg)
     then = gm.grid_agreement(grid_a, grid_b, new, cfg)
-    if now is None or then is None or now.support <= IN_USE_MARGIN * then.support:
-        return None
-    return (f"the grids support the transform in use better ({now.support:.0f} net wall cells "
-            f"against {then.support:.0f})")
-
-
-def _unvouched(grid: gm.GridMergeResult, transform: Rigid2D,
-               cfg: gm.GridMergeConfig) -> str | None:
-    """Why the grids do not vouch for a structural merge's ``transform``: their best alignment
-    is another one, or the same one with a calibrated confidence (which weighs
-    ``cfg.drift_prior``) below ``accept_threshold``; ``None`` if they do (or have no
-    alignment to judge by)."""
-    if grid.centre is None:
-        return None
-    if gm.distinct(grid.transform, transform, grid.centre, cfg):
-        return "the grids' best alignment is another one"
-    if grid.confidence >= cfg.accept_threshold:
-        return None
-    return (f"the grids' confidence in it is {grid.confidence:.2f} < "
-            f"accept_threshold={cfg.accept_threshold}"
-            + (f" (drift_prior {cfg.drift_prior:g})" if cfg.drift_prior > 0 else ""))
+    return MergeRule.of(cfg).keeps(now, then)
 
 
 def _log_odds(p: float) -> float:
@@ -191,42 +179,32 @@ def _log_odds(p: float) -> float:
 def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
             config: gm.GridMergeConfig | None, in_use: Rigid2D | None = None,
             vouch: bool = False) -> HybridResult:
+    """The steps of the module docstring."""
     t0 = time.perf_counter()
     cfg = config or gm.GridMergeConfig()
-
-    def kept(transform: Rigid2D) -> str | None:  # why in_use stays instead of transform
-        if in_use is None:
-            return None
-        centre = map_b.xy.mean(axis=0) if map_b.n_nodes else np.zeros(2)
-        if not gm.distinct(transform, in_use, centre, cfg):
-            return None
-        return _keeps(grid_a, grid_b, transform, in_use, cfg)
-
+    rule = MergeRule.of(cfg)
+    # 1. the structural merge, at the one threshold
     topo = merge_maps(map_a, map_b, method="auto",
-                      config={"accept_threshold": cfg.accept_threshold})
+                      config={"accept_threshold": rule.accept_threshold})
     fields = {f.name: getattr(topo, f.name) for f in dataclasses.fields(MergeResult)}
     grid: gm.GridMergeResult | None = None
     if topo.accepted:
-        # the structural merge is accepted only if the grids agree with it (a hard gate)
-        why = gm.check_with_grids(grid_a, grid_b, topo.transform, cfg)
-        if why is None:  # and the walls place it to the cells' precision
-            refined = gm.refine_with_grids(grid_a, grid_b, topo.transform, cfg)
-            why = kept(refined)
-            if why is None and (vouch or cfg.drift_prior > 0):
-                grid = gm.merge_grids(grid_a, grid_b, cfg)
-                why = _unvouched(grid, refined, cfg)
-            if why is None:
-                merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
-                return HybridResult(**{**fields, "transform": refined, "merged": merged,
-                                       "method": "hybrid", "time_s": time.perf_counter() - t0},
-                                    supplied_by="structural")
-            fields.update(transform=refined)
-        fields.update(accepted=False, merged=map_a,
+        # 2. checked, refined and (if asked) vouched for by the grids
+        why, refined, grid = _structural_step(map_b, grid_a, grid_b, topo.transform, cfg, rule,
+                                              in_use, vouch)
+        if why is None:
+            merged = fuse_maps(map_a, map_b, refined, topo.matches, HYBRID_EPS)
+            return HybridResult(**{**fields, "transform": refined, "merged": merged,
+                                   "method": "hybrid", "time_s": time.perf_counter() - t0},
+                                supplied_by="structural")
+        fields.update(transform=refined, accepted=False, merged=map_a,
                       reason=f"structural merge refuted by the grids: {why}")
     if not try_grids:
         return HybridResult(**{**fields, "method": "hybrid", "time_s": time.perf_counter() - t0})
+    # 3. the grid alignment (once: the vouching's, if it ran)
     grid = grid or gm.merge_grids(grid_a, grid_b, cfg)
-    why = grid.reason if not grid.accepted else kept(grid.transform)
+    why = grid.reason if not grid.accepted else _kept(map_b, grid_a, grid_b, grid.transform,
+                                                      cfg, rule, in_use)
     if why is not None:
         return HybridResult(**{**fields, "transform": grid.transform, "accepted": False,
                                "matches": np.empty((0, 2), dtype=np.int64), "merged": map_a,
@@ -234,19 +212,57 @@ def _hybrid(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, try_grids: bool,
                                "time_s": time.perf_counter() - t0,
                                "reason": f"topology: {fields['reason']}; grids: {why}",
                                "confidence": grid.confidence}, grid=grid)
-    moved = grid.transform.apply(map_b.xy)
-    matches = np.empty((0, 2), dtype=np.int64)
-    if map_a.n_nodes and map_b.n_nodes:
-        d, idx = cKDTree(map_a.xy).query(moved, distance_upper_bound=HYBRID_EPS)
-        keep = np.isfinite(d)
-        matches = np.stack([idx[keep], np.flatnonzero(keep)], axis=1).astype(np.int64)
-        # one B node per A node: the closest
-        order = np.argsort(d[keep], kind="stable")
-        _, first = np.unique(matches[order, 0], return_index=True)
-        matches = matches[order[first]]
+    matches = _nearest_matches(map_a, map_b, grid.transform)
     merged = fuse_maps(map_a, map_b, grid.transform, matches, HYBRID_EPS)
     return HybridResult(transform=grid.transform, accepted=True,
                         score=_log_odds(grid.confidence), matches=matches, merged=merged,
                         method="hybrid", time_s=time.perf_counter() - t0, reason=None,
                         evidence=None, confidence=grid.confidence, grid=grid,
                         supplied_by="grid")
+
+
+def _kept(map_b: Any, grid_a: Any, grid_b: Any, transform: Rigid2D, cfg: gm.GridMergeConfig,
+          rule: MergeRule, in_use: Rigid2D | None) -> str | None:
+    """Why the transform in use stays instead of ``transform`` (clearly different from it at
+    B's node centroid, and the grids support it clearly better); ``None`` if nothing is in
+    use or ``transform`` may replace it."""
+    if in_use is None:
+        return None
+    centre = map_b.xy.mean(axis=0) if map_b.n_nodes else np.zeros(2)
+    if not rule.distinct(transform, in_use, centre):
+        return None
+    return _keeps(grid_a, grid_b, transform, in_use, cfg)
+
+
+def _structural_step(map_b: Any, grid_a: Any, grid_b: Any, transform: Rigid2D,
+                     cfg: gm.GridMergeConfig, rule: MergeRule, in_use: Rigid2D | None,
+                     vouch: bool) -> tuple[str | None, Rigid2D, gm.GridMergeResult | None]:
+    """Step 2 for an accepted structural merge's ``transform``: ``(why it is refuted or None,
+    the transform to report, the grid alignment if the vouching ran it)``. The grids' check is
+    a hard gate; then the walls place it to the cells' precision, the transform in use may be
+    kept instead, and the grids vouch when :meth:`fusion.decision.MergeRule.needs_vouch`."""
+    why = gm.check_with_grids(grid_a, grid_b, transform, cfg)
+    if why is not None:
+        return why, transform, None
+    refined = gm.refine_with_grids(grid_a, grid_b, transform, cfg)
+    why = _kept(map_b, grid_a, grid_b, refined, cfg, rule, in_use)
+    grid = None
+    if why is None and rule.needs_vouch(vouch):
+        grid = gm.merge_grids(grid_a, grid_b, cfg)
+        why = rule.vouches(grid, refined)
+    return why, refined, grid
+
+
+def _nearest_matches(map_a: Any, map_b: Any, transform: Rigid2D) -> np.ndarray:
+    """``(K, 2)`` node pairs ``(a, b)`` of B moved by ``transform`` within :data:`HYBRID_EPS`
+    of an A node, one B node per A node (the closest)."""
+    matches = np.empty((0, 2), dtype=np.int64)
+    if not (map_a.n_nodes and map_b.n_nodes):
+        return matches
+    d, idx = cKDTree(map_a.xy).query(transform.apply(map_b.xy),
+                                     distance_upper_bound=HYBRID_EPS)
+    keep = np.isfinite(d)
+    matches = np.stack([idx[keep], np.flatnonzero(keep)], axis=1).astype(np.int64)
+    order = np.argsort(d[keep], kind="stable")
+    _, first = np.unique(matches[order, 0], return_index=True)
+    return matches[order[first]]

@@ -20,7 +20,8 @@ the edges that the cycles they close support:
 2. **Unconfirmed edges.** An edge no consistent triangle confirms (the bridge that first
    joins a robot to the others, say) is judged by its own confidence alone, and a team has
    many pairs, hence many chances of one confident look-alike: such an edge is kept only at
-   ``min_unconfirmed`` confidence or more (the env's ``mapping.team_accept_threshold``).
+   ``min_unconfirmed`` confidence or more (the env's ``mapping.team_accept_threshold``,
+   :meth:`fusion.decision.MergeRule.team_min_unconfirmed`).
 3. **Spanning forest.** The remaining edges are added by decreasing confidence
    (Kruskal's order); an edge closing a longer cycle is kept only if the path through the
    forest already built agrees with it, so the forest is consistent by construction.
@@ -44,14 +45,8 @@ import networkx as nx
 import numpy as np
 from scipy.optimize import least_squares
 
+from fusion.decision import CYCLE_TOLERANCE_DEG, CYCLE_TOLERANCE_M
 from fusion.rigid import Rigid2D
-
-CYCLE_TOLERANCE_DEG = 5.0
-"""Largest rotation (degrees) a consistent triangle may compose to: two merges right to 2°
-each compose to at most 4°; look-alikes are tens of degrees or whole metres off."""
-
-CYCLE_TOLERANCE_M = 1.0
-"""Largest displacement (metres) of a robot's map centre around a consistent triangle."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,7 +123,8 @@ def consistent_edges(edges: Sequence[Edge], centres: Mapping[int, np.ndarray] | 
             centre; missing robots: their frame origin).
         check: ``False`` keeps the pairwise decisions alone: a spanning forest by confidence,
             no votes, no rejection (for ablations).
-        tolerance_deg, tolerance_m: what a consistent cycle may compose to.
+        tolerance_deg, tolerance_m: what a consistent cycle may compose to
+            (:data:`fusion.decision.CYCLE_TOLERANCE_DEG`, ``CYCLE_TOLERANCE_M``).
         min_unconfirmed: least confidence of an edge no consistent triangle confirms
             (with ``check``).
 

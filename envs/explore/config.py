@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fusion.decision import DEFAULT_ACCEPT_THRESHOLD, TEAM_ACCEPT_THRESHOLD
 from topo.grid import SensorModel
 from topo.validation import check_int, check_real, config_from
 
@@ -354,7 +355,7 @@ class MappingConfig:
             cells: the same maps would only give the same answer. ``0`` runs on schedule.
         accept_threshold: with ``"hybrid"``, a merge is accepted only when its calibrated
             confidence (probability that the transform is right) reaches this, in ``[0, 1]``;
-            default ``fusion.grid_merge.DEFAULT_ACCEPT_THRESHOLD`` (0.9).
+            default ``fusion.decision.DEFAULT_ACCEPT_THRESHOLD`` (0.9).
         local_map_size: side of the egocentric ``local_map`` observation, cells (``>= 64``).
         local_map_resolution: metres per ``local_map`` cell.
         max_nodes: graph nodes in the observation (nearest first; padded with a mask).
@@ -381,12 +382,12 @@ class MappingConfig:
     merge_method: str = "hybrid"
     grid_merge_every: int = 100
     grid_merge_growth: float = 0.2
-    accept_threshold: float = 0.9
+    accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     local_map_size: int = 64
     local_map_resolution: float = 0.15
     max_nodes: int = 32
     cycle_check: bool = True
-    team_accept_threshold: float = 0.97
+    team_accept_threshold: float = TEAM_ACCEPT_THRESHOLD
     first_merge_check: bool = True
 
     def __post_init__(self) -> None:

@@ -7,8 +7,10 @@ Every ``mapping.merge_every`` steps the two topological maps are merged (``run_m
 checked against them. A merge of the same two maps as the last one is skipped (it would give
 the same answer). An accepted transform that differs from the one in use replaces it and the
 shared map is rebuilt (with ``"hybrid"``, one clearly different is not accepted when the grids
-support the one in use clearly better, ``fusion.hybrid.IN_USE_MARGIN``); one the grids refute
-is dropped (the shared map is robot 0's alone).
+support the one in use clearly better); one the grids refute is dropped (the shared map is
+robot 0's alone). Every such decision is a step of ``fusion.decision.MergeRule``: the
+first-merge check, what a merge call does to a pair's transform in use
+(``fusion.decision.pair_verdict``) and the team's threshold for unconfirmed merges.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from envs.explore.comm import TeamViews
 from envs.explore.config import MERGE_METHODS as CONFIG_MERGE_METHODS
 from envs.explore.config import MappingConfig
 from envs.explore.mapping import RobotMap
+from fusion.decision import MergeRule, pair_verdict
 from fusion.grid_merge import drift_prior
 from fusion.rigid import Rigid2D
 from fusion.team import CycleCheck, Edge, consistent_edges, frames_from
@@ -123,9 +126,10 @@ def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid
             config = GridMergeConfig(**fields, drift_prior=drift_prior)
         if try_grids and in_use is not None:
             return recheck(map_a, map_b, grid_a, grid_b, in_use, config)
+        vouch = MergeRule.of(config, first_merge_check=first_merge_check).first_merge_vouch(
+            in_use)
         return hybrid_merge(map_a, map_b, grid_a, grid_b, try_grids=try_grids,
-                            config=config, in_use=in_use,
-                            vouch=first_merge_check and in_use is None), None
+                            config=config, in_use=in_use, vouch=vouch), None
     from fusion.structural import merge_maps
 
     return merge_maps(map_a, map_b, method=method), None
@@ -216,8 +220,9 @@ class PairLoop:
         self.calls += 1
         self.last_run = steps
         confidence = float(getattr(result, "confidence", 0.0))
-        if result.accepted and (self.transform is None
-                                or not result.transform.allclose(self.transform)):
+        verdict = pair_verdict(result.accepted, result.transform, confidence, self.transform,
+                               self.confidence, refuted)
+        if verdict == "replace":
             if result.method not in MERGE_METHODS:
                 raise RuntimeError(f"merge result method {result.method!r} has no merge_method "
                                    f"code; known: {list(MERGE_METHODS)}")
@@ -227,11 +232,11 @@ class PairLoop:
             self.transform = result.transform
             self.history.append((steps, self.transform, confidence))
             return True
-        if result.accepted and confidence > self.confidence:
+        if verdict == "confirm":
             # the transform in use, found again more confidently
             self.history.append((steps, self.transform, confidence))
             return True
-        if refuted is not None and self.transform is not None:
+        if verdict == "drop":
             self.drops += 1
             self.method = "none"
             self.source = "none"
@@ -296,7 +301,8 @@ class TeamMerging:
         self._keys: list[tuple | None] = [None] * n
         self._per_step = max(1, n // 2)
         # two robots have no cycle to confirm a merge: their pair is the accept rule alone
-        self._min_unconfirmed = config.team_accept_threshold if n >= 3 else 0.0
+        self._min_unconfirmed = MergeRule(
+            team_accept_threshold=config.team_accept_threshold).team_min_unconfirmed(n)
         self._errors: dict[int, tuple] = {}
 
     @property

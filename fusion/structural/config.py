@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from fusion.decision import DEFAULT_RULE, STRUCTURAL_ACCEPT_THRESHOLD
 from topo.validation import check_int, check_real, config_from
 
-DEFAULT_ACCEPT_THRESHOLD = 0.8
-"""Default :attr:`MergeConfig.accept_threshold`. ``benchmarks/calibrate_merge.py --model
-structural`` prints the smallest threshold (on a 0.05 grid) with at most 1 % false accepts of
-no-overlap pairs and 1 % wrong accepts of all tuning pairs in cross-validation (the ``meta``
-of the fitted model); the default stays above it when that one sits at the limit, with a
-margin for pairs unlike the tuning ones (``benchmarks/fusion.md``)."""
+DEFAULT_ACCEPT_THRESHOLD = STRUCTURAL_ACCEPT_THRESHOLD
+"""Default :attr:`MergeConfig.accept_threshold`: the structural merge called alone
+(:data:`fusion.decision.STRUCTURAL_ACCEPT_THRESHOLD`, where every accept threshold is
+documented)."""
 
 
 METHODS = ("auto", "paper_icp", "exhaustive", "multistart_icp", "ransac")
@@ -81,8 +80,8 @@ class MergeConfig:
     distinct_angle_deg: float = 10.0
     distinct_distance: float = 1.5
     icp_max_iter: int = 30
-    min_inliers: int = 3
-    min_margin: float = 1.0
+    min_inliers: int = DEFAULT_RULE.min_inliers
+    min_margin: float = DEFAULT_RULE.min_margin
     accept_threshold: float = DEFAULT_ACCEPT_THRESHOLD
     multistart_starts: int = 12
     exhaustive_step_deg: float = 2.0

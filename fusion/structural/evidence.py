@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.calibration import load_weights
+from fusion.decision import MergeRule
 from fusion.icp import moments_degeneracy
 from fusion.rigid import Rigid2D, wrap_angle
 from fusion.structural import _evidence_kernels as EK
@@ -267,27 +268,9 @@ def with_evidence(ev: Evaluated, **changes) -> Evaluated:
 
 
 def decide(evidence: MergeEvidence, config: MergeConfig | None = None) -> str | None:
-    """The accept rule: ``None`` to accept, else the reasons to reject (``"; "``-joined).
-
-    Rejects when: fewer than ``min_inliers`` matched nodes; the matched nodes are collinear
-    (the rotation is not determined); a distinct alternative within ``min_margin`` of the
-    score (ambiguous); or the calibrated :attr:`MergeEvidence.confidence` is below
-    ``accept_threshold`` (weak evidence).
-    """
-    cfg = config_of(config)
-    e = evidence
-    reasons = []
-    if e.inliers < cfg.min_inliers:
-        reasons.append(f"too few matched nodes: {e.inliers} < min_inliers={cfg.min_inliers}")
-    if e.collinear:
-        reasons.append("matched nodes are collinear: rotation not determined")
-    if e.margin < cfg.min_margin:
-        reasons.append(f"ambiguous: a distinct alignment scores {e.runner_up:.2f} against "
-                       f"{e.score:.2f} (margin < min_margin={cfg.min_margin})")
-    confidence = e.confidence
-    if confidence < cfg.accept_threshold:
-        reasons.append(f"weak evidence: confidence {confidence:.2f} < accept_threshold="
-                       f"{cfg.accept_threshold} (score {e.score:.2f}, {e.inliers} matches, "
-                       f"{e.matched_edges} matched paths, {e.conflicts} conflicts, "
-                       f"{e.crossings} crossings, rmse {e.rmse:.2f} m)")
-    return "; ".join(reasons) or None
+    """The structural merge's accept rule: ``None`` to accept, else the reasons to reject
+    (``"; "``-joined) — :meth:`fusion.decision.MergeRule.structural` of ``config``'s rule:
+    too few matched nodes (``min_inliers``), collinear matches, a distinct alternative within
+    ``min_margin`` (ambiguous), or a calibrated :attr:`MergeEvidence.confidence` below
+    ``accept_threshold`` (weak evidence)."""
+    return MergeRule.of(config_of(config)).structural(evidence)

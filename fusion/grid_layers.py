@@ -1,0 +1,186 @@
+"""The grid alignment's layers: occupancy grids cropped to their known cells and pooled to one
+resolution (:func:`pooled_layers`), how B's cells moved by a transform land on A's
+(:func:`landing`, :class:`GridAgreement`), and the FFT correlation that scores every
+translation of B at once (:class:`Correlator`). What :func:`fusion.grid_merge.merge_grids`
+is built from; split from it to keep each module about one thing.
+
+Grids are duck-typed: anything with cell-state codes (``cell_states()`` or ``states``),
+``resolution`` and ``origin``. ``cfg`` arguments are :class:`fusion.grid_merge.GridMergeConfig`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+from scipy import fft as sfft
+from scipy import ndimage
+
+from fusion import _grid_kernels as GK
+
+UNKNOWN, FREE, OCCUPIED = 0, 1, 2  # topo.grid.CellState codes
+
+if TYPE_CHECKING:
+    from fusion.grid_merge import GridMergeConfig
+
+
+def cell_states(grid: Any) -> np.ndarray:
+    s = grid.states() if callable(getattr(grid, "states", None)) else grid.states
+    return np.asarray(s)
+
+
+def pooled_layers(grid: Any, res: float | tuple[float, ...]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | list | None:
+    """(wall mask, free mask, origin) of ``grid`` cropped to its known cells, pooled to
+    cells of exactly ``res`` (a cell is a wall if any fine cell is occupied, free if most are
+    free and none is occupied; a pooled cell may cover a fractional number of fine cells, e.g.
+    6.7 of 0.03 m: rounding to whole cells would stretch the map by up to 5 %); for a tuple of
+    resolutions, a list of them (the grid is read once); ``None`` if nothing is known. Grids
+    coarser than ``res`` give pooled layers with gaps."""
+    states = cell_states(grid)
+    r0, r1, c0, c1 = GK.known_box(states, UNKNOWN)
+    if r0 < 0:
+        return None
+    fine = float(grid.resolution)
+    origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * fine
+    out = []
+    for r in (res if isinstance(res, tuple) else (res,)):
+        ratio = fine / r
+        h, w = int((r1 - r0 + 0.5) * ratio) + 1, int((c1 - c0 + 0.5) * ratio) + 1
+        out.append((*GK.pool(states, r0, c0, h, w, ratio, FREE, OCCUPIED), origin))
+    return out if isinstance(res, tuple) else out[0]
+
+
+def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
+    rows, cols = np.nonzero(mask)
+    return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
+
+
+class GridAgreement(NamedTuple):
+    """How B's cells moved by a transform land on A's (:func:`grid_agreement`), at
+    :attr:`GridMergeConfig.resolution`.
+
+    Attributes:
+        overlap_m2: area of B's free space landing on A's known cells.
+        wall_agreement: fraction of B's wall cells landing on A's known cells that meet an A
+            wall (within one cell).
+        conflict: fraction of them landing in A's free space, away from A's walls.
+        free_conflict: fraction of B's free cells landing on A's known cells that land on an
+            A wall.
+        wall_hits: how many of B's wall cells land on A's known cells.
+    """
+
+    overlap_m2: float
+    wall_agreement: float
+    conflict: float
+    free_conflict: float
+    wall_hits: int
+
+    @property
+    def support(self) -> float:
+        """B's wall cells on A's walls minus those in A's free space: the net count of walls
+        that support the transform, comparable between two transforms of the same grids."""
+        return self.wall_hits * (self.wall_agreement - self.conflict)
+
+
+def landing(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall, pts_free,
+                 n_free_b) -> GridAgreement:
+    """How B's wall and free cells moved by ``transform`` land on A's pooled layers."""
+    h, w = wall_a.shape
+
+    def cells(pts: np.ndarray) -> np.ndarray:
+        ij = np.floor((transform.apply(pts) - origin_a) / res).astype(int)
+        return ij[(ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)]
+
+    known_a = wall_a | free_a
+    ia = cells(pts_wall)
+    on_known = known_a[ia[:, 1], ia[:, 0]]
+    hits = ia[on_known]
+    agree = float(near_wall_a[hits[:, 1], hits[:, 0]].mean()) if len(hits) else 0.0
+    conflict = float((free_a & ~near_wall_a)[hits[:, 1], hits[:, 0]].mean()) if len(hits) else 1.0
+    ifm = cells(pts_free)
+    ifm = ifm[known_a[ifm[:, 1], ifm[:, 0]]]
+    free_conflict = float(wall_a[ifm[:, 1], ifm[:, 0]].mean()) if len(ifm) else 0.0
+    step_free = max(1, int(math.ceil(n_free_b / max(len(pts_free), 1))))
+    overlap = float(len(ifm)) * step_free * res * res
+    return GridAgreement(overlap, agree, conflict, free_conflict, len(hits))
+
+
+class Correlator:
+    """Score of every translation of B's wall and free points, rotated about ``centre``,
+    against A's layers at one resolution: ``+1`` per B wall on an A wall (within one cell),
+    ``−conflict`` per B wall on A free space and per B free cell on an A wall, ``+free_weight``
+    per B free cell on A free space (module doc, step 2). A's layers are transformed once;
+    each rotation costs two forward FFTs and one inverse, batched over rotations; only the best
+    translation of each rotation is kept (and the score maps when asked for)."""
+
+    def __init__(self, wall_a: np.ndarray, free_a: np.ndarray, origin_a: np.ndarray,
+                 res: float, pts_wall: np.ndarray, pts_free: np.ndarray, centre: np.ndarray,
+                 radius: float, cfg: GridMergeConfig) -> None:
+        self.res, self.origin_a, self.centre = res, origin_a, centre
+        self.pts_wall, self.pts_free = pts_wall, pts_free
+        near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+        for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
+        for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
+        # B rotated about ``centre`` fits in a square of side 2·radius
+        self.side = int(math.ceil(2 * radius / res)) + 2
+        self.half = self.side // 2
+        self.shape = (wall_a.shape[0] + self.side, wall_a.shape[1] + self.side)
+        self.fshape = tuple(sfft.next_fast_len(n, real=True) for n in self.shape)
+        # single precision: scores are sums of a few thousand small terms
+        self.fa_walls = sfft.rfft2(for_walls.astype(np.float32), self.fshape, workers=1)
+        self.fa_free = sfft.rfft2(for_free.astype(np.float32), self.fshape, workers=1)
+
+    def _kernels(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+        """``(len(thetas), side, side)`` rasters of ``pts`` rotated about the centre, flipped
+        (correlation is convolution with the flipped kernel)."""
+        k = np.zeros((len(thetas), self.side, self.side), dtype=np.float32)
+        if len(pts):
+            GK.raster_rotated(k, pts, float(self.centre[0]), float(self.centre[1]),
+                              np.cos(thetas), np.sin(thetas), self.res, self.half)
+        return k
+
+    def best(self, thetas: np.ndarray, keep_maps: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Per rotation: the best score, the flat index of its translation in the score map
+        (:meth:`translation`), and with ``keep_maps`` the ``(len(thetas), H, W)`` score maps
+        of every translation (A-cell offsets)."""
+        n = len(thetas)
+        scores = np.empty(n)
+        at = np.empty(n, dtype=np.int64)
+        out = np.empty((n,) + self.shape, dtype=np.float32) if keep_maps else None
+        rows = np.arange(16)
+        for i in range(0, n, 16):  # bounded memory
+            th = thetas[i: i + 16]
+            spec = self.fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
+                                              workers=1)
+            if len(self.pts_free):
+                spec += self.fa_free * sfft.rfft2(self._kernels(self.pts_free, th),
+                                                  self.fshape, workers=1)
+            smaps = sfft.irfft2(spec, self.fshape, workers=1)[:, : self.shape[0],
+                                                               : self.shape[1]]
+            flat = smaps.reshape(len(th), -1)
+            k = np.argmax(flat, axis=1)
+            scores[i: i + 16] = flat[rows[: len(th)], k]
+            at[i: i + 16] = k
+            if out is not None:
+                out[i: i + 16] = smaps
+        return scores, at, out
+
+    def index(self, T: np.ndarray, theta: float) -> tuple[float, float]:
+        """(row, column) of the score map where translation ``T`` at rotation ``theta`` lies
+        (:meth:`translation`'s inverse, not rounded)."""
+        c, s = math.cos(theta), math.sin(theta)
+        corner = (np.asarray(T) + np.array([[c, -s], [s, c]]) @ self.centre
+                  - self.half * self.res - self.origin_a) / self.res
+        return corner[1] + self.side - 1, corner[0] + self.side - 1
+
+    def translation(self, k: int, theta: float, width: int) -> np.ndarray:
+        """T of the flat score-map index ``k`` at rotation ``theta``: the flipped kernel's
+        cell (side-1, side-1), i.e. kernel cell (0, 0) — B's point ``centre - half·res`` —
+        lands on A cell (r - side + 1, col - side + 1)."""
+        r, col = divmod(int(k), width)
+        c, s = math.cos(theta), math.sin(theta)
+        corner = self.origin_a + np.array([col - self.side + 1, r - self.side + 1]) * self.res
+        return corner + self.half * self.res - np.array([[c, -s], [s, c]]) @ self.centre
