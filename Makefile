@@ -7,7 +7,7 @@ PIP    := $(PY) -m pip
 # torch itself downloads a multi-GB CUDA build.
 TORCH  := torch==2.13.0
 
-.PHONY: demo test bench lint clean env-pairs
+.PHONY: demo test bench lint clean env-pairs calibrate
 
 $(VENV)/.torch:
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,24 @@ test: $(VENV)/.deps-test
 # the env-pair benchmark set (tune and test splits) for benchmarks/topo_repeatability.py
 env-pairs: $(VENV)/.deps-base
 	$(PY) benchmarks/env_pairs.py --out data/env_pairs
+
+# Refit every fitted parameter of the merges (fusion/calibration.json) after changing what they
+# read: the topological map extraction, the occupancy grids, the structural search or the grid
+# alignment's evidence (CONTRIBUTING.md). Long: it makes the tuning pairs (resumable), then fits
+# the search's ranking weights, the structural confidence (it reads the ranking score) on the
+# tune, synthetic and generic pairs, the grid confidence on the noise-free pairs and its drift
+# terms on top. Review the printed tables and `git diff fusion/calibration.json` before
+# committing: a refit moves merge decisions (tests/envs/test_env_hash.py digests).
+CALIBRATION ?= out/calibration
+calibrate: $(VENV)/.deps-base
+	$(PY) benchmarks/env_pairs.py --out data/env_pairs --only tune
+	$(PY) benchmarks/env_pairs.py --out data/env_pairs --odometry-noise 0.01 0.02 0.05
+	$(PY) -m fusion.calibration fit --model ranking --write
+	rm -f $(CALIBRATION)/structural_rows.json
+	$(PY) benchmarks/generic_graphs.py --calibration-rows $(CALIBRATION)/structural_rows.json
+	$(PY) -m fusion.calibration fit --model structural --cache $(CALIBRATION)/structural_rows.json --write
+	$(PY) -m fusion.calibration fit --model grid --write
+	$(PY) -m fusion.calibration fit --model grid --drift --extend --write
 
 bench: $(VENV)/.deps-bench
 	$(PY) benchmarks/icp_speed.py

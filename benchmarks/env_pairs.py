@@ -19,14 +19,15 @@ generate``, so an
 interrupted run resumes with the same command. ``benchmarks/topo_repeatability.py`` reads it.
 
 ``--odometry-noise σ …`` instead makes, per σ, ``drift/<split>/sigma_<σ>`` (apart from the
-split folders, which ``benchmarks/calibrate_merge.py`` reads by default): frontier pairs
+split folders, which ``python -m fusion.calibration fit`` reads by default): frontier pairs
 (``--episodes`` × 3 snapshots, 1500 steps, 20 m buildings, the dataset CLI's episode seeds and
 snapshot rule) driven with ``robot.odometry_noise = (σ, σ)``, whose ``transform`` is the
 **drift-aware** truth at the snapshot (``envs.explore.drift.drift_aware_truth``: the
 robots' current odometry frames), not the start-frame one the dataset CLI stores — with drift no
 rigid transform matches the start frames, and the current frames are where the maps are right
 now. Finished episodes are skipped, so a rerun resumes. The ``tune`` split (seed 0) unless
-``--only test``: seed 1's worlds, a held-out set for ``calibrate_merge.py --held-out``.
+``--only test``: seed 1's worlds, a held-out set for ``python -m fusion.calibration fit
+--held-out``.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ more evidence — every wall cell — so this method aligns them directly:
    and how many of them meet an A wall at the grids' own resolution (:meth:`GridMergeResult.
    features`) — gives its **confidence**, the probability that it is right (< 2°, < 0.3 m),
    from a logistic model fitted on tuning map pairs (:mod:`fusion.calibration`, model
-   ``"grid"``, refitted by ``benchmarks/calibrate_merge.py``). It is **accepted** when the
+   ``"grid"``, refitted by ``python -m fusion.calibration fit``). It is **accepted** when the
    confidence reaches ``accept_threshold`` and enough area overlaps (``min_overlap_m2``, a
    hard gate): symmetric buildings, whose rivals score as well, get a low confidence (at most
    1/2 for a tie, :data:`TIE_MARGIN`) and are rejected rather than merged wrongly.
@@ -113,7 +113,7 @@ class GridMergeConfig:
     ``native_refine``: refine the alignment on the grids' own cells (finer than
     ``resolution``: 0.03–0.1 m). The confidence model was fitted with the default search
     settings (``resolution`` … ``refine_top``): other values change the evidence it reads, so
-    refit it (``benchmarks/calibrate_merge.py``) before trusting its probabilities.
+    refit it (``make calibrate``) before trusting its probabilities.
     ``drop_margin``: :func:`fusion.hybrid.recheck` drops the transform in use when the grids'
     alignment of it has a confidence below ``accept_threshold − drop_margin`` (a margin, so
     that a merge is not dropped and re-accepted as the confidence wavers at the threshold).

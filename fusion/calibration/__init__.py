@@ -17,7 +17,8 @@ Features are standardised with the tuning set's mean and spread and clipped to t
 when fitting (a model never extrapolates beyond its data). The fit is a ridge-penalised
 Newton/IRLS in numpy (scikit-learn is not a dependency). Models live in
 ``fusion/calibration.json`` (:data:`TABLE_PATH`), one per name, with the date, commit and data
-they were fitted on; ``benchmarks/calibrate_merge.py`` refits them.
+they were fitted on; ``python -m fusion.calibration fit`` refits them (``make calibrate``:
+all of them).
 """
 
 from __future__ import annotations

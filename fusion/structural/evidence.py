@@ -147,7 +147,7 @@ class MergeEvidence:
     def confidence(self) -> float:
         """The calibrated probability that the alignment is right (< 2°, < 0.3 m at B's
         centroid): the stored ``"structural"`` model of :mod:`fusion.calibration` of
-        :meth:`calibration_features` (``benchmarks/calibrate_merge.py --model structural``).
+        :meth:`calibration_features` (``python -m fusion.calibration fit --model structural``).
         Fitted on maps that are rarely symmetric: an alignment with a distinct alternative
         nearly as good may read confident; :func:`decide` rejects it as ambiguous."""
         from fusion.calibration import load_model

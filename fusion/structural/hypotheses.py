@@ -158,7 +158,7 @@ def candidate_features(map_a: TopoMap, map_b: TopoMap,
                        ) -> tuple[list[Rigid2D], np.ndarray]:
     """The alignments ``"auto"`` scores last before refining the best (its search's candidates)
     and their :meth:`MergeEvidence.features` values, one row each (columns in the order of
-    :data:`CONFIDENCE_WEIGHTS`): what ``benchmarks/calibrate_merge.py --model ranking`` fits
+    :data:`CONFIDENCE_WEIGHTS`): what ``python -m fusion.calibration fit --model ranking`` fits
     those weights on. Empty when ``merge_maps`` would not search (too few nodes, degenerate
     maps, no hypothesis).
 
