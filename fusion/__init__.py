@@ -1,5 +1,7 @@
-"""fusion: align two robots' topological maps (the paper's ICP-SVD and global merges)."""
+"""fusion: align two robots' topological maps (the paper's ICP-SVD and global merges) and decide
+when to trust a merge (:class:`MergeRule`, :mod:`fusion.decision`)."""
 
+from fusion.decision import MergeRule
 from fusion.evaluation.synthetic import SyntheticConfig, SyntheticPair, generate_pairs, make_pair
 from fusion.icp import IcpResult, icp_svd, svd_rotation
 from fusion.paper import PaperExample, paper_example
@@ -21,6 +23,7 @@ __all__ = [
     "MergeConfig",
     "MergeEvidence",
     "MergeResult",
+    "MergeRule",
     "PaperExample",
     "Placement",
     "Rigid2D",

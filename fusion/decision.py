@@ -38,10 +38,10 @@ from topo.validation import check_int, check_real
 
 DEFAULT_ACCEPT_THRESHOLD = 0.9
 """The default accept threshold of every merge that has the grids (``GridMergeConfig``, the
-hybrid merge, the env's ``mapping.accept_threshold``): the smallest threshold (on a 0.05
-grid) at which the cross-validated tuning alignments meet the rule of ``python -m
-fusion.calibration fit --model grid`` (few false accepts of no-overlap pairs, few wrong
-accepts of all pairs)."""
+hybrid merge, the env's ``mapping.accept_threshold``): the threshold rule's choice for the
+``"grid"`` model on the noise-free tuning pairs (``python -m fusion.calibration fit --model
+grid``: the smallest threshold on a 0.05 grid with few false accepts of no-overlap pairs and
+few wrong accepts of all pairs in cross-validation)."""
 
 STRUCTURAL_ACCEPT_THRESHOLD = 0.8
 """The default :attr:`fusion.MergeConfig.accept_threshold`: the structural merge called alone

@@ -35,7 +35,7 @@ def pooled_layers(grid: Any, res: float | tuple[float, ...]
     """(wall mask, free mask, origin) of ``grid`` cropped to its known cells, pooled to
     cells of exactly ``res`` (a cell is a wall if any fine cell is occupied, free if most are
     free and none is occupied; a pooled cell may cover a fractional number of fine cells, e.g.
-    6.7 of 0.03 m: rounding to whole cells would stretch the map by up to 5 %); for a tuple of
+    6.7 of 0.03 m: rounding to whole cells would stretch the map); for a tuple of
     resolutions, a list of them (the grid is read once); ``None`` if nothing is known. Grids
     coarser than ``res`` give pooled layers with gaps."""
     states = cell_states(grid)

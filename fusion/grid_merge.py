@@ -13,7 +13,7 @@ more evidence — every wall cell — so this method aligns them directly:
    rasterised, and one FFT cross-correlation per layer scores **every** translation at once:
    ``+1`` per B wall on an A wall (within one cell), ``−conflict`` per B wall on A free space
    and per B free cell on an A wall, ``+free_weight`` per B free cell on A free space. This
-   sweep runs on layers pooled ``coarse_factor`` times coarser (4× fewer cells at 2), in
+   sweep runs on layers pooled ``coarse_factor`` times coarser (a quarter of the cells at 2), in
    single precision, batched over rotations;
 3. the ``refine_top`` best clearly different coarse alignments are scored again at
    ``resolution`` — the best on a ``step_deg / 3`` angle grid around it, the others (its

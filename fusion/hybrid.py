@@ -47,7 +47,8 @@ from fusion.structural import MergeResult, fuse_maps, merge_maps
 
 HYBRID_EPS = 0.6
 """Node fusion radius (m) when a grid alignment builds the merged topological map: sonar
-topological maps of the same place put their nodes ~0.5 m apart."""
+topological maps of the same place put their nodes apart by up to about this much
+(``benchmarks/fusion.md``)."""
 
 IN_USE_MARGIN = DEFAULT_RULE.in_use_margin
 """A confident result clearly different from the transform in use replaces it unless the grids
