@@ -208,7 +208,7 @@ def test_bad_arguments(kwargs, match):
 @pytest.mark.parametrize(("argv", "match"), [
     (["--world-size", "3", "3"], r"env settings: world.size\[0\] must be >= 6.0, got 3.0"),
     (["--world-size", "nan", "10"], r"world_size must be finite, got \(nan, 10.0\)"),
-    (["--n-robots", "8", "--world-size", "6", "6"], r"env settings: .*8 robots"),
+    (["--n-robots", "8", "--world-size", "6", "6"], r"env settings: .*\b8\b"),  # the env's words
     (["--ent-coef", "nan"], "ent_coef must be finite, got nan"),
     (["--log-std-init", "nan"], "log_std_init must be finite, got nan"),
     (["--device", "tpu"], "device must be 'cpu', 'cuda', 'cuda:N', 'mps' or 'auto', got 'tpu'"),
