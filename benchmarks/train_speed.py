@@ -80,10 +80,12 @@ def cpu_split(level: str, runners: int, iterations: int, n_envs: int) -> dict[st
     is the iteration's length with a free core per process."""
     import ray
 
+    from agents.rllib_training import rllib_config, start_ray
+
     args = train.Args(backend="rllib", level=level, n_envs=n_envs, num_env_runners=runners,
                       progress=False)
-    started = train._start_ray(args)
-    algo = train.rllib_config(args).build_algo()
+    started = start_ray(args)
+    algo = rllib_config(args).build_algo()
     group = algo.env_runner_group
 
     def runner_cpu() -> list[float]:

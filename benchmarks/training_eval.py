@@ -117,8 +117,9 @@ POLICY_KINDS = ("run:", "sample:", "best-run:", "best-sample:")
 
 def _policy_path(run: str | Path, best: bool) -> Path:
     """A run's final policy (``model.zip`` or ``rllib/``), or with ``best`` the best one its
-    evaluations saw (``train.BEST_SB3`` / ``train.BEST_RLLIB``); raises SystemExit if missing."""
-    from train import BEST_RLLIB, BEST_SB3
+    evaluations saw (``agents.training.BEST_SB3`` / ``BEST_RLLIB``); raises SystemExit if
+    missing."""
+    from agents.training import BEST_RLLIB, BEST_SB3
 
     names = (BEST_SB3, BEST_RLLIB) if best else ("model.zip", "rllib")
     for name in names:

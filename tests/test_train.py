@@ -1,5 +1,6 @@
 """train.py: tiny-budget training, reproducibility, resume, SB3Explorer datasets, bad args."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,7 @@ def _report(step, t85, final):
 def test_keep_best_keeps_lower_t85_then_higher_coverage(tmp_path):
     import json
 
-    from train import keep_best
+    from agents.training import keep_best
 
     saved = []
     for step, t85, final in [(1, 121, 0.5), (2, 121, 0.4), (3, 121, 0.6), (4, 90, 0.3),
@@ -75,11 +76,15 @@ def test_periodic_evaluations_keep_the_best_policy(tmp_path):
     from stable_baselines3 import PPO
 
     run = tmp_path / "r"
-    run.mkdir()
+    (run / "checkpoints").mkdir(parents=True)
     (run / "best.json").write_text(json.dumps({"step": 9, "T85": 0, "final_coverage": 1}))
-    run = main(Args(runs_dir=tmp_path, run_name="r", seed=6, **{**TINY, "eval_every": 128}))
+    (run / "checkpoints" / "step_000000999.zip").write_bytes(b"another run's")
+    run = main(Args(runs_dir=tmp_path, run_name="r", overwrite=True, seed=6,
+                    **{**TINY, "eval_every": 128}))
     best = json.loads((run / "best.json").read_text())
     assert best["step"] in (128, 256)  # the stale record of an overwritten run is gone
+    assert sorted(p.name for p in (run / "checkpoints").iterdir()) == [
+        "step_000000128.zip", "step_000000256.zip"]  # and so are its checkpoints
     # the saved policy is the one evaluated at the recorded step (hold 1: a decision a step)
     assert PPO.load(run / "best_model.zip", device="cpu").num_timesteps == best["step"]
 
@@ -185,11 +190,63 @@ def test_sb3_explorer_generates_a_pair(run_dir, tmp_path):
          "lr_schedule='linear' applies to backend='sb3' only"),
         ({"level": "motion", "central_critic": True},
          "central_critic applies to level='goals' with the sector head on backend='sb3' only"),
+        ({"ent_coef": float("nan")}, "ent_coef must be finite, got nan"),
+        ({"log_std_init": float("inf")}, "log_std_init must be finite, got inf"),
+        ({"learning_rate": float("nan")}, "learning_rate must be finite, got nan"),
+        ({"world_size": (float("nan"), 10.0)}, r"world_size must be finite, got \(nan, 10.0\)"),
+        ({"world_size": (3.0, 3.0)}, r"env settings: world.size\[0\] must be >= 6.0, got 3.0"),
+        ({"env_kwargs": {"sonr": {}}}, r"env settings: env_kwargs has unknown keys \['sonr'\]"),
+        ({"device": "tpu"}, "device must be 'cpu', 'cuda', 'cuda:N', 'mps' or 'auto', got 'tpu'"),
+        ({"device": "cuda:x"}, "device must be 'cpu', 'cuda', 'cuda:N', 'mps' or 'auto', got 'cuda:x'"),
     ],
 )
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Args(**kwargs)
+
+
+@pytest.mark.parametrize(("argv", "match"), [
+    (["--world-size", "3", "3"], r"env settings: world.size\[0\] must be >= 6.0, got 3.0"),
+    (["--world-size", "nan", "10"], r"world_size must be finite, got \(nan, 10.0\)"),
+    (["--n-robots", "8", "--world-size", "6", "6"], r"env settings: .*\b8\b"),  # the env's words
+    (["--ent-coef", "nan"], "ent_coef must be finite, got nan"),
+    (["--log-std-init", "nan"], "log_std_init must be finite, got nan"),
+    (["--device", "tpu"], "device must be 'cpu', 'cuda', 'cuda:N', 'mps' or 'auto', got 'tpu'"),
+])
+def test_a_setting_that_cannot_run_is_one_line_and_no_run_folder(tmp_path, capsys, argv, match):
+    """Issue 45: settings that used to fail inside the env workers (a traceback per worker and
+    a run folder holding only ``args.json``) or halfway inside torch are refused up front."""
+    from train import cli
+
+    with pytest.raises(SystemExit) as exit_:
+        cli(["--runs-dir", str(tmp_path), "--n-envs", "2", "--no-progress", *argv])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("train.py: error: "), err
+    assert re.search(match, err), err
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_existing_run_is_refused_unless_overwrite(tmp_path):
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "model.zip").write_bytes(b"a trained policy")
+    with pytest.raises(ValueError, match=r"run_name: the run folder '.*r' exists; pass "
+                                         r"--overwrite to replace its run, or --resume"):
+        main(Args(runs_dir=tmp_path, run_name="r", **TINY))
+    assert (run / "model.zip").read_bytes() == b"a trained policy"
+
+
+def test_a_run_that_dies_before_training_leaves_no_folder(tmp_path, monkeypatch):
+    import agents.training
+
+    def die(*args):
+        raise RuntimeError("worker died")
+
+    monkeypatch.setattr(agents.training, "train_sb3", die)
+    with pytest.raises(RuntimeError, match="worker died"):
+        main(Args(runs_dir=tmp_path, run_name="x", **TINY))
+    assert not list(tmp_path.iterdir())
 
 
 def test_non_numbers_are_type_errors():
