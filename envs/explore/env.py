@@ -487,7 +487,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
     the original would. A copy replays the episode since ``reset`` (manual, Copies), so
-    restoring one costs about 0.35 s of CPU per 1000 steps since ``reset`` at the defaults.
+    restoring one takes about as long as those steps took.
     """
 
     metadata = {
