@@ -1,7 +1,7 @@
 """Learned goal selection over the frontier planner: the policy picks *where* to explore next,
 :class:`agents.scripted.Frontier`'s planner and pure pursuit drive there.
 
-Learning exploration from raw velocity commands takes PPO millions of steps; choosing among
+Learning exploration from raw velocity commands is slow (long horizons); choosing among
 frontiers is the decision that matters (which room next, whether to follow the teammate), so
 the policy acts at that level, as in hierarchical exploration policies (e.g. Active Neural SLAM's
 global policy over a local planner):

@@ -23,7 +23,7 @@ Learning exploration from velocity commands is slow for three reasons this wrapp
 
 The observation and the env's reward are kept (the shaping is added per robot, on top; train
 with ``reward_mode="individual"``: before a merge the team reward pays nothing for robot 1's
-exploration, ``benchmarks/training.md``). Policies trained on it act on the plain env through
+exploration). Policies trained on it act on the plain env through
 ``agents.SB3Explorer``, each command held ``motion_hold`` steps as in training.
 """
 

@@ -21,7 +21,7 @@ match SB3's is more work than this adapter. The semantics here are exactly those
 Multi-process (``n_workers > 1``): the envs are split across worker processes, each stepping its
 share in one call per step (like ``SubprocVecEnv``, but a worker holds several envs). Infos
 cross the process boundary *light*: only numbers, strings and small arrays (≤ 64 values) are
-kept. ``two_robot_explore``'s own infos are all of that kind (under 1 kB a step); the filter
+kept. ``two_robot_explore``'s own infos are all of that kind; the filter
 guards against wrappers that add objects, which would be pickled every step. Use
 ``n_workers=1`` to see every info.
 """

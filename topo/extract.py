@@ -15,9 +15,8 @@ depends on the unknown is flagged:
 3. **Clearance** — the distance from each free cell to the nearest *occupied* cell
    (``scipy.ndimage.distance_transform_edt``), smoothed by a Gaussian of ``smoothing``. The
    unknown is not an obstacle here: where a robot has not looked yet the clearance is not cut
-   short, so it does not depend on how far the exploration has got (counting the unknown as
-   an obstacle made the nodes of two robots' maps of the same rooms agree 2–3 times less
-   often, ``benchmarks/fusion.md``). Walls seen only in fragments still bound the field.
+   short, so it does not depend on how far the exploration has got. Walls seen only in
+   fragments still bound the field.
 4. **Places** — the maxima of the clearance whose persistence is at least ``persistence``
    (the clearance must fall by that much on every way to a higher maximum) and whose
    clearance is at least ``min_clearance``: room centres, corridor crossings and bends, the
@@ -91,8 +90,8 @@ class ExtractConfig:
 
     Attributes:
         resolution: cell size the map is pooled to before extraction (never finer than the
-            map's own cells). 0.2 m keeps doors (≈ 1 m) several cells wide and makes an
-            extraction of a robot's map a few milliseconds.
+            map's own cells). 0.2 m keeps doors (≈ 1 m) several cells wide and an extraction
+            cheap enough to repeat during an episode.
         min_hole_area: holes in free space smaller than this are filled.
         open_radius: free space within ``open_near_unknown`` of the unknown is opened by a disc
             of this radius (about the robot's); 0 (the default) turns the opening off.

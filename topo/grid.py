@@ -172,10 +172,10 @@ class OccupancyGrid:
     def update_valid(self, pose: np.ndarray, ranges: np.ndarray, sensor_angles: np.ndarray,
                      max_range: float, cone_half_width: float) -> None:
         """:meth:`update` without its checks, for callers whose scans are valid by construction
-        (the env, four grids every step, where the checks cost as much as the update): ``pose``
-        a float64 ``(3,)`` array, ``ranges`` and ``sensor_angles`` float64 ``(K,)`` arrays,
-        all finite, ranges ``>= 0``, ``max_range > 0``, ``cone_half_width`` in ``(0, pi/2]``.
-        The same update; bad input here is not diagnosed."""
+        (the env, which updates several grids every step): ``pose`` a float64 ``(3,)`` array,
+        ``ranges`` and ``sensor_angles`` float64 ``(K,)`` arrays, all finite, ranges ``>= 0``,
+        ``max_range > 0``, ``cone_half_width`` in ``(0, pi/2]``. The same update; bad input
+        here is not diagnosed."""
         self._apply(pose, ranges, sensor_angles, max_range, cone_half_width, NO_MASK, NO_COUNTS)
 
     def update_tracked(self, pose: np.ndarray, ranges: np.ndarray, sensor_angles: np.ndarray,

@@ -77,8 +77,7 @@ class ReplayCopies:
         """Rebuild the env from :meth:`__getstate__`'s state: construct it, restore the
         generator as it was at ``reset``, reset and replay the recorded commands (no
         rendering, no warnings), so that it ends in exactly the original's state. The time
-        grows with the steps since ``reset``: about 0.35 s of CPU per 1000 steps at the defaults
-        (manual, Copies).
+        grows with the steps since ``reset`` (Copies in ``docs/env_explore.md``).
 
         Raises:
             RuntimeError: the replay did not reproduce the original (step count, agents,

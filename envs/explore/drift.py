@@ -24,9 +24,8 @@ def odometry_noise_level(cfg: RobotConfig) -> float:
     ``fusion.grid_merge.drift_prior(σ, steps)`` reads and the one test of "does it drift?"
     (``> 0``) the env asks: the larger of ``odometry_noise`` for the ``"increment"`` model,
     the largest ``sqrt(αk)`` for ``"rot_trans_rot"`` (``sqrt(α1)``, the relative spread of
-    each rotation, for the presets); ``0`` for perfect odometry. The ``pioneer3dx`` preset
-    (``sqrt(α1) = 0.05``) drifts about as much as ``"increment"`` at σ = 0.05
-    (``benchmarks/drift.md``)."""
+    each rotation, for the presets); ``0`` for perfect odometry. Why: one number lets the
+    merge's drift prior treat both models alike."""
     if not isinstance(cfg, RobotConfig):
         raise TypeError(f"cfg must be a RobotConfig, got {type(cfg).__name__}")
     if cfg.odometry_model == "rot_trans_rot":

@@ -1,25 +1,21 @@
 """A team of sonar robots explores an unknown building and merges its maps.
 
-Two envs share this manual: ``multi_robot_explore_v0`` (teams of ``n_robots`` = 2–8, with
-range-limited communication: ``comm``) and ``two_robot_explore_v0``, the team of two with its
-original observation layout (one ``teammate`` row, no ``contacts``/``fused_robots`` infos).
-Where the manual says "two robots", a larger team does the same pairwise (Merging N maps).
+The manual of ``multi_robot_explore_v0`` (teams of ``n_robots`` = 2–8, range-limited
+communication) and ``two_robot_explore_v0`` (two robots, its original layout: one ``teammate``
+row, no ``contacts``/``fused_robots`` infos). How sensing, drift, merging, the known-poses
+baseline, the state and copies work, at length: ``docs/env_explore.md``.
 
 ## Description
 
-Two Pioneer3-DX-like robots (``robot_0``, ``robot_1``; ``robot_0 … robot_{N-1}`` in a team of
-N) start at random, unknown-to-each-other
-poses in a 2-D indoor world simulated with pymunk. Each drives by a velocity command, senses
-with a ring of 8 sonars, and builds an occupancy grid and a topological map (places and the
-paths between them) **in its own odometry frame**. Every ``merge_every`` steps the two robots'
-maps are aligned (``mapping.merge_method``, default ``"hybrid"``: ``fusion.merge_maps`` on the
-topological maps, then an occupancy-grid alignment, see Maps); when a merge is accepted, robot
-1's map joins robot 0's in the **shared map**. The team is rewarded for growing the shared map,
-so a wrong merge costs reward. It is a cooperative PettingZoo ``ParallelEnv``; ``env()`` gives
-the AEC version; ``gymnasium.make("topomerge/TwoRobotExplore-v0")`` (after ``import envs``) is
-one Gymnasium agent driving both robots (joint action, both observations, the team reward:
-:mod:`envs.explore.centralised`), for Gymnasium's wrappers and vector envs;
-``gymnasium.make("topomerge/MultiRobotExplore-v0", n_robots=N)`` is the same for a team.
+Pioneer3-DX-like robots (``robot_0 … robot_{N-1}``) start at random poses, unknown to each
+other, in a 2-D indoor world simulated with pymunk. Each drives by a velocity command, senses
+with a ring of sonars and builds an occupancy grid and a topological map **in its own odometry
+frame**. Every ``merge_every`` steps robots in contact align their maps; an accepted merge adds
+a teammate's map to a robot's **fused map**. The team is rewarded for growing robot 0's fused
+map (the **shared map**), so a wrong merge costs reward. A cooperative PettingZoo
+``ParallelEnv``; ``env()`` is its AEC version; after ``import envs``,
+``gymnasium.make("topomerge/TwoRobotExplore-v0")`` (or ``"topomerge/MultiRobotExplore-v0"``,
+``n_robots=N``) is the team as one Gymnasium agent (:mod:`envs.explore.centralised`).
 
 ## Action Space
 
@@ -36,8 +32,8 @@ With ``action_type="discrete"``, ``Discrete(5)``: 0 stop, 1 forward, 2 turn left
 
 ## Observation Space
 
-A ``Dict`` per robot (spaces built once; ``R`` = the frame radius, the world's diagonal plus
-the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size``):
+A ``Dict`` per robot (``R`` = the world's diagonal plus the sonar range; ``N`` =
+``mapping.max_nodes``, ``L`` = ``mapping.local_map_size``):
 
 | key | shape, dtype | meaning | min | max |
 |---|---|---|---|---|
@@ -46,156 +42,75 @@ the sonar range; ``N`` = ``mapping.max_nodes``, ``L`` = ``mapping.local_map_size
 | ``graph_nodes`` | (N, 9) f32 | per node, nearest first (a) | -2R, 0 | 2R, 16 |
 | ``graph_mask`` | (N,) f32 | 1 for a real node, 0 for padding | 0 | 1 |
 | ``graph_adjacency`` | (N, N) f32 | 1 where a path joins two listed nodes | 0 | 1 |
-| ``local_map`` | (1, L, L) u8 | heading-up crop of the shared map (b) | 0 | 255 |
+| ``local_map`` | (1, L, L) u8 | heading-up crop of the robot's fused map (b) | 0 | 255 |
 | ``teammate`` | (5,) f32 | teammate's estimated pose (c; two robots) | -2R, -1, 0 | 2R, 1, 1 |
 | ``teammates`` | (N−1, 7) f32 | per teammate (h; teams) | -2R, -1, 0 | 2R, 1, 1 |
 
-(a) ``x, y`` relative to the robot (m, robot frame: x ahead, y left; within ``±2R``), kind
-one-hot (junction, dead end, corner, gateway; 0–1), degree (0–16), clearance (m, 0–10), frontier
-flag (1 for a node that touches the unknown: where exploring goes on) — of the robot's own
-topological map (see Maps).
-(b) robot at the centre facing up, its left on the image's left, ``mapping.local_map_resolution``
-m/pixel; 0 occupied, 128 unknown, 255 free.
+(a) of the robot's own topological map: ``x, y`` relative to the robot (m, robot frame: x
+ahead, y left), kind one-hot (junction, dead end, corner, gateway), degree (0–16), clearance
+(m, 0–10), frontier flag (1: the node touches the unknown).
+(b) robot at the centre facing up, its left on the image's left,
+``mapping.local_map_resolution`` m/pixel; 0 occupied, 128 unknown, 255 free; only its own map
+before a merge.
 (c) ``x, y`` (m, robot frame), ``cos, sin`` of its relative heading, valid flag (1 once a merge
 is accepted; all 0 before).
-(h) one row per teammate, in index order, skipping the robot itself: the five entries of (c)
-for that teammate (valid: it is in this robot's fused map; its pose is the one at their last
-contact when out of contact), then ``in_contact`` (0/1) and ``age``: steps since their last
-contact / ``max_cycles`` (0 in contact, 1 if never; clipped to 1).
-
-Before a merge is accepted a robot's ``local_map`` shows only its own map. The raw maps are
-read through the env (Infos, below).
+(h) one row per teammate in index order, skipping the robot itself: the five entries of (c)
+(valid: it is in this robot's fused map; its pose at their last contact when out of contact),
+then ``in_contact`` (0/1) and ``age``: steps since their last contact / ``max_cycles`` (0 in
+contact, 1 if never; clipped to 1).
 
 ## Sensors
 
-The Pioneer front ring: 8 sonars at -90, -50, -30, -10, 10, 30, 50, 90° from the heading, on the
-robot's rim (ranges are measured from there). Each is a 15° cone sampled by ``sonar.rays`` rays
-(3); a ray is cast from the robot's centre against the walls and the teammate's disc (not the
-robot's own) — **the very shapes the robots collide with**, with pymunk's segment-query
-arithmetic (``envs.explore.raycast``). Range 0.15–5 m,
-Gaussian noise (σ = 0.01 m), an echo hitting a wall more than 60° off its normal is lost with
-probability 0.5 (specular reflection). A sonar reads its nearest surviving echo; 5 m means no
-echo. ``sonar.measure_every = 0.1`` scans only
-every 10 cm of travel, as the paper's robots did.
-
-Odometry is exact by default. ``robot.odometry_noise`` (σ per step's motion) or
-``robot.odometry_model="rot_trans_rot"`` (Thrun's α1–α4; ``odometry_alphas="pioneer3dx"``:
-Stage's Pioneer, 1–2.5 % of the distance driven) make it drift, and each map then **bends**:
-cells are drawn where the odometry thought the robot was, so no rigid transform fits two maps
-everywhere; merges are judged at the robots' current places (Infos, note f), and the hybrid
-merge's confidence weighs the drift the maps may hold (``fusion.grid_merge.drift_prior``). It
-refuses most merges of bent maps: of 20 held-out 3000-step Frontier episodes, 11 merge at
-σ 0.01 and 3 at σ 0.02 (``benchmarks/drift.md``).
+A ring of sonars on each robot's rim (``sonar.angles``: the Pioneer front ring). A sonar is a
+cone of ``sonar.rays`` rays cast against the walls and the teammates' discs — the very shapes
+the robots collide with — and reads its nearest echo plus Gaussian noise; an echo meeting a
+wall more than ``dropout_incidence`` off its normal is lost with probability ``dropout_prob``
+(specular reflection); ``max_range`` means no echo. Odometry is exact by default;
+``robot.odometry_noise`` or ``robot.odometry_model="rot_trans_rot"`` make it drift, and the
+maps then bend (Drift in ``docs/env_explore.md``).
 
 ## Maps
 
-``world.source = "procedural"`` (default): a seeded ``world.size`` building (20 × 20 m) of
-rooms (3–6 m), corridors, doors and loops, with furniture; a new building every reset. Or a
-file: ROS ``map_server`` YAML (+PGM), DungeonMaps PNG (``world.png_resolution`` m/pixel) or
-HouseExpo JSON (``{"verts": [[x, y], ...]}``, metres). Walls are the traced, simplified contours
-of the map's non-free cells. Each robot's occupancy grid (``topo.OccupancyGrid``,
-``mapping.grid_resolution``) covers a square of half-side ``R`` around its start and folds
-each scan in with a sonar-cone inverse model (free up to the echo, a wall along its arc); a
-reading longer than ``mapping.usable_range`` (2.5 m) only frees the cone up to that range and
-draws no wall, since far readings are where a lost echo reads through a wall and a 15° arc
-(1 m wide at 4 m) closes a doorway. The true coverage (Infos, note d) uses the same model. Its
-topological map (``topo.extract_topomap``, settings ``mapping.topo``) is re-extracted from the
-grid every ``mapping.topo_every`` steps once the map has grown by ``mapping.topo_growth`` (2 %)
-since the last extraction (and the structural merge of two unchanged maps is skipped):
-**places** at the maxima of the clearance from the
-walls the sonars have seen (room centres, corridor crossings and bends), **gateways** at the
-narrow passes between them and into rooms seen too little to be places (doorways), **dead
-ends** at corridor ends, and the paths between
-them; a node that touches the unknown is flagged (its ``frontier`` feature) and the structural
-merge leaves it out, since it moves as the map grows. Two robots that know the same rooms put
-the same places there, whatever else each has seen (``benchmarks/topo_repeatability.py``).
+``world.source="procedural"`` (default) is a new ``world.size`` building of rooms, corridors,
+doors, loops and furniture every reset; or a ROS ``map_server`` YAML, DungeonMaps PNG or
+HouseExpo JSON file. Each robot folds its scans into an occupancy grid (half-side ``R`` around
+its start; readings beyond ``mapping.usable_range`` only free) and every ``mapping.topo_every``
+steps, once the map has grown by ``mapping.topo_growth``, re-extracts its topological map
+(``topo.extract_topomap``): **places**, **gateways** (doorways), **dead ends** and the paths
+between them; nodes touching the unknown are flagged ``frontier`` and left out of merges.
 
-Merging (``mapping.merge_method``): ``"hybrid"`` (default, ``fusion.hybrid.hybrid_merge``)
-runs the structural global merge ``fusion.merge_maps(method="auto")`` on the two topological
-maps every ``merge_every`` steps and every ``grid_merge_every`` steps also the occupancy-grid
-alignment ``fusion.grid_merge.merge_grids`` (rotation search + FFT correlation, refined on the
-grids' own cells; the costly part, so only once the maps have grown by ``grid_merge_growth``,
-20 %, since its last run), which is what succeeds on most sonar map pairs: sonar topological
-maps of the same place differ too much for the structural merge to be confident. Every merge
-result carries a **confidence**, the calibrated probability that its transform is right
-(rotation < 2°, translation < 0.3 m; fitted on tuning map pairs, ``fusion.calibration``), and
-is accepted only when ``confidence >= mapping.accept_threshold`` (a pair's first structural
-merge also needs the grids' own alignment to be the same one at that confidence,
-``mapping.first_merge_check``: early maps may share no place, and a room row fits its twin;
-default 0.9: no wrong
-accept on the 156 held-out map pairs, 70 % of the pairs sharing ≥ 40 % merged right; lower it
-to merge sooner and more often at the price of wrong merges — 0.7: 80 % and 1.7 % — see the
-threshold table in ``benchmarks/fusion.md``). Small maps of a self-similar building
-(the procedural buildings are lattices of rooms) can still be confidently wrong (a room row
-turned 180° or shifted onto its twin), so the grid alignment keeps running after a merge is
-accepted (``fusion.hybrid.recheck``): an accepted alignment replaces the transform in use
-(refined, or a different one), and a rejected one whose best alignment is clearly different
-from the transform in use drops it (info ``merge_drops``): the shared map is robot 0's cells
-alone again until the next accepted merge. Other values run one ``fusion.merge_maps`` method
-(its own accept rule; ``accept_threshold`` is not used); ``"none"`` never merges;
-``"known"`` merges nothing either: every pair's true start-frame transform is in use from the
-first step (confidence 1, ``merge_source`` "known"), the known-initial-poses setting of most
-multi-robot exploration work — a reference for what not knowing the poses costs (with
-odometry noise the maps still drift away from it; maps are still exchanged only in contact).
-``"exhaustive"`` (the paper's search) suits small maps only: beyond
-``fusion.search.DEFAULT_MAX_EVALUATIONS`` placements (two maps of about 166 path endpoints) it
-raises a ``ValueError`` from ``step()`` instead of running for minutes.
+Merging (``mapping.merge_method``): ``"hybrid"`` (default) runs the structural merge of the
+topological maps every ``merge_every`` steps and the occupancy-grid alignment every
+``grid_merge_every`` steps. A result is accepted when its **confidence** (calibrated
+probability that the transform is right: rotation < 2°, translation < 0.3 m) is at least
+``mapping.accept_threshold``: lower it to merge sooner, at the price of wrong merges. The grids
+keep checking an accepted transform and may replace or drop it (``merge_drops``). ``"auto"``,
+``"paper_icp"``, ``"exhaustive"``, ``"multistart_icp"``: one ``fusion.merge_maps`` method with
+its own accept rule; ``"none"`` never merges; ``"known"`` uses the true start-frame transforms
+from the first step (the known-poses baseline).
 
 ## Communication
 
-``comm.range`` (metres, ``None`` = unlimited, the default) limits who exchanges maps: two
-robots whose centres are at most that far apart are in range (with ``comm.line_of_sight``, only
-if no wall crosses the segment between them); robots are **in contact** when a chain of
-in-range robots joins them (multi-hop relaying through teammates).
-What robot ``i`` knows of teammate ``j``'s map is ``j``'s live map while they are in contact and
-the copy from the end of their last step in contact afterwards: between contacts nothing
-streams (``env.teammate_map(agent, teammate)`` reads it; ``None`` if they never met). Pairs are
-merged only while in contact, on their live maps; a merge's transform becomes known to a robot
-with the maps, i.e. as it was at its last contact with either robot of the pair.
-
-## Merging N maps
-
-Every ``merge_every`` steps the pairs in contact are merged pairwise (the two-robot merge
-below, each pair with its own schedule), at most ``max(1, N // 2)`` pairs per merge step —
-first pairs that would join two fused maps, then the least recently merged — and the grid
-alignment on every ``grid_merge_every / merge_every``-th turn of a pair, so each robot's share
-of the merge cost does not grow with the team. Each robot assembles the pairs' transforms
-it knows into a graph of frames; with three or more robots **cycle consistency** rejects
-look-alike merges (``fusion.team``: A→B→C must agree with A→C within 5° and 1 m; the edges that
-break the most triangles are left out until none is broken; a merge no consistent triangle
-confirms — the bridge that first joins a robot to the others — needs
-``mapping.team_accept_threshold`` (0.97) confidence, as a team's many pairs give many chances
-of one confident look-alike; then a spanning forest by confidence). Robot ``i``'s **fused
-map** is its component of that forest: its own map and each member's (as it knows it) moved
-into its frame. ``mapping.cycle_check = False`` uses the
-pairwise decisions alone. ``merge_state()`` reports every pair (transform, confidence, kept by
-the cycle check), each robot's fused members and frames, and the contacts.
+Robots at most ``comm.range`` metres apart (``None``: always; with ``comm.line_of_sight``, no
+wall between) are in range; robots joined by a chain of in-range robots are **in contact**.
+Pairs merge only in contact (at most ``max(1, N // 2)`` per merge step); out of contact a robot
+keeps a teammate's map as it was at their last contact (``env.teammate_map(agent, teammate)``).
+With three or more robots ``mapping.cycle_check`` leaves out merges that break triangles
+A→B→C, and a merge no triangle confirms needs ``mapping.team_accept_threshold``.
+``merge_state()`` reports every pair, fused map and contact.
 
 ## Rewards
 
-Team reward (both robots get it), every step:
+Team reward (every robot gets it), every step:
 
-    coverage_reward · (new shared-map area, m²) − collision_penalty · (new contacts of either
+    coverage_reward · (new shared-map area, m²) − collision_penalty · (new contacts of any
     robot) − time_penalty
 
-The shared map is robot 0's fused map: its known cells plus robot 1's moved by the latest
-accepted merge transform (in a team, plus every teammate's in robot 0's fused map, each by its
-frame: a teammate's cells count once it merges into robot 0's component, as robot 1's do with
-two robots; unmerged components do not count until they do, and with limited communication
-robot 0 counts what it knows, so bringing maps back to robot 0 pays).
-When a new merge changes the transform, or the transform is dropped, the shared map
-is rebuilt and the change of its area (possibly negative: a wrong merge overlaps what it should
-not, a dropped one takes robot 1's cells out) enters the reward.
-``reward_mode="oracle"`` uses the true newly swept area instead (for ablations; see Infos,
-``true_coverage``); ``"individual"`` gives each robot its own new area and its own contacts.
-
-Shaping for learning velocity commands lives outside the env, so that every explorer is
-scored on the same reward: ``agents.motion.MotionEnv`` (``train.py --level motion --hold K
---frontier-shaping k``) holds each command ``K`` steps and adds, per robot, the
-potential-based term ``k · (Φ(s') − Φ(s))`` with ``Φ`` minus the path length to the
-nearest frontier of the robot's own map: it pays progress towards unexplored space and sums
-to the change of ``Φ`` over an episode, so it cannot be farmed (undiscounted: a discounted
-``γ · Φ(s')`` would pay a robot for standing still).
+A teammate's cells count once it is in robot 0's fused map; when a merge changes or drops a
+transform the shared map is rebuilt and the change of its area (negative for a wrong merge or
+a dropped one) enters the reward. ``reward_mode="oracle"`` uses the true newly swept area
+instead (ablations); ``"individual"`` gives each robot its own new area and its own contacts.
+Shaping for learning velocity commands lives outside the env (``agents.motion.MotionEnv``).
 
 Worked example (defaults: ``coverage_reward = 0.1``, ``collision_penalty = 0.5``,
 ``time_penalty = 0.01``): in one step robot 0 uncovers 120 new cells and robot 1 (already
@@ -207,118 +122,59 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 
 ``N`` random drivable cells (two for ``two_robot_explore_v0``) at least
 ``world.start_clearance`` (0.45 m) from any wall and ``world.min_start_separation`` (2 m)
-apart, in the same connected region, random headings; each robot's odometry starts at
-``(0, 0, 0)``. A fresh ``pymunk.Space`` every reset. The first scan is taken at reset. A
-``reset`` that raises (bad ``start_poses``) leaves no episode: ``agents`` is empty and
-``step()`` raises until a ``reset`` succeeds.
+apart, in one connected region, random headings; each robot's odometry starts at ``(0, 0, 0)``.
+A fresh ``pymunk.Space`` every reset; the first scan is taken at reset. A ``reset`` that raises
+(bad ``start_poses``) leaves no episode (``agents`` empty): ``step()`` raises until a ``reset``
+succeeds.
 
 ## Episode End
 
 * Termination: the true covered fraction of the reachable free area (``info["true_coverage"]``)
-  reaches ``target_coverage`` (0.95) — both robots terminate.
-* Truncation: ``max_cycles`` steps (1000) — both robots truncate.
+  reaches ``target_coverage`` (0.95) — all robots terminate.
+* Truncation: ``max_cycles`` steps (1000) — all robots truncate.
 
 After that ``agents`` is empty and ``step()`` raises until ``reset()``.
 
 ## Infos
 
-Small, numeric and comparable (no NaN, no wall clock, no live objects: under 1 kB pickled per
-step; equal episodes give equal infos, as PettingZoo's ``parallel_seed_test`` checks, and
-TorchRL turns every entry into a tensor). Per robot:
+Small, numeric and comparable (no NaN, no wall clock, no live objects). Per robot:
 
 | key | type | meaning |
 |---|---|---|
-| ``true_coverage`` | float | fraction of the reachable free area the sonars have truly swept (d) |
-| ``true_area_m2`` | float | area truly swept (walls included), m² |
-| ``shared_area_m2`` | float | known area of the shared map, m² |
-| ``shared_coverage`` | float | shared area / reachable area (the robots' estimate, e) |
+| ``true_coverage`` / ``true_area_m2`` | float | share of the reachable area / m² truly swept (d) |
+| ``shared_area_m2`` / ``shared_coverage`` | float | shared map's known m² / over reachable m² |
 | ``own_area_m2`` | float | known area of the robot's own map, m² |
 | ``overlap`` | float | fraction of the smaller robot's true sweep the other also swept |
 | ``collisions`` | int | contacts of this robot so far |
 | ``merge_accepted`` | bool | a merge transform is in use |
-| ``merge_method`` | int | ``MERGE_METHODS[code]``: method of the merge result in use (0 none) (g) |
-| ``merge_source`` | int | ``MERGE_SOURCES[code]``: its source (1 structural, 2 grid, 3 known) (g) |
+| ``merge_method`` / ``merge_source`` | int | code of the merge in use's method / source (g) |
 | ``merge_errors_valid`` | bool | the two errors below are measured (a transform is in use) |
 | ``merge_rotation_error_deg`` | float | rotation error of the transform in use, ° (f) |
 | ``merge_translation_error_m`` | float | its translation error at robot 1's map centroid, m (f) |
-| ``merges`` | int | merge calls so far |
-| ``merge_drops`` | int | transforms dropped because the grids refuted them (see Maps) |
-| ``pose`` | (3,) f64 | true world pose ``x, y, θ`` (for metrics; explorers must not use it) |
-| ``odometry`` | (3,) f64 | odometry pose in the robot's own start frame |
-| ``contacts`` | int | teammates in contact now (``multi_robot_explore_v0``) |
-| ``fused_robots`` | int | robots in this robot's fused map, itself included (likewise) |
+| ``merges`` / ``merge_drops`` | int | merge calls so far / transforms the grids refuted (Maps) |
+| ``pose`` / ``odometry`` | (3,) f64 | true world ``x, y, θ`` (metrics only) / own-frame odometry |
+| ``contacts`` / ``fused_robots`` | int | teammates in contact / robots in its fused map (teams) |
 
-(d) the world cells the robots' inverse sensor model updates for each scan taken from the
-robot's true pose with its true ranges (nearest real echo per cone, no noise, no dropout), so a
-dropped echo that "sees through" a wall, or odometry drift, does not count. (e) it includes
-walls, phantom free space behind dropped echoes and mis-merged area. (f) against ground
-truth; 0.0 when ``merge_errors_valid`` is False (a flag, not NaN, so that infos compare). With
-odometry noise the truth is drift-aware: the transform right at the robots' current places
-(each robot's current odometry frame, ``Robot.odometry_frame()``), the translation error the
-larger at the two robots' positions (``envs.explore.drift``); in a team, the largest
-over robot 0's fused teammates. (g) in a team, pair (robot_0, robot_1)'s;
-``merge_state().pairs`` has every pair's.
-
-The maps are read through the env, not handed out every step (a grid is megabytes; explorers
-need it only when they plan): ``env.unwrapped.robot_map(agent)`` gives a read-only
-:class:`~envs.explore.mapping.RobotMapSnapshot` of the robot's own maps (a copy of
-its ``topo.OccupancyGrid``, its ``topo.TopoMap``, odometry; later steps never change it; taken
-once per step, about 0.1 ms at the defaults), and ``env.unwrapped.merge_state()`` a
-:class:`MergeState` (the transform in use, the method that supplied it, the last
-``fusion.MergeResult``, counts and the last merge call's wall time, ``time_s``). Explorers
-that plan on maps are given read access this way (``agents.base.Explorer.bind``).
+(d) from true poses and ranges: dropped echoes and drift do not count. (f) against ground
+truth, drift-aware with odometry noise; 0.0 when not valid; in a team, the largest over robot
+0's fused teammates. (g) ``MERGE_METHODS[code]`` (0: none) and ``MERGE_SOURCES[code]`` (1
+structural, 2 grid, 3 known), constants of this module; in a team, pair (robot_0, robot_1)'s.
+Maps are read through the env: ``env.unwrapped.robot_map(agent)`` (a read-only snapshot) and
+``env.unwrapped.merge_state()`` (:class:`MergeState`).
 
 ## State
 
-``state()`` is a global view for centralised critics (MAPPO-style): a float32 vector in
-``state_space`` (a ``Box`` of ``state_scalars(N) + 3 · STATE_MAP_SIZE²`` values, 4N + 4 + 3072:
-3084 for two robots), in the
-world frame, the same layout for every world (positions as fractions of the world's extent):
-
-| index | meaning | min | max |
-|---|---|---|---|
-| 4i … 4i+3 | robot i's true pose: ``x, y`` (fraction of the extent), ``cos θ, sin θ`` | 0, -1 | 1 |
-| 4N | ``true_coverage`` | 0 | 1 |
-| 4N+1 | ``overlap`` | 0 | 1 |
-| 4N+2 | share of the teammates in robot 0's fused map (two robots: a merge in use, 0/1) | 0 | 1 |
-| 4N+3 | steps / ``max_cycles`` | 0 | 1 |
-| S + k | swept: share of world block ``k`` truly swept | 0 | 1 |
-| S + 1024 + k | shared map: share of block ``k`` known in the shared map (g) | 0 | 1 |
-| S + 2048 + k | reachable: share of block ``k`` that is reachable free space | 0 | 1 |
-
-``S = 4N + 4`` (12 for two robots). The world's extent is cut into ``STATE_MAP_SIZE ×
-STATE_MAP_SIZE`` (32 × 32) blocks, ``k = row
-· 32 + column``, row 0 at the bottom; each share is measured at 4 × 4 points evenly spread in
-the block. (g) the shared map placed in the world by robot 0's true start pose: a wrong merge
-shows as known cells where nothing was swept. The reachable channel is fixed per world.
-``state()`` costs about 80 µs; the AEC ``env()`` forwards ``state()`` and ``state_space``.
+``state()`` (``state_space``; the AEC ``env()`` forwards both) is a global view for centralised
+critics: float32, ``4N + 4 + 3 · 32²`` values in the world frame — each robot's true pose,
+``true_coverage``, ``overlap``, the share of teammates in robot 0's fused map, steps /
+``max_cycles``, then 32 × 32 maps of the world truly swept, in the shared map, and reachable
+(index table: State in ``docs/env_explore.md``).
 
 ## Copies
 
-The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as
-the original would (same observations, rewards and infos for the same actions), also after
-the episode's end (``agents`` empty) and into the next unseeded ``reset`` (its generator is
-where the original's is).
-
-A copy is made by **replay**, not by copying the physics: what is pickled is the config, the
-render mode, the loaded world file, the generator's state at the last ``reset``, the start
-poses given to it, each step's ``(v, ω)`` commands since (32 bytes a step: about 33 kB after
-1000 steps) and any later ``max_cycles`` change. Restoring builds a fresh env, resets it from
-that generator state and steps it through the commands, building no observations, no
-rendering and no warnings. Why: pymunk pickles bodies and contacts but not what a step leaves
-to the next (the solver's bias velocities and joint impulses, the broadphase's pair order), so
-an unpickled space drifts from the original after a contact; the env is deterministic given
-the generator, the start poses and the commands, so a replay rebuilds that state exactly.
-
-Cost: restoring takes about as long as the steps since ``reset`` took, less their outputs —
-about 0.35 s of CPU per 1000 steps at the defaults, 0.13 s with ``topo_every = merge_every =
-0`` (``benchmarks/copy_speed.py``) — and grows with the step count: copy early in an episode
-where copies are frequent (tree search, say), or keep the actions and replay them yourself.
-
-Not copied: the render window; the wall time in ``merge_state().time_s`` (the replay's own);
-changes made to the env's internals from outside ``step``/``reset``. The replay checks the
-step count, agents, poses, contact counts and generator state it ends in against the
-original's, and a copy that does not reproduce them raises ``RuntimeError``.
+The env pickles and deep-copies before and after ``reset``, and a copy continues exactly as the
+original would. A copy replays the episode since ``reset``, so restoring takes about as long as
+those steps took; a replay that does not reproduce the original raises ``RuntimeError``.
 
 ## Arguments
 
@@ -329,19 +185,15 @@ are a ``ValueError``.
 
 | parameter | type | default | meaning |
 |---|---|---|---|
-| ``world.source`` | str | ``"procedural"`` | procedural building or a map file |
-| ``world.size`` | (float, float) | (20, 20) | procedural building size, m |
-| ``world.room_size`` | (float, float) | (3, 6) | procedural room side range, m |
-| ``world.corridor_prob`` | float | 0.25 | chance a room row/column is a corridor |
-| ``world.loop_prob`` | float | 0.3 | chance of an extra door (loops) |
+| ``world.source`` | str | ``"procedural"`` | procedural building or a map file path (Maps) |
+| ``world.size`` / ``room_size`` | (float, float) | (20, 20) / (3, 6) | building, room sides, m |
+| ``world.resolution`` / ``png_resolution`` | float | 0.1 / 0.1 | world grid m/cell, PNG m/pixel |
+| ``world.corridor_prob`` / ``loop_prob`` | float | 0.25 / 0.3 | corridor rows, extra doors |
+| ``world.door_width`` / ``wall_thickness`` | float | 1 / 0.2 | m |
 | ``world.obstacle_density`` | float | 0.5 | furniture boxes per 10 m² |
-| ``world.png_resolution`` | float | 0.1 | m/pixel of PNG maps |
+| ``world.start_clearance`` / ``min_start_separation`` | float | 0.45 / 2 | m (Starting State) |
 | ``n_robots`` | int | 2 | robots in the team, 2–8 (``two_robot_explore_v0``: 2) |
-| ``comm.range`` | float or None | None | contact range, m (see Communication) |
-| ``comm.line_of_sight`` | bool | False | contact also needs no wall between |
-| ``mapping.cycle_check`` | bool | True | cycle consistency (see Merging N maps) |
-| ``mapping.team_accept_threshold`` | float | 0.97 | unconfirmed merges in teams (likewise) |
-| ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
+| ``comm.range`` / ``line_of_sight`` | float or None / bool | None / False | see Communication |
 | ``robot.radius`` | float | 0.25 | disc radius, m |
 | ``robot.max_speed`` / ``max_turn_rate`` | float | 0.7 / 100 | m/s, °/s at action 1 |
 | ``robot.dt`` / ``substeps`` | float / int | 0.1 / 4 | seconds per step, physics substeps |
@@ -349,31 +201,29 @@ are a ``ValueError``.
 | ``robot.odometry_noise`` | (float, float) | (0, 0) | relative σ of ``"increment"`` odometry |
 | ``robot.odometry_alphas`` | 4 floats or str | 0s | α1–α4, or ``"pioneer3dx"`` |
 | ``robot.drift_correction`` | bool | False | experimental odometry correction (noisy only) |
-| ``robot.drift_correction_every`` | int | 25 | steps between matches (``localize``) |
-| ``robot.drift_correction_window`` / ``_age`` | int | 150 / 300 | echoes' steps, walls' age |
+| ``robot.drift_correction_every`` / ``_window`` / ``_age`` | int | 25 / 150 / 300 | steps |
 | ``robot.drift_correction_sigma`` | float | 3 | m per echo of the match's information |
+| ``sonar.angles`` | floats | Pioneer ring | directions, ° CCW from the heading |
 | ``sonar.rays`` / ``cone`` | int / float | 3 / 15 | rays per cone, cone width (°) |
-| ``sonar.min_range`` / ``max_range`` | float | 0.15 / 5 | m |
-| ``sonar.noise_std`` | float | 0.01 | m |
-| ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout |
+| ``sonar.min_range`` / ``max_range`` / ``noise_std`` | float | 0.15 / 5 / 0.01 | m |
+| ``sonar.dropout_incidence`` / ``dropout_prob`` | float | 60 / 0.5 | specular dropout: °, chance |
 | ``sonar.measure_every`` | float or None | None | scan every this many metres travelled |
 | ``mapping.grid_resolution`` | float | 0.1 | m/cell |
-| ``mapping.usable_range`` | float or None | 2.5 | m; longer readings only free (see Maps) |
+| ``mapping.usable_range`` | float or None | 2.5 | m; longer readings only free (Maps) |
 | ``mapping.topo_every`` / ``merge_every`` | int | 25 / 25 | steps (0 = never) |
-| ``mapping.topo_growth`` | float | 0.02 | map growth before a re-extraction (see Maps) |
+| ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments |
+| ``mapping.topo_growth`` / ``grid_merge_growth`` | float | 0.02 / 0.2 | growth before a rerun |
 | ``mapping.topo`` | dict or ``ExtractConfig`` | defaults | ``topo.ExtractConfig`` fields |
-| ``mapping.merge_method`` | str | ``"hybrid"`` | Maps: ``merge_maps`` methods, ``"known"`` |
-| ``mapping.grid_merge_every`` | int | 100 | steps between grid alignments (see Maps) |
-| ``mapping.grid_merge_growth`` | float | 0.2 | map growth before a rejected one is retried |
-| ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (see Maps) |
-| ``mapping.local_map_size`` | int | 64 | ``local_map`` side, pixels |
-| ``mapping.local_map_resolution`` | float | 0.15 | ``local_map`` m/pixel |
+| ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps |
+| ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (Maps) |
+| ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
+| ``mapping.cycle_check`` | bool | True | cycle consistency (Communication) |
+| ``mapping.team_accept_threshold`` | float | 0.97 | merges no triangle confirms (likewise) |
+| ``mapping.local_map_size`` / ``_resolution`` | int / float | 64 / 0.15 | pixels, m/pixel |
 | ``mapping.max_nodes`` | int | 32 | graph nodes observed |
-| ``max_cycles`` | int | 1000 | truncation |
-| ``target_coverage`` | float | 0.95 | termination |
+| ``max_cycles`` / ``target_coverage`` | int / float | 1000 / 0.95 | truncation, termination |
 | ``reward_mode`` | str | ``"shared"`` | ``"shared"``, ``"oracle"``, ``"individual"`` |
-| ``coverage_reward`` | float | 0.1 | reward per new m² |
-| ``collision_penalty`` | float | 0.5 | per new contact |
+| ``coverage_reward`` / ``collision_penalty`` | float | 0.1 / 0.5 | per new m², per new contact |
 | ``time_penalty`` | float | 0.01 | per step |
 | ``action_type`` | str | ``"continuous"`` | or ``"discrete"`` |
 | ``render_mode`` | str or None | None | ``"human"`` (pygame-ce window) or ``"rgb_array"`` |
@@ -487,7 +337,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
 
     The env pickles and deep-copies, before and after ``reset``; a copy continues exactly as
     the original would. A copy replays the episode since ``reset`` (manual, Copies), so
-    restoring one costs about 0.35 s of CPU per 1000 steps since ``reset`` at the defaults.
+    restoring one takes about as long as those steps took.
     """
 
     metadata = {

@@ -1,5 +1,6 @@
-"""The env's global state for centralised critics (manual, State): every robot's true pose,
-coverage and progress, and three coarse world-frame maps — swept, shared and reachable.
+"""The env's global state for centralised critics (manual, State; its index table is in
+``docs/env_explore.md``): every robot's true pose, coverage and progress, and three coarse
+world-frame maps — swept, shared and reachable.
 
 The maps are ``STATE_MAP_SIZE²`` blocks over the world's extent; each block is the mean of
 ``STATE_SAMPLES²`` points sampled evenly inside it, read from the world grid (swept, reachable)

@@ -1,4 +1,4 @@
-"""Drift correction of a robot's odometry against its own map (issue 33, part 1).
+"""Drift correction of a robot's odometry against its own map.
 
 With noisy odometry a robot's map bends: what it mapped long ago sits where the odometry then
 put it, what it maps now where the odometry now puts it. :class:`DriftCorrector` pulls the pose
@@ -31,8 +31,8 @@ estimate back onto the robot's own older map, a scan-to-map match done every
   what the noise accumulated since the last one allows. A fit whose Mahalanobis distance
   exceeds :data:`GATE` (χ² with 3 degrees of freedom, p = 0.01) is rejected.
 
-Measured not to reduce these robots' drift (``benchmarks/drift.md``), so
-``robot.drift_correction`` is off by default.
+Experimental: ``robot.drift_correction`` is off by default, since on the default robots it does
+not reduce the drift.
 
 Applied corrections move :attr:`Robot.odometry` (the env then draws new cells where they belong
 and the drift-aware truth follows the corrected frame) and the buffered echoes with it. Nothing

@@ -7,8 +7,8 @@ in robot 0's frame ("A"); robot 1's map ("B") enters it through the latest accep
 
 Per step only a window around each robot is touched: the grid update visits the cones' cells
 (``topo.OccupancyGrid``) and adds those it makes known to the "ever known" mask, and the shared
-map only receives the bounding box of the cells that became known this step — so a step costs
-the same in a 20 m and an 80 m world. The shared map is re-warped whole only when a merge
+map only receives the bounding box of the cells that became known this step — so a step's cost
+does not grow with the world's size. The shared map is re-warped whole only when a merge
 changes the transform. "Ever known" makes coverage monotone: a cell whose log-odds later drift
 back to unknown still counts as covered. The true coverage sweeps the cones without a grid
 (:class:`OracleCoverage`).
@@ -156,7 +156,7 @@ class RobotMap:
         time and their bounding box (all zero if none).
         """
         # the grid's checks are skipped (update_valid's contract): the env's scans are valid by
-        # construction, and the checks would double the cost
+        # construction, and checking them would add to every step's cost
         counts = self.grid.update_tracked(pose, ranges + mount_radius, angles,
                                           max_range + mount_radius, half_cone, self.ever)
         n = int(counts[0])
@@ -235,7 +235,7 @@ class RobotMapSnapshot:
 
     @classmethod
     def of(cls, robot_map: RobotMap, odometry: np.ndarray, step: int) -> RobotMapSnapshot:
-        """Copy ``robot_map``'s grid (about 0.1 ms at the default 20 m world) and freeze it."""
+        """Copy ``robot_map``'s grid and freeze it."""
         grid = robot_map.grid.copy()
         grid.freeze()
         odo = np.array(odometry, dtype=np.float64)

@@ -175,7 +175,7 @@ class Observer:
         ox, oy, oth = robots[i].odometry.tolist()
         c, s = math.cos(oth), math.sin(oth)
         # clipped as floats, then rounded: the bounds are float32 values, so this is the
-        # float32 clip (np.clip's call costs more than the whole observation's arithmetic)
+        # float32 clip, without np.clip's call overhead
         r = self._odo_bound
         odometry = np.array([min(max(ox, -r), r), min(max(oy, -r), r), c, s], dtype=np.float32)
         sonar = (sonars[i].last / self.config.sonar.max_range).astype(np.float32)

@@ -6,8 +6,8 @@ smallest fraction ``alpha`` of its length below 1 and the surface normal there, 
 the formulas of chipmunk's segment queries (``cpSegmentShapeSegmentQuery``,
 ``CircleSegmentQuery``, ``cpSpaceSegmentQueryFirst``), so that a scan reads what pymunk's
 ``Space.segment_query_first`` reads; ``tests/envs/test_sonar.py`` checks them against each
-other. Why not pymunk's query itself: its Python wrapper costs more per ray than this caster
-costs per scan, and the env casts 48 rays a step (``benchmarks/env_speed.md``).
+other. Why not pymunk's query itself: its Python wrapper's overhead is paid per ray, this
+caster's per scan, and the env casts every ray of every sonar every step.
 
 Segments are binned in square cells :data:`CELL` wide; a scan tests only the segments of the
 cells its rays can reach, each once, so a scan costs about the same in a small and a large

@@ -116,8 +116,8 @@ one: two corridors that close would be the same corridor."""
 
 PATH_CHORD = 0.4
 """Polylines (pixel-fine paths of extracted maps) are read as chords about this long (m): a
-sample per :data:`PATH_STEP` at most, as for straight paths, and a fifth of the raster's work;
-a chord strays from its pixels by a few centimetres, well inside :data:`PATH_TOL`."""
+sample per :data:`PATH_STEP` at most, as for straight paths, and less raster work; a chord
+strays from its pixels by a few centimetres, well inside :data:`PATH_TOL`."""
 
 
 PATH_FIT_WEIGHT = 10.0

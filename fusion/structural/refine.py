@@ -30,8 +30,7 @@ def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
     :data:`PATH_TOL` of A's paths under ``(theta, t)`` paired with their nearest A path point,
     :data:`PATH_FIT_WEIGHT` per metre of path. Two robots' polylines between the same places
     are routes through each one's own free space and run apart by a few decimetres: paired
-    point by point they pull the rotation off (on env map pairs the fit without them is
-    within 2° far more often, ``benchmarks/fusion.md``)."""
+    point by point they pull the rotation off."""
     weight = 0.0 if pa.polylines or pb.polylines else PATH_FIT_WEIGHT
     P, Q, w = RK.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
                             weight, theta, t[0], t[1], PATH_TOL, pa.field,
@@ -51,8 +50,8 @@ def line_fit(pa: Prepared, pb: Prepared, pairs: np.ndarray, theta: float, t: np.
     lying within :data:`LINE_FIT_GATE` of A's polylines to them (:data:`LINE_FIT_WEIGHT` per
     metre). Point to point, two robots' polylines of one corridor pull the rotation off (they
     run apart by a few decimetres, each through its own robot's free space); point to line,
-    only their direction counts, and a long corridor fixes the rotation that 5–7 noisy nodes
-    leave ±2° off."""
+    only their direction counts, and a long corridor fixes the rotation better than a few
+    noisy nodes."""
     P, Q = pb.xy[pairs[:, 1]], pa.xy[pairs[:, 0]]
     for _ in range(iterations):
         c, s = np.cos(theta), np.sin(theta)
@@ -83,7 +82,7 @@ def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Ev
     least-squares fits on mutually nearest nodes of any kinds within ``fit_eps`` (a node at
     the edge of explored space may have another kind in each map) and, for maps without
     polylines, on B's path points lying on A's paths (:func:`least_squares`: long corridors fix
-    the rotation far better than the 3–6 nodes a small overlap shares); for maps with
+    the rotation better than the few nodes a small overlap shares); for maps with
     polylines, then a point-to-line fit of the node pairs and B's polyline points on A's
     polylines (:func:`line_fit`)."""
     best = start
