@@ -25,7 +25,7 @@ $(VENV)/.deps-base: pyproject.toml $(VENV)/constraints.txt
 	touch $@
 
 $(VENV)/.deps-test: pyproject.toml $(VENV)/constraints.txt
-	$(PIP) install -c $(VENV)/constraints.txt -e ".[dev,render,ray,rllib,torchrl]"
+	$(PIP) install -c $(VENV)/constraints.txt -e ".[dev,render,ray,rllib,torchrl,slam]"
 	touch $@
 
 $(VENV)/.deps-bench: pyproject.toml $(VENV)/constraints.txt
