@@ -54,7 +54,6 @@ import pickle
 import platform
 import resource
 import statistics
-import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -64,11 +63,9 @@ from pathlib import Path
 import numpy as np
 from _actions import fixed_actions
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from envs import two_robot_explore_v0  # noqa: E402
-from envs.explore import env as env_module  # noqa: E402
-from envs.explore import mapping, merging, raycast, robot, sonar  # noqa: E402
+from envs import two_robot_explore_v0
+from envs.explore import env as env_module
+from envs.explore import mapping, merging, raycast, robot, sonar
 
 
 @dataclass(frozen=True, slots=True)
