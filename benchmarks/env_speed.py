@@ -66,6 +66,7 @@ from _actions import fixed_actions
 from envs import two_robot_explore_v0
 from envs.explore import env as env_module
 from envs.explore import mapping, merging, raycast, robot, sonar
+from envs.explore.config import MappingConfig
 
 
 @dataclass(frozen=True, slots=True)
@@ -325,8 +326,9 @@ def main() -> None:
     print(f"# two_robot_explore_v0 speed ({platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}, single process)\n")
 
-    print("## Defaults (20x20 m procedural, sonar + grid every step, topo every 10, merge "
-          "every 25)")
+    cfg = MappingConfig()
+    print(f"## Defaults (20x20 m procedural, sonar + grid every step, topo every "
+          f"{cfg.topo_every}, merge every {cfg.merge_every})")
     run_env(200)  # warm-up (imports, first merge)
     env_sps, par = run_env(args.steps)
     floor = run_floor(par, args.steps)
