@@ -311,7 +311,7 @@ def copy_table(copies: list[int], repeats: int) -> None:
                   flush=True)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="steps per measurement")
     parser.add_argument("--soak", type=int, default=0, help="steps of the memory soak (0: skip)")
@@ -319,7 +319,7 @@ def main() -> None:
                         help="only the copy table, at these steps since reset "
                              "(default 250 1000 3000)")
     parser.add_argument("--repeats", type=int, default=3, help="restores per copy measurement")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.copies is not None:
         copy_table(args.copies or [250, 1000, 3000], args.repeats)
         return

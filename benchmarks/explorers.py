@@ -412,7 +412,7 @@ def heldout_compare(before: Path, after: Path) -> None:
                   f"{(y > x).sum()} | {secs[0]:.0f} → {secs[1]:.0f} |")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=("metrics", "decision", "dataset", "speed", "heldout"),
                         default=None, help="one part (default: metrics, decision, dataset)")
@@ -442,7 +442,7 @@ def main() -> None:
                         help="--only heldout: rows file (JSON) to fill")
     parser.add_argument("--compare", type=Path, nargs=2, metavar=("BEFORE", "AFTER"),
                         help="compare two --only heldout row files")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.from_json is not None:
         print_table(json.loads(args.from_json.read_text()))
         return
