@@ -39,7 +39,6 @@ import cProfile
 import io
 import json
 import pstats
-import sys
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -47,9 +46,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from topo.fileio import atomic_write_bytes  # noqa: E402
+from topo.fileio import atomic_write_bytes
 
 STAGES = ("_apply_actions", "_simulate", "_contact", "_sense_and_map", "_fuse", "_rewards",
           "_observe", "_infos")

@@ -19,10 +19,22 @@ section "Seeds" measures, for each of seeds 0–4 (its own world), the env and b
 right after the other on that world and prints each seed's ratios and their median: the ratio
 to read against the target.
 
+**Copies** (``--copies``, instead of the rest): the cost of copying the env (``pickle`` and
+``copy.deepcopy``), against stepping. A copy replays the episode since ``reset`` (the env's
+manual, Copies), so restoring costs about what the steps since ``reset`` cost, less the
+observations and infos a replay does not build. For each setting and each episode length ``N``
+(steps since ``reset``; seed 0, the default 20 m world, a new random command every 10 steps as in
+``benchmarks/_actions.py``) this prints, in CPU milliseconds (the machine is shared; wall time in
+brackets): the original's ``N`` steps (the reference, the same process), ``pickle.dumps``,
+``pickle.loads`` (the replay) and ``copy.deepcopy``, each restore per 1000 restored steps, its
+ratio to stepping, and the pickle's size. Medians of ``--repeats`` restores.
+
 Usage::
 
     python benchmarks/env_speed.py                 # defaults, ~1.5 min
     python benchmarks/env_speed.py --soak 100000   # plus a 100k-step memory/free-space soak
+    python benchmarks/env_speed.py --copies        # the copy table only, ~1 min
+    python benchmarks/env_speed.py --copies 500 2000 --repeats 5
 
 Stage timings wrap the env's hooks with ``time.perf_counter`` (a few % overhead, so the
 breakdown's total is a little above the untimed run).
@@ -35,24 +47,26 @@ the fairer comparison when the machine is busy (the two agree on a quiet one).
 from __future__ import annotations
 
 import argparse
+import copy
 import functools
 import math
+import pickle
 import platform
 import resource
-import sys
+import statistics
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from _actions import fixed_actions
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from envs import two_robot_explore_v0  # noqa: E402
-from envs.explore import env as env_module  # noqa: E402
-from envs.explore import mapping, merging, raycast, robot, sonar  # noqa: E402
+from envs import two_robot_explore_v0
+from envs.explore import env as env_module
+from envs.explore import mapping, merging, raycast, robot, sonar
+from envs.explore.config import MappingConfig
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,16 +256,79 @@ def seeds_table(steps: int, seeds: tuple[int, ...] = (0, 1, 2, 3, 4)) -> None:
     print(f"| **median** | {env_med:,.0f} | | **{pub_med:.2f}** | | {floor_med:.2f} |")
 
 
-def main() -> None:
+COPY_SETTINGS = {
+    "defaults": {},
+    "no topo/merge": {"mapping": {"topo_every": 0, "merge_every": 0}},
+}
+
+
+def _timed(fn: Callable[[], object]) -> tuple[float, float, object]:
+    """``(CPU s, wall s, result)`` of one call of ``fn``."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    out = fn()
+    return time.process_time() - c0, time.perf_counter() - w0, out
+
+
+def _medians(fn: Callable[[], object], repeats: int) -> tuple[float, float]:
+    """Median CPU and wall seconds of ``repeats`` calls of ``fn``."""
+    runs = [_timed(fn)[:2] for _ in range(repeats)]
+    return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
+
+
+def _episode(kwargs: dict, steps: int):
+    """An env after ``reset(seed=0)`` and ``steps`` steps, and the CPU and wall time of those
+    steps (``reset`` included)."""
+    env = two_robot_explore_v0.parallel_env(max_cycles=steps, **kwargs)
+    acts = fixed_actions(steps, 0)
+
+    def run():
+        env.reset(seed=0)
+        for k in range(steps):
+            env.step(acts[k])
+
+    cpu, wall, _ = _timed(run)
+    return env, cpu, wall
+
+
+def copy_table(copies: list[int], repeats: int) -> None:
+    """The copy table (module docstring, Copies)."""
+    _episode({}, 300)  # compiled kernels (those of the grid merges too) load outside the timings
+    print("| setting | steps since reset | stepping ms | dumps ms | loads ms (replay) "
+          "| deepcopy ms | loads ms / 1000 steps | loads / stepping | pickle bytes |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, kwargs in COPY_SETTINGS.items():
+        for steps in copies:
+            env, cpu, wall = _episode(kwargs, steps)
+            data = pickle.dumps(env)
+            dumps = _medians(lambda env=env: pickle.dumps(env), repeats)
+            loads = _medians(lambda data=data: pickle.loads(data), repeats)
+            deep = _medians(lambda env=env: copy.deepcopy(env), repeats)
+            print(f"| {name} | {steps} | {cpu * 1e3:.0f} ({wall * 1e3:.0f}) "
+                  f"| {dumps[0] * 1e3:.2f} ({dumps[1] * 1e3:.2f}) "
+                  f"| {loads[0] * 1e3:.0f} ({loads[1] * 1e3:.0f}) "
+                  f"| {deep[0] * 1e3:.0f} ({deep[1] * 1e3:.0f}) "
+                  f"| {loads[0] * 1e6 / steps:.0f} | {loads[0] / cpu:.2f} | {len(data):,} |",
+                  flush=True)
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="steps per measurement")
     parser.add_argument("--soak", type=int, default=0, help="steps of the memory soak (0: skip)")
-    args = parser.parse_args()
+    parser.add_argument("--copies", type=int, nargs="*", default=None, metavar="STEPS",
+                        help="only the copy table, at these steps since reset "
+                             "(default 250 1000 3000)")
+    parser.add_argument("--repeats", type=int, default=3, help="restores per copy measurement")
+    args = parser.parse_args(argv)
+    if args.copies is not None:
+        copy_table(args.copies or [250, 1000, 3000], args.repeats)
+        return
     print(f"# two_robot_explore_v0 speed ({platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}, single process)\n")
 
-    print("## Defaults (20x20 m procedural, sonar + grid every step, topo every 10, merge "
-          "every 25)")
+    cfg = MappingConfig()
+    print(f"## Defaults (20x20 m procedural, sonar + grid every step, topo every "
+          f"{cfg.topo_every}, merge every {cfg.merge_every})")
     run_env(200)  # warm-up (imports, first merge)
     env_sps, par = run_env(args.steps)
     floor = run_floor(par, args.steps)

@@ -1,9 +1,15 @@
-"""Explorers compared: exploration metrics over seeded worlds, frontier decision time, and
-map-pair dataset generation speed (process pool vs Ray).
+"""Explorers compared: exploration metrics over seeded worlds, frontier decision time, map-pair
+dataset generation speed (process pool vs Ray), team speed in large buildings, and T85 on the
+held-out worlds (two commits compared).
 
     python benchmarks/explorers.py [--worlds 20] [--sizes 10 20] [--workers 1] [--skip-ray]
         [--only metrics|decision|dataset] [--explorers NAME ...] [--json rows.json]
         [--from-json rows.json]
+    python benchmarks/explorers.py --only speed [--sizes 20 40 80] [--steps 2000 6000 6000]
+        [--explorers frontier coordinated_frontier] [--seed 100] [--robots N] [--json F]
+    python benchmarks/explorers.py --only heldout --out rows.json [--explorers frontier ...]
+        [--worlds 20] [--skip-real] [--workers 1]
+    python benchmarks/explorers.py --compare before.json after.json
 
 1. For each explorer, episodes on ``--worlds`` procedural buildings per size (seeds 0..N-1;
    ``max_cycles`` 150 steps per metre of building side: 1500 for 10 m, 3000 for 20 m) and on
@@ -19,8 +25,27 @@ map-pair dataset generation speed (process pool vs Ray).
 3. Dataset generation: pairs/min with the process backend and with Ray on the same settings,
    alternating, ``--repeats`` times each (Ray's start-up included in its time).
 
-Team speed in large buildings against the raw env is ``explorer_speed.py``; T85 on the
-held-out worlds of ``training_eval.py``, and two commits compared, ``explorers_heldout.py``.
+Steps 1–3 run without ``--only``; the two below are asked for by name.
+
+``--only speed``: how fast a scripted team explores large buildings, against the raw env
+stepped with the same actions in the same run. For each building size and explorer one episode
+of ``--steps`` steps (``max_cycles``), the team's ``act()`` timed per robot and the env's
+``step()`` timed; then a fresh env reset with the same seed is stepped with the recorded actions
+alone (the env floor: what the env costs without explorers). Columns: team steps/s and ms/step
+(explorers + env), the explorers' share of that time, the env floor (steps/s of the replay), the
+true coverage reached, and per robot the planning cost: ``act()`` ms per step, plans, ms per
+plan and the robot's known area at the end (so that cost per plan can be read against the area
+it plans over). The CPU columns are the same from the process's CPU time
+(``time.process_time``): on a machine shared with other jobs they move less than wall time.
+
+``--only heldout``: the scripted explorers on the held-out worlds of ``training_eval.py``
+(:func:`training_eval.heldout_worlds`: 20 procedural buildings, sides 10–20 m, plus the real
+maps); an episode is :func:`training_eval.episode`, so the numbers are the ones
+``training_eval.py`` reports for the scripted explorers. Rows are saved (atomically) to
+``--out`` after each episode and reused, so an interrupted run resumes. ``--compare BEFORE
+AFTER`` prints, per explorer, the median, mean and interquartile mean of T85 (and T95) over the
+worlds of two such files (two commits), the relative change, and how many worlds got faster,
+tied or slower.
 """
 
 from __future__ import annotations
@@ -36,6 +61,8 @@ import numpy as np
 from _maps import REAL_MAX_CYCLES, real_worlds
 
 EXPLORERS = ("random_walk", "wall_follower", "frontier", "coordinated_frontier")
+TEAM_EXPLORERS = ("frontier", "coordinated_frontier")
+"""The default of ``--only speed`` and ``--only heldout``."""
 STEPS_PER_METRE = 150
 
 
@@ -215,30 +242,232 @@ def dataset_speed(workers: int, skip_ray: bool, pairs: int, repeats: int) -> Non
               f"{statistics.median(results['ray']) / statistics.median(results['process']):.2f}")
 
 
-def main() -> None:
+def _env(size: float, steps: int, robots: int | None):
+    from envs import two_robot_explore_v0
+
+    kwargs = {"max_cycles": steps, "world": {"size": (size, size)}}
+    if robots is not None and robots != 2:
+        from envs import multi_robot_explore_v0  # the N-robot env (issue 32)
+
+        return multi_robot_explore_v0.parallel_env(n_robots=robots, **kwargs)
+    return two_robot_explore_v0.parallel_env(**kwargs)
+
+
+def speed_row(explorer: str, size: float, steps: int, seed: int,
+            robots: int | None = None) -> dict:
+    """One timed episode and its replay on the raw env (``--only speed``, module docstring)."""
+    from agents.registry import make_team
+
+    env = _env(size, steps, robots)
+    team = make_team(explorer, env=env)
+    obs, infos = env.reset(seed=seed)
+    for explorer_, s in zip(team.values(), np.random.SeedSequence(seed).spawn(len(team)),
+                            strict=True):
+        explorer_.reset(int(s.generate_state(1)[0]))
+    act_s = dict.fromkeys(team, 0.0)
+    act_cpu = 0.0
+    env_s = env_cpu = 0.0
+    log = []
+    coverage = 0.0
+    while env.agents:
+        actions = {}
+        c0 = time.process_time()
+        for a in env.agents:
+            t0 = time.perf_counter()
+            actions[a] = team[a].act(obs[a], infos[a])
+            act_s[a] += time.perf_counter() - t0
+        c1 = time.process_time()
+        act_cpu += c1 - c0
+        log.append(actions)
+        t0 = time.perf_counter()
+        obs, _r, _t, _u, infos = env.step(actions)
+        env_s += time.perf_counter() - t0
+        env_cpu += time.process_time() - c1
+        if infos:
+            coverage = float(next(iter(infos.values()))["true_coverage"])
+    raw = env.unwrapped
+    robots_out = {}
+    for a, e in team.items():
+        snap = raw.robot_map(a)
+        plans = getattr(e, "events", {}).get("plans", 0)
+        robots_out[a] = {"act_ms_per_step": act_s[a] / len(log) * 1e3, "plans": plans,
+                         "ms_per_plan": act_s[a] / plans * 1e3 if plans else float("nan"),
+                         "known_m2": snap.known_cells * snap.grid.resolution ** 2}
+    replay = _env(size, steps, robots)
+    replay.reset(seed=seed)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for actions in log:
+        replay.step(actions)
+    floor_s, floor_cpu = time.perf_counter() - t0, time.process_time() - c0
+    total = sum(act_s.values()) + env_s
+    return {"explorer": explorer, "size": size, "steps": len(log),
+            "steps_per_s": len(log) / total, "ms_per_step": total / len(log) * 1e3,
+            "explorer_share": sum(act_s.values()) / total,
+            "env_floor_steps_per_s": len(log) / floor_s, "env_in_run_ms": env_s / len(log) * 1e3,
+            "cpu_steps_per_s": len(log) / (act_cpu + env_cpu),
+            "cpu_explorer_ms": act_cpu / len(log) * 1e3,
+            "cpu_env_floor_steps_per_s": len(log) / floor_cpu,
+            "coverage": coverage, "robots": robots_out}
+
+
+def print_speed_table(rows: list[dict]) -> None:
+    """The team speed table and the per-robot planning cost table (markdown)."""
+    print("| explorer | building | steps | team steps/s | ms/step | explorer share | "
+          "env floor steps/s | env ms/step in run | CPU: team steps/s | CPU: explorers "
+          "ms/step | CPU: env floor steps/s | true coverage |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['explorer']} | {r['size']:g} m | {r['steps']} | {r['steps_per_s']:.0f} | "
+              f"{r['ms_per_step']:.2f} | {r['explorer_share']:.0%} | "
+              f"{r['env_floor_steps_per_s']:.0f} | {r['env_in_run_ms']:.2f} | "
+              f"{r['cpu_steps_per_s']:.0f} | {r['cpu_explorer_ms']:.2f} | "
+              f"{r['cpu_env_floor_steps_per_s']:.0f} | {r['coverage']:.2f} |")
+    print("\n| explorer | building | robot | act() ms/step | plans | ms/plan | known m² | "
+          "ms/plan per 100 m² known |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        for a, p in r["robots"].items():
+            print(f"| {r['explorer']} | {r['size']:g} m | {a} | {p['act_ms_per_step']:.3f} | "
+                  f"{p['plans']} | {p['ms_per_plan']:.2f} | {p['known_m2']:.0f} | "
+                  f"{p['ms_per_plan'] / max(p['known_m2'], 1e-9) * 100:.3f} |")
+
+
+def team_speed(parser: argparse.ArgumentParser, args: argparse.Namespace,
+               explorers: list[str]) -> None:
+    """``--only speed``: every size × explorer row, printed as it ends, then the tables."""
+    import torch
+
+    torch.set_num_threads(1)
+    sizes = args.sizes or [20.0, 40.0, 80.0]
+    steps = args.steps if len(args.steps) > 1 else args.steps * len(sizes)
+    if len(steps) != len(sizes):
+        parser.error(f"--steps must give one value or one per size ({len(sizes)}), "
+                     f"got {len(steps)}")
+    rows = []
+    for size, n in zip(sizes, steps, strict=True):
+        for e in explorers:
+            rows.append(speed_row(e, size, n, args.seed, args.robots))
+            r = rows[-1]
+            print(f"{e} {size:g} m: {r['steps_per_s']:.0f} steps/s, floor "
+                  f"{r['env_floor_steps_per_s']:.0f}", flush=True)
+    print()
+    print_speed_table(rows)
+    if args.json is not None:
+        from topo.fileio import atomic_write_json
+
+        atomic_write_json(args.json, rows)
+
+
+def heldout_run(out: Path, explorers: list[str], n_worlds: int, real: bool, workers: int) -> None:
+    """Every (explorer, held-out world) episode not yet in ``out``, saved after each."""
+    from training_eval import episode as heldout_episode
+    from training_eval import heldout_worlds
+
+    from topo.fileio import atomic_write_json
+
+    rows = json.loads(out.read_text()) if out.exists() else {}
+    todo = [(e, w) for e in explorers for w in heldout_worlds(n_worlds, real)
+            if f"{e}|{w.id}" not in rows]
+    print(f"{len(todo)} episodes to run", flush=True)
+
+    def keep(e, w, r, seconds):
+        r.pop("curve", None)
+        rows[f"{e}|{w.id}"] = {**r, "seconds": seconds}
+        atomic_write_json(out, rows)
+        print(f"{e} {w.id}: T85 {r['T85']:.0f} ({seconds:.1f} s)", flush=True)
+
+    if workers == 1:
+        for e, w in todo:
+            t0 = time.perf_counter()
+            keep(e, w, heldout_episode(e, w), time.perf_counter() - t0)
+        return
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as pool:
+        results = pool.map(heldout_episode, *zip(*todo, strict=True))
+        for (e, w), r in zip(todo, results, strict=True):
+            keep(e, w, r, float("nan"))
+
+
+def heldout_compare(before: Path, after: Path) -> None:
+    """The T85 (and T95) comparison table of two row files (common worlds only)."""
+    from training_eval import iqm
+
+    a, b = json.loads(before.read_text()), json.loads(after.read_text())
+    common = sorted(set(a) & set(b))
+    print("| explorer | worlds | metric | before median | after median | before mean | "
+          "after mean | before IQM | after IQM | IQM change | faster / tied / slower | "
+          "wall s before → after |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for e in dict.fromkeys(k.split("|")[0] for k in common):
+        keys = [k for k in common if k.startswith(f"{e}|")]
+        for m in ("T85", "T95"):
+            x = np.array([a[k][m] for k in keys])
+            y = np.array([b[k][m] for k in keys])
+            secs = (sum(a[k].get("seconds", 0.0) for k in keys),
+                    sum(b[k].get("seconds", 0.0) for k in keys))
+            print(f"| {e} | {len(keys)} | {m} | {np.median(x):.0f} | {np.median(y):.0f} | "
+                  f"{x.mean():.0f} | {y.mean():.0f} | {iqm(x):.0f} | {iqm(y):.0f} | "
+                  f"{iqm(y) / iqm(x) - 1:+.1%} | {(y < x).sum()} / {(y == x).sum()} / "
+                  f"{(y > x).sum()} | {secs[0]:.0f} → {secs[1]:.0f} |")
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=("metrics", "decision", "dataset", "speed", "heldout"),
+                        default=None, help="one part (default: metrics, decision, dataset)")
     parser.add_argument("--worlds", type=int, default=20)
-    parser.add_argument("--sizes", type=float, nargs="+", default=[10.0, 20.0])
+    parser.add_argument("--sizes", type=float, nargs="+", default=None,
+                        help="building sides in m (default 10 20; --only speed 20 40 80)")
     parser.add_argument("--workers", type=int, default=1,
-                        help="episode processes for the metrics (1: the machine is shared); "
-                             "the dataset comparison uses 2")
+                        help="episode processes for the metrics and heldout (1: the machine is "
+                             "shared); the dataset comparison uses 2")
     parser.add_argument("--skip-ray", action="store_true")
     parser.add_argument("--skip-real", action="store_true", help="procedural worlds only")
-    parser.add_argument("--explorers", nargs="+", choices=EXPLORERS, default=list(EXPLORERS),
-                        help="explorers of the metrics table (default: all)")
+    parser.add_argument("--explorers", nargs="+", default=None,
+                        help=f"explorers (default: the metrics all of {', '.join(EXPLORERS)}; "
+                             f"speed and heldout {' '.join(TEAM_EXPLORERS)})")
     parser.add_argument("--pairs", type=int, default=90, help="pairs per dataset run")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--only", choices=("metrics", "decision", "dataset"), default=None)
-    parser.add_argument("--json", type=Path, default=None, help="write the episode rows here")
+    parser.add_argument("--json", type=Path, default=None,
+                        help="write the episode rows (metrics) or the speed rows here")
     parser.add_argument("--from-json", type=Path, default=None,
-                        help="print the table of earlier rows instead of running episodes")
-    args = parser.parse_args()
+                        help="print the table of earlier metrics rows instead of running")
+    parser.add_argument("--steps", type=int, nargs="+", default=[2000, 6000, 6000],
+                        help="--only speed: episode length per size (one value: the same for all)")
+    parser.add_argument("--seed", type=int, default=100, help="--only speed: the world's seed")
+    parser.add_argument("--robots", type=int, default=None,
+                        help="--only speed: team size (default: the two-robot env)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="--only heldout: rows file (JSON) to fill")
+    parser.add_argument("--compare", type=Path, nargs=2, metavar=("BEFORE", "AFTER"),
+                        help="compare two --only heldout row files")
+    args = parser.parse_args(argv)
     if args.from_json is not None:
         print_table(json.loads(args.from_json.read_text()))
         return
+    if args.compare:
+        heldout_compare(*args.compare)
+        return
+    if args.only in ("speed", "heldout"):
+        explorers = args.explorers or list(TEAM_EXPLORERS)
+    else:
+        explorers = args.explorers or list(EXPLORERS)
+        unknown = [e for e in explorers if e not in EXPLORERS]
+        if unknown:
+            parser.error(f"--explorers of the metrics table must be among {', '.join(EXPLORERS)}"
+                         f", got {' '.join(unknown)}")
+    if args.only == "speed":
+        team_speed(parser, args, explorers)
+        return
+    if args.only == "heldout":
+        if args.out is None:
+            parser.error("--only heldout needs --out FILE (the rows, resumed if it exists)")
+        heldout_run(args.out, explorers, args.worlds, not args.skip_real, args.workers)
+        return
     if args.only in (None, "metrics"):
-        metrics_table(args.worlds, args.sizes, args.workers, args.json, not args.skip_real,
-                      tuple(args.explorers))
+        metrics_table(args.worlds, args.sizes or [10.0, 20.0], args.workers, args.json,
+                      not args.skip_real, tuple(explorers))
     if args.only in (None, "decision"):
         decision_time()
     if args.only in (None, "dataset"):

@@ -49,18 +49,17 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from fusion.evaluation.results import (  # noqa: E402
+from fusion.evaluation.results import (
     EvalPair,
     is_success,
     oracle_transform,
     transform_errors,
 )
-from fusion.evaluation.synthetic import generic_pairs  # noqa: E402
-from fusion.structural import MergeConfig, decide, merge_maps  # noqa: E402
-from topo.fileio import atomic_write_json  # noqa: E402
+from fusion.evaluation.synthetic import generic_pairs
+from fusion.structural import MergeConfig, decide, merge_maps
+from topo.fileio import atomic_write_json
+
+ROOT = Path(__file__).resolve().parents[1]
 
 PLAIN_MIN_INLIERS = 9
 """``ransac plain`` accepts an alignment with at least this many matched nodes (not collinear):

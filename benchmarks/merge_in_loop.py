@@ -1,10 +1,15 @@
 """Merges inside the env loop: how long each episode runs on a wrong merge transform, and what
-the grid alignment costs once a merge is in use.
+the grid alignment costs once a merge is in use; with ``--robots N``, how many robot-steps a
+team's fused map places a teammate with a wrong transform, cycle check on and off.
 
     python benchmarks/merge_in_loop.py [--explorer frontier] [--worlds 20] [--size 20]
         [--steps 3000] [--first-seed 0] [--odometry-noise S] [--odometry-alphas A]
         [--drift-prior] [--drift-correction [KEY=VALUE ...]]
+    python benchmarks/merge_in_loop.py --robots N [--quick] [--worlds 10] [--size 20]
+        [--steps 3000] [--first-seed 100] [--comm-range R] [--checks on off] [--out FILE]
+        [--jobs 1] [--table-only]
 
+**Two robots** (``two_robot_explore_v0``, without ``--robots``).
 For each seed ``first_seed .. first_seed + worlds - 1`` (its own procedural ``size`` m
 building) one episode of ``--steps`` steps with a scripted team (``agents.scripted``), defaults
 otherwise. Every step with a transform in use is checked against the **drift-aware** truth
@@ -24,7 +29,7 @@ larger of the two). ``--drift-correction [KEY=VALUE ...]`` turns on the robots' 
 the alphas — and the env's steps) by wrapping ``fusion.hybrid``'s ``hybrid_merge`` and
 ``recheck``: the env's merging has passed that same prior itself since 1dde75e, so the flag
 changes nothing at later commits and is kept to run older checkouts as they are measured in
-``benchmarks/drift.md``. Per episode: the first step merged, steps
+``docs/notes/drift.md``. Per episode: the first step merged, steps
 merged, steps wrong (and the first wrong transform's errors), the first step on a right
 transform (not wrong), transforms installed (each accepted merge that changed the one in use),
 merges dropped (``info["merge_drops"]``), accepted merge results by what supplied them (the
@@ -38,6 +43,31 @@ calls and seconds with no transform in use (searching) and with one (re-examinin
 Seeds 0–19 are the ones the merge was developed on (seeds 11 and 15 were case studies);
 ``--first-seed 100`` runs worlds it never saw.
 
+**A team of N** (``--robots N``, 2–8: ``multi_robot_explore_v0`` with ``n_robots = N``).
+For each seed (from 100 by default: held out) one episode of ``--steps`` steps
+(``max_cycles``; it ends earlier at 95 % true coverage), a :class:`agents.scripted.Frontier`
+per robot, defaults otherwise, once with ``mapping.cycle_check = True`` and once ``False``
+(``--checks``). Frontier robots plan on their own maps, so both runs of a seed drive the same
+paths and differ only in which merges robot 0's fused map uses.
+
+Every step, for every teammate ``j`` in robot 0's fused map (``merge_state().frames[0]``: the
+transform robot j's frame → robot 0's it uses) the transform is compared with the truth
+``env.true_transform(0, j)`` (the robots' start poses; odometry is perfect at the defaults):
+**wrong** is more than 2° or more than 0.3 m off (the calibration's "right": rotation < 2°,
+translation < 0.3 m), the translation error taken at the centroid of robot j's topological map
+(its places; robot j's position while it has none), as ``env.merge_errors()`` does; **grossly
+wrong** is more than 5° or 1 m off, what the two-robot run calls wrong (a teammate's rooms on
+the wrong rooms, not a near miss). A **merged robot-step** is one teammate in robot 0's fused
+map for one step; the headline is wrong robot-steps / merged robot-steps. Also per episode: the
+steps with any teammate wrong, the first step robot 0's map held the whole team, the pair
+transforms in use (``merge_state().pairs``, each pair (i, j) against ``env.true_transform(i,
+j)``) that were wrong, counted per pair-step, and how many of those the cycle check kept
+(``kept``: used for fusion) — with the check off every pair transform is kept, so the
+pair-step counts say what the check removes. Each finished episode is one JSON line in
+``--out``, the file rewritten atomically after each row: an interrupted run resumes, a run with
+more worlds adds only the missing ones; ``--table-only`` prints the tables of what the file
+holds.
+
 Run it on two checkouts (``PYTHONPATH=.`` from each) to compare versions on the same seeds.
 """
 
@@ -47,22 +77,33 @@ import argparse
 import dataclasses
 import math
 import statistics
-import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from team_size import add_run_arguments, append_row, read_rows, run_all
 
-import fusion.grid_merge as grid_merge  # noqa: E402
-import fusion.hybrid as hybrid  # noqa: E402
-from agents.base import run_episode  # noqa: E402
-from agents.registry import EXPLORERS, make_team  # noqa: E402
-from envs import two_robot_explore_v0  # noqa: E402
-from envs.explore.config import RobotConfig  # noqa: E402
-from envs.explore.drift import drift_aware_error, odometry_noise_level  # noqa: E402
-from envs.explore.robot import start_frame_pose  # noqa: E402
+import fusion.grid_merge as grid_merge
+import fusion.hybrid as hybrid
+from agents.base import run_episode
+from agents.registry import EXPLORERS, make_team
+from envs import multi_robot_explore_v0, two_robot_explore_v0
+from envs.explore.config import RobotConfig
+from envs.explore.drift import drift_aware_error, odometry_noise_level
+from envs.explore.robot import start_frame_pose
 
 WRONG_DEG, WRONG_M = 5.0, 1.0
+"""Two robots: wrong is more than this off (a teammate's rooms on the wrong rooms)."""
+TEAM_WRONG_DEG, TEAM_WRONG_M = 2.0, 0.3
+"""A team: wrong is more than this off (the calibration's "right"); grossly wrong is the
+two-robot wrong."""
+DEFAULT_OUT = Path(tempfile.gettempdir()) / "topomerge-team_merge_in_loop.jsonl"
+QUICK = {"worlds": 4, "steps": 1500}
+"""What ``--quick`` sets for a team (explicit ``--worlds`` / ``--steps`` win)."""
+TEAM_ONLY = ("quick", "comm_range", "checks", "out", "jobs", "table_only")
+PAIR_ONLY = ("explorer", "accept_threshold", "odometry_noise", "odometry_alphas",
+             "grid_merge_growth", "drift_prior", "drift_correction")
 
 
 class _GridClock:
@@ -176,28 +217,159 @@ def episode(seed: int, explorer: str, steps: int, size: float, clock: _GridClock
     return row
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--explorer", choices=sorted(EXPLORERS), default="frontier")
-    parser.add_argument("--worlds", type=int, default=20)
-    parser.add_argument("--size", type=float, default=20.0)
-    parser.add_argument("--steps", type=int, default=3000)
-    parser.add_argument("--accept-threshold", type=float, default=None)
-    parser.add_argument("--first-seed", type=int, default=0,
-                        help="seed of the first world (100 and on: worlds never tuned on)")
-    parser.add_argument("--odometry-noise", type=float, default=0.0,
-                        help="robot.odometry_noise = (S, S), the 'increment' model")
-    parser.add_argument("--odometry-alphas", default=None,
-                        help="the 'rot_trans_rot' model: a preset name or a1,a2,a3,a4")
-    parser.add_argument("--grid-merge-growth", type=float, default=None,
-                        help="mapping.grid_merge_growth (0: re-examine the transform in use "
-                             "every grid_merge_every steps, whether or not the maps grew)")
-    parser.add_argument("--drift-prior", action="store_true",
-                        help="give the merges the grids' drift_prior (module docstring)")
-    parser.add_argument("--drift-correction", nargs="*", default=None, metavar="KEY=VALUE",
-                        help="robot.drift_correction = True, with further "
-                             "robot.drift_correction_<KEY> = VALUE settings")
-    args = parser.parse_args()
+class _Errors:
+    """Errors of transforms against the truth, kept while the transform, the map it is
+    measured on and the truth stay the same objects (most steps change none of them)."""
+
+    def __init__(self) -> None:
+        self._cache: dict[tuple[int, int], tuple] = {}
+
+    def wrong(self, key: tuple[int, int], transform: Any, truth: Any, topomap: Any,
+              fallback: Any) -> tuple[bool, float, float]:
+        """Whether ``transform`` is wrong (module docstring), and its errors (°, m)."""
+        hit = self._cache.get(key)
+        if hit is not None and hit[0] is transform and hit[1] is topomap and hit[2] is truth:
+            return hit[3]
+        xy = topomap.xy
+        at = xy.mean(axis=0) if len(xy) else fallback
+        rot = math.degrees(transform.rotation_error(truth))
+        trans = transform.translation_error(truth, at)
+        out = (rot > TEAM_WRONG_DEG or trans > TEAM_WRONG_M, rot, trans)
+        if len(xy):
+            self._cache[key] = (transform, topomap, truth, out)
+        return out
+
+
+def team_episode(seed: int, n: int, size: float, steps: int, cycle_check: bool,
+            comm_range: float | None) -> dict[str, Any]:
+    """One team episode's row (module docstring)."""
+    from agents.scripted import Frontier
+
+    env = multi_robot_explore_v0.parallel_env(
+        n_robots=n, max_cycles=steps, world={"size": (size, size)},
+        comm={"range": comm_range}, mapping={"cycle_check": cycle_check})
+    team = {a: Frontier() for a in env.possible_agents}
+    errors = _Errors()
+    row = {"seed": seed, "n": n, "size": size, "max_cycles": steps, "cycle_check": cycle_check,
+           "comm_range": comm_range, "merged": 0, "wrong": 0, "steps_wrong": 0,
+           "first_merged": None, "fused_all": None, "first_wrong": None, "pair_steps": 0,
+           "pair_wrong": 0, "pair_wrong_kept": 0, "pair_kept": 0, "worst_deg": 0.0,
+           "worst_m": 0.0, "gross": 0}
+
+    def watch(k: int, _obs, _rewards, _infos) -> None:
+        state = env.merge_state()
+        frames = state.frames[0]
+        any_wrong = False
+        for j, transform in frames.items():
+            if j == 0:
+                continue
+            robot = env.robots[j]
+            bad, rot, trans = errors.wrong((0, j), transform, env.true_transform(0, j),
+                                           env.maps[j].topomap, robot.odometry[:2])
+            row["merged"] += 1
+            row["gross"] += rot > WRONG_DEG or trans > WRONG_M
+            if bad:
+                row["wrong"] += 1
+                any_wrong = True
+                row["worst_deg"] = max(row["worst_deg"], round(rot, 2))
+                row["worst_m"] = max(row["worst_m"], round(trans, 3))
+                if row["first_wrong"] is None:
+                    row["first_wrong"] = f"step {k}, robot {j}: {rot:.1f}° / {trans:.2f} m"
+        row["steps_wrong"] += any_wrong
+        if len(frames) > 1 and row["first_merged"] is None:
+            row["first_merged"] = k
+        if len(frames) == n and row["fused_all"] is None:
+            row["fused_all"] = k
+        for (i, j), pair in state.pairs.items():
+            if pair.transform is None:
+                continue
+            row["pair_steps"] += 1
+            row["pair_kept"] += pair.kept
+            bad = errors.wrong((i, j), pair.transform, env.true_transform(i, j),
+                               env.maps[j].topomap, env.robots[j].odometry[:2])[0]
+            row["pair_wrong"] += bad
+            row["pair_wrong_kept"] += bad and pair.kept
+
+    cpu = time.process_time()
+    out = run_episode(env, team, seed=seed, callback=watch)
+    row.update(steps=out["steps"], coverage=round(float(
+        out["infos"]["robot_0"]["true_coverage"]), 4),
+        drops=env.merge_state().drops, cpu_s=round(time.process_time() - cpu, 1))
+    return row
+
+
+def _team_key(row: dict[str, Any]) -> tuple:
+    return (row["seed"], row["n"], row["size"], row["max_cycles"], row["cycle_check"],
+            row["comm_range"])
+
+
+def team_tables(rows: list[dict[str, Any]]) -> str:
+    """A team's per-episode rows, then the summary per cycle-check setting (module docstring)."""
+    lines = ["| seed | cycle check | steps | first merged | all fused | merged robot-steps | "
+             "wrong | steps any wrong | first wrong | worst ° / m | pair-steps wrong (kept) "
+             "/ in use | drops | coverage |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r["seed"], not r["cycle_check"])):
+        lines.append(
+            f"| {r['seed']} | {'on' if r['cycle_check'] else 'off'} | {r['steps']} | "
+            f"{r['first_merged'] or '-'} | {r['fused_all'] or '-'} | {r['merged']} | "
+            f"{r['wrong']} | {r['steps_wrong']} | {r['first_wrong'] or ''} | "
+            f"{r['worst_deg']:.1f} / {r['worst_m']:.2f} | {r['pair_wrong']} "
+            f"({r['pair_wrong_kept']}) / {r['pair_steps']} | {r['drops']} | "
+            f"{r['coverage']:.3f} |")
+    lines += ["", "| cycle check | episodes | merged robot-steps | wrong robot-steps | wrong / "
+              "merged | episodes with a wrong step | wrong pair-steps, kept / all | grossly wrong "
+              "(> 5° or > 1 m) / merged |",
+              "|---|---|---|---|---|---|---|---|"]
+    for check in (True, False):
+        rs = [r for r in rows if r["cycle_check"] == check]
+        if not rs:
+            continue
+        merged = sum(r["merged"] for r in rs)
+        wrong = sum(r["wrong"] for r in rs)
+        # rows written before the gross count existed have none
+        if any("gross" not in r for r in rs):
+            gross = "–"
+        else:
+            n_gross = sum(r["gross"] for r in rs)
+            gross = f"{n_gross} ({n_gross / max(merged, 1):.2%})"
+        lines.append(
+            f"| {'on' if check else 'off'} | {len(rs)} | {merged} | {wrong} | "
+            f"{wrong / max(merged, 1):.2%} | {sum(r['wrong'] > 0 for r in rs)} | "
+            f"{sum(r['pair_wrong_kept'] for r in rs)} / {sum(r['pair_wrong'] for r in rs)} | "
+            f"{gross} |")
+    return "\n".join(lines)
+
+
+def team_main(args: argparse.Namespace) -> None:
+    """The team run: the episodes not yet in ``--out``, then the tables."""
+    rows = read_rows(args.out)
+    wanted = [(seed, args.robots, args.size, args.steps, check == "on", args.comm_range)
+              for seed in range(args.first_seed, args.first_seed + args.worlds)
+              for check in args.checks]
+    if not args.table_only:
+        done = {_team_key(r) for r in rows}
+        todo = [w for w in wanted if w not in done]
+        print(f"# {len(todo)} episodes to run, {len(rows)} in {args.out}", flush=True)
+        t0 = time.perf_counter()
+        for _task, row in run_all(team_episode, todo, args.jobs):
+            if isinstance(row, Exception):
+                raise row
+            append_row(args.out, rows, row)
+            print(f"seed {row['seed']} cycle check {row['cycle_check']}: wrong "
+                  f"{row['wrong']} / {row['merged']} merged robot-steps, "
+                  f"{row['cpu_s']:.0f} s CPU ({time.perf_counter() - t0:.0f} s)", flush=True)
+    shown = rows if args.table_only else [r for r in rows if _team_key(r) in set(wanted)]
+    if not shown:
+        print("no episodes recorded")
+        return
+    print(f"\n# N-robot merges in the loop ({args.out}): Frontier, wrong = > "
+          f"{TEAM_WRONG_DEG:g}° or > {TEAM_WRONG_M:g} m against env.true_transform\n")
+    print(team_tables(shown))
+
+
+def pair_main(args: argparse.Namespace) -> None:
+    """The two-robot run: episodes one by one, each row printed as it ends."""
     robot = robot_kwargs(args.odometry_noise, args.odometry_alphas)
     if args.drift_correction is not None:
         robot["drift_correction"] = True
@@ -250,6 +422,73 @@ def main() -> None:
         print(f"grid alignments {label}: {clock.calls[key]} calls, "
               f"{clock.seconds[key]:.1f} s = {clock.seconds[key] / steps * 1e6:.0f} µs per env "
               f"step ({clock.seconds[key] / wall:.1%} of the run's {wall:.0f} s)")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options; those of the other run (two robots or a team) are refused."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=None,
+                        help="a team of N (2-8, multi_robot_explore_v0, Frontier robots); "
+                             "without it the two-robot env")
+    parser.add_argument("--worlds", type=int, default=None,
+                        help=f"default 20, a team 10 (--quick {QUICK['worlds']})")
+    parser.add_argument("--size", type=float, default=20.0)
+    parser.add_argument("--steps", type=int, default=None,
+                        help=f"max_cycles (default 3000; a team with --quick {QUICK['steps']})")
+    parser.add_argument("--first-seed", type=int, default=None,
+                        help="seed of the first world (default 0, a team 100; 100 and on: "
+                             "worlds never tuned on)")
+    two = parser.add_argument_group("two robots (without --robots)")
+    two.add_argument("--explorer", choices=sorted(EXPLORERS), default="frontier")
+    two.add_argument("--accept-threshold", type=float, default=None)
+    two.add_argument("--odometry-noise", type=float, default=0.0,
+                     help="robot.odometry_noise = (S, S), the 'increment' model")
+    two.add_argument("--odometry-alphas", default=None,
+                     help="the 'rot_trans_rot' model: a preset name or a1,a2,a3,a4")
+    two.add_argument("--grid-merge-growth", type=float, default=None,
+                     help="mapping.grid_merge_growth (0: re-examine the transform in use "
+                          "every grid_merge_every steps, whether or not the maps grew)")
+    two.add_argument("--drift-prior", action="store_true",
+                     help="give the merges the grids' drift_prior (module docstring)")
+    two.add_argument("--drift-correction", nargs="*", default=None, metavar="KEY=VALUE",
+                     help="robot.drift_correction = True, with further "
+                          "robot.drift_correction_<KEY> = VALUE settings")
+    team = parser.add_argument_group("a team (--robots N)")
+    team.add_argument("--quick", action="store_true",
+                      help=f"{QUICK['worlds']} worlds of {QUICK['steps']} steps")
+    team.add_argument("--comm-range", type=float, default=None,
+                      help="comm.range in m (default unlimited)")
+    team.add_argument("--checks", nargs="+", choices=("on", "off"), default=None,
+                      help="mapping.cycle_check settings to run (default on off)")
+    add_run_arguments(team, DEFAULT_OUT)
+    args = parser.parse_args(argv)
+    is_team = args.robots is not None
+    defaults = vars(parser.parse_args([]))
+    for name in PAIR_ONLY if is_team else TEAM_ONLY:
+        if getattr(args, name) != defaults[name]:
+            option = "--" + name.replace("_", "-")
+            run = "two robots (without --robots)" if is_team else "a team (--robots N)"
+            parser.error(f"{option} is an option for {run}, got {option} "
+                         f"{getattr(args, name)} with --robots {args.robots}")
+    if is_team and not 2 <= args.robots <= 8:
+        parser.error(f"--robots must be 2-8 (the env's n_robots), got {args.robots}")
+    if is_team and args.jobs < 1:
+        parser.error(f"--jobs must be >= 1, got {args.jobs}")
+    quick = is_team and args.quick
+    args.worlds = args.worlds or (QUICK["worlds"] if quick else 10 if is_team else 20)
+    args.steps = args.steps or (QUICK["steps"] if quick else 3000)
+    if args.first_seed is None:
+        args.first_seed = 100 if is_team else 0
+    args.checks = args.checks or ["on", "off"]
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    if args.robots is None:
+        pair_main(args)
+    else:
+        team_main(args)
 
 
 if __name__ == "__main__":

@@ -53,7 +53,6 @@ import json
 import math
 import os
 import statistics
-import sys
 import tempfile
 import time
 from collections import defaultdict
@@ -64,9 +63,7 @@ from typing import Any
 
 from _poses import split_poses, with_merge_method
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from topo.fileio import atomic_write_bytes  # noqa: E402
+from topo.fileio import atomic_write_bytes
 
 LEVELS = (0.5, 0.85, 0.95)
 """The coverage levels timed (T50, T85, T95)."""

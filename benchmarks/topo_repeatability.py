@@ -39,22 +39,20 @@ import argparse
 import dataclasses
 import hashlib
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from agents.dataset import env_kwargs
+from envs.two_robot_explore_v0 import parallel_env
+from fusion.evaluation.evaluate import evaluate
+from fusion.evaluation.pairs import GridSnapshot, load_pairs, pair_files, read_manifest
+from fusion.evaluation.repeatability import in_region, node_repeatability, shared_region
+from fusion.evaluation.results import ROTATION_OK_DEG, EvalPair
+from topo.extract import extract_topomap
+from topo.grid import CellState
 
-from agents.dataset import env_kwargs  # noqa: E402
-from envs.two_robot_explore_v0 import parallel_env  # noqa: E402
-from fusion.evaluation.evaluate import evaluate  # noqa: E402
-from fusion.evaluation.pairs import GridSnapshot, load_pairs, pair_files, read_manifest  # noqa: E402
-from fusion.evaluation.repeatability import in_region, node_repeatability, shared_region  # noqa: E402
-from fusion.evaluation.results import ROTATION_OK_DEG, EvalPair  # noqa: E402
-from topo.extract import extract_topomap  # noqa: E402
-from topo.grid import CellState  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 BINS = ((0.0, 0.2), (0.2, 0.4), (0.4, 0.7), (0.7, 1.01))
 

@@ -13,17 +13,14 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 from _timing import interleaved_medians, median_time
 from scipy import ndimage
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
-
-from topo import OccupancyGrid, load_floor_plan  # noqa: E402
-from topo.extract import extract_topomap  # noqa: E402
+from topo import OccupancyGrid, load_floor_plan
+from topo.extract import extract_topomap
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "maps"
 SONAR = np.radians([-90, -50, -30, -10, 10, 30, 50, 90])

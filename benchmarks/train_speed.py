@@ -30,7 +30,6 @@ import contextlib
 import io
 import os
 import platform
-import sys
 import tempfile
 import time
 from collections import defaultdict
@@ -38,9 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import train  # noqa: E402
+import train
 
 
 def scalars(run_dir: Path) -> dict[str, list[float]]:

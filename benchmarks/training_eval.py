@@ -1,7 +1,7 @@
 """Evaluate trained exploration policies on held-out worlds and print the table and plot of
-``benchmarks/training.md``: the T85 ratio to ``Frontier`` as an interquartile mean with a 95 %
-bootstrap interval, T50/T95 ratios, final coverage, against the scripted explorers and the
-goal-level rules.
+``benchmarks/RESULTS.md`` (Training): the T85 ratio to ``Frontier`` as an interquartile mean
+with a 95 % bootstrap interval, T50/T95 ratios, final coverage, against the scripted explorers
+and the goal-level rules.
 
 Usage::
 
@@ -54,7 +54,6 @@ import argparse
 import functools
 import json
 import os
-import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,10 +63,8 @@ import numpy as np
 from _maps import MAPS, REAL_MAX_CYCLES, real_worlds
 from _poses import POSE_SUFFIXES, split_poses, with_merge_method
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from agents.goals import SECTOR_RULES  # noqa: E402
-from topo.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
+from agents.goals import SECTOR_RULES
+from topo.fileio import atomic_write_bytes, atomic_write_json
 
 HELDOUT_ENTROPY = 0x4E1D_5EED
 """Root of the held-out worlds' ``SeedSequence`` (no training or ``train.py`` evaluation

@@ -1,4 +1,4 @@
-"""The team benchmarks (``team_size.py``, ``team_merge_in_loop.py``, ``env_scaling.py``): a tiny
+"""The team benchmarks (``team_size.py``, ``merge_in_loop.py --robots N``, ``env_scaling.py``): a tiny
 run of each writes its rows, resumes without re-running them, and prints its tables; the
 ratio tables pair episodes by seed. What they measure is read from their tables, not tested."""
 
@@ -21,7 +21,7 @@ def _load(name: str):
 
 
 ts = _load("team_size")
-tml = _load("team_merge_in_loop")
+mil = _load("merge_in_loop")
 es = _load("env_scaling")
 
 
@@ -68,6 +68,17 @@ def test_team_size_ratios_pair_seeds_and_mark_censored_medians():
     assert "| frontier | 10 | unlimited | ~0.50 (<0.50, 0.50) |" in bound
 
 
+def test_merge_in_loop_refuses_the_other_runs_options():
+    with pytest.raises(SystemExit):
+        mil.parse_args(["--robots", "3", "--odometry-noise", "0.01"])
+    with pytest.raises(SystemExit):
+        mil.parse_args(["--checks", "on"])
+    with pytest.raises(SystemExit):
+        mil.parse_args(["--robots", "9"])
+    team, pair = mil.parse_args(["--robots", "4"]), mil.parse_args([])
+    assert (team.worlds, team.first_seed, pair.worlds, pair.first_seed) == (10, 100, 20, 0)
+
+
 def test_team_size_rejects_bad_arguments():
     with pytest.raises(SystemExit):
         ts.parse_args(["--ns", "1"])
@@ -77,7 +88,7 @@ def test_team_size_rejects_bad_arguments():
 
 def test_team_merge_in_loop_runs_both_checks(tmp_path, capsys):
     out = tmp_path / "merge.jsonl"
-    tml.main(["--n", "3", "--worlds", "1", "--steps", "20", "--size", "10", "--out", str(out)])
+    mil.main(["--robots", "3", "--worlds", "1", "--steps", "20", "--size", "10", "--out", str(out)])
     rows = ts.read_rows(out)
     assert sorted(r["cycle_check"] for r in rows) == [False, True]
     assert all(0 <= r["gross"] <= r["wrong"] <= r["merged"] and r["steps"] == 20 for r in rows)
