@@ -128,7 +128,7 @@ def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
     _, par, (obs, infos) = _episode(8, 150, sonar={"dropout_prob": 0.0},
                                     mapping={"merge_method": "known"})
     info = infos["robot_0"]
-    assert par.merge_state().transform.allclose(par.true_merge)
+    assert par.merge_state().transform.allclose(par.true_transform(0, 1))
     assert info["merge_accepted"] and info["merge_errors_valid"]
     assert info["shared_area_m2"] == pytest.approx(info["true_area_m2"], rel=0.05)
     truth = np.array([infos[a]["pose"] for a in ("robot_0", "robot_1")])
@@ -241,8 +241,9 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
         res = real(grid_a, grid_b, config)
         n = len(calls)
         calls.append(n)
-        wrong = Rigid2D.from_degrees(90.0, (5.0, 0.0)) @ par.true_merge
-        transform = [wrong, Rigid2D.from_degrees(2.0) @ wrong][n] if n < 2 else par.true_merge
+        truth = par.true_transform(0, 1)
+        wrong = Rigid2D.from_degrees(90.0, (5.0, 0.0)) @ truth
+        transform = [wrong, Rigid2D.from_degrees(2.0) @ wrong][n] if n < 2 else truth
         return dataclasses.replace(res, transform=transform, accepted=n < 2,
                                    reason=None if n < 2 else "test", centre=(0.0, 0.0))
 
@@ -255,7 +256,8 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
         seen.append((len(calls), state.transform, infos["robot_0"], rewards["robot_0"], state))
     assert len(calls) == 4, "the grid alignment did not keep running after the merge"
     in_use = {n: t for n, t, *_ in seen}
-    assert math.degrees(in_use[1].rotation_error(par.true_merge)) == pytest.approx(90.0)
+    truth = par.true_transform(0, 1)
+    assert math.degrees(in_use[1].rotation_error(truth)) == pytest.approx(90.0)
     assert math.degrees(in_use[2].rotation_error(in_use[1])) == pytest.approx(2.0)
     # the third alignment is rejected and 92° / 8 m away: the merge is dropped
     assert in_use[3] is None and seen[-1][1] is None
