@@ -37,23 +37,40 @@ def test_rgb_array_frame_shows_something():
     par.close()
 
 
+class _LastMerge:
+    """The env as the renderer reads it, with another last merge result (``merge``)."""
+
+    def __init__(self, env, merge):
+        self._env, self.merge = env, merge
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+
 def test_rgb_array_shows_robot_1_in_the_shared_panel_once_merged():
     """With a transform in use the shared panel draws robot 1's graph too, also when the last
-    merge attempt (a re-examination) was rejected and kept the transform."""
+    merge attempt (a re-examination) was rejected and kept the transform; only an accepted
+    merge's own fused graph replaces the two graphs."""
     from types import SimpleNamespace
 
-    par = two_robot_explore_v0.parallel_env(render_mode="rgb_array", **{**SMALL, "max_cycles": 60})
+    from envs.explore.render import Renderer
+
+    # known poses: robot 1's true transform is in use from the first step, no merge call
+    par = two_robot_explore_v0.parallel_env(render_mode="rgb_array", mapping={
+        "merge_method": "known"}, **{**SMALL, "max_cycles": 60})
     par.reset(seed=0)
     for _ in range(50):
-        par.step({a: np.array([0.8, 0.2]) for a in par.agents})
-    assert par.maps[1].topomap.n_nodes
-    par.shared.rebuild({0: par.maps[0], 1: par.maps[1]},
-                       {1: (par.true_merge, par.true_merge.inverse())})
-    par._merging.result = SimpleNamespace(accepted=True, merged=par.maps[0].topomap)  # robot 0's graph
-    own_graph = par.render()
-    par._merging.result = SimpleNamespace(accepted=False, merged=par.maps[0].topomap)  # kept transform
+        _, _, _, _, infos = par.step({a: np.array([0.8, 0.2]) for a in par.agents})
+    assert infos["robot_0"]["merge_accepted"] and par.merge is None
+    assert par.robot_map("robot_1").topomap.n_nodes
     both_graphs = par.render()
+    own = par.robot_map("robot_0").topomap
+    renderer = Renderer("rgb_array", par.metadata["render_fps"])
+    own_graph = renderer.draw(_LastMerge(par, SimpleNamespace(accepted=True, merged=own)))
+    kept = renderer.draw(_LastMerge(par, SimpleNamespace(accepted=False, merged=own)))
     assert both_graphs.shape == own_graph.shape and not np.array_equal(both_graphs, own_graph)
+    np.testing.assert_array_equal(kept, both_graphs)
+    renderer.close()
     par.close()
 
 

@@ -11,7 +11,6 @@ from conftest import SMALL
 from envs import two_robot_explore_v0
 from envs.explore.env import MERGE_METHODS
 from envs.explore.mapping import compose_pose
-from fusion.rigid import Rigid2D
 
 
 def _flatten(par, obs, rewards, terms, truncs, infos):
@@ -32,6 +31,8 @@ def _flatten(par, obs, rewards, terms, truncs, infos):
 
 
 def _episode(seed, steps, **kw):
+    """A seeded episode of ``steps`` steps: its trace (:func:`_flatten` of every step), the
+    env, and the last step's observations and infos."""
     par = two_robot_explore_v0.parallel_env(**{**SMALL, "max_cycles": steps, **kw})
     rng = np.random.default_rng(seed + 100)
     obs, infos = par.reset(seed=seed)
@@ -41,22 +42,23 @@ def _episode(seed, steps, **kw):
         # change course only every 5 steps so the robots get somewhere
         if len(trace) % 5:
             act = {a: np.array([0.8, 0.1]) for a in par.agents}
-        trace.append(_flatten(par, *par.step(act)))
-    return trace, par
+        obs, rewards, terms, truncs, infos = par.step(act)
+        trace.append(_flatten(par, obs, rewards, terms, truncs, infos))
+    return trace, par, (obs, infos)
 
 
 def test_same_seed_same_episode_for_520_steps():
     noise = {"robot": {"odometry_noise": (0.05, 0.05)}, "sonar": {"measure_every": 0.05}}
-    a, _ = _episode(11, 520, **noise)
-    b, _ = _episode(11, 520, **noise)
+    a, *_ = _episode(11, 520, **noise)
+    b, *_ = _episode(11, 520, **noise)
     assert len(a) == len(b) == 521
     for k, (x, y) in enumerate(zip(a, b, strict=True)):
         assert x == y, f"episodes diverge at step {k}"
 
 
 def test_other_seed_other_episode():
-    a, _ = _episode(1, 5)
-    b, _ = _episode(2, 5)
+    a, *_ = _episode(1, 5)
+    b, *_ = _episode(2, 5)
     assert a[0] != b[0]
 
 
@@ -104,7 +106,7 @@ def test_oracle_reward_counts_true_new_area():
 
 
 def test_windowed_bookkeeping_matches_the_whole_grid():
-    _, par = _episode(4, 120)
+    _, par, _ = _episode(4, 120)
     for rmap in par.maps:
         known = rmap.grid.known_mask()
         # every cell the grid knows now was caught by the per-step windows
@@ -118,34 +120,27 @@ def test_windowed_bookkeeping_matches_the_whole_grid():
         assert rmap.ever[:, c0].any() and rmap.ever[:, c1 - 1].any()
 
 
-def _use_transform(par, transform):
-    """Put ``transform`` (robot 1 → robot 0) in use as a merge would: both robots' fused maps
-    and robot 0's shared map."""
-    ident = Rigid2D.identity()
-    inverse = transform.inverse()
-    par._merging.frames[0] = {0: (ident, ident), 1: (transform, inverse)}
-    par._merging.frames[1] = {1: (ident, ident), 0: (inverse, transform)}
-    par.shared.rebuild({0: par.maps[0], 1: par.maps[1]}, {1: (transform, inverse)})
-
-
 def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
     # without dropouts (a "no echo" belief clears space through walls) and odometry noise, the
-    # robots' maps hold what the sonars truly swept: with the true transform the shared map
-    # covers what the oracle counts, up to the range noise and nearest-cell resampling
-    _, par = _episode(8, 150, sonar={"dropout_prob": 0.0})
-    _use_transform(par, par.true_merge)
-    assert par.shared.area == pytest.approx(par.oracle.area, rel=0.05)
-    obs = par._observe_one(0)
-    truth = np.array([r.true_pose() for r in par.robots])
+    # robots' maps hold what the sonars truly swept: with the true transform in use (known
+    # poses) the shared map covers what the oracle counts, up to the range noise and
+    # nearest-cell resampling
+    _, par, (obs, infos) = _episode(8, 150, sonar={"dropout_prob": 0.0},
+                                    mapping={"merge_method": "known"})
+    info = infos["robot_0"]
+    assert par.merge_state().transform.allclose(par.true_transform(0, 1))
+    assert info["merge_accepted"] and info["merge_errors_valid"]
+    assert info["shared_area_m2"] == pytest.approx(info["true_area_m2"], rel=0.05)
+    truth = np.array([infos[a]["pose"] for a in ("robot_0", "robot_1")])
     dx, dy = truth[1, :2] - truth[0, :2]
     c, s = math.cos(truth[0, 2]), math.sin(truth[0, 2])
-    np.testing.assert_allclose(obs["teammate"][:2], [c * dx + s * dy, -s * dx + c * dy],
-                               atol=1e-4)
+    np.testing.assert_allclose(obs["robot_0"]["teammate"][:2],
+                               [c * dx + s * dy, -s * dx + c * dy], atol=1e-4)
     dth = truth[1, 2] - truth[0, 2]
-    np.testing.assert_allclose(obs["teammate"][2:], [math.cos(dth), math.sin(dth), 1.0],
-                               atol=1e-5)
+    np.testing.assert_allclose(obs["robot_0"]["teammate"][2:],
+                               [math.cos(dth), math.sin(dth), 1.0], atol=1e-5)
     # robot 1's pose moved into robot 0's frame is robot 1's true pose seen from robot 0's start
-    moved = compose_pose(par.true_merge, par.robots[1].odometry)
+    moved = compose_pose(par.merge_state().transform, infos["robot_1"]["odometry"])
     start0 = par.robots[0].start
     c0, s0 = math.cos(start0[2]), math.sin(start0[2])
     d = truth[1, :2] - start0[:2]
@@ -154,6 +149,8 @@ def test_true_merge_makes_shared_map_match_the_oracle_and_teammate_exact():
     rot_err, trans_err = par.merge_errors()
     assert rot_err == pytest.approx(0.0, abs=1e-9)
     assert trans_err == pytest.approx(0.0, abs=1e-9)
+    assert info["merge_rotation_error_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert info["merge_translation_error_m"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_local_map_is_egocentric_and_heading_up():
@@ -244,8 +241,9 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
         res = real(grid_a, grid_b, config)
         n = len(calls)
         calls.append(n)
-        wrong = Rigid2D.from_degrees(90.0, (5.0, 0.0)) @ par.true_merge
-        transform = [wrong, Rigid2D.from_degrees(2.0) @ wrong][n] if n < 2 else par.true_merge
+        truth = par.true_transform(0, 1)
+        wrong = Rigid2D.from_degrees(90.0, (5.0, 0.0)) @ truth
+        transform = [wrong, Rigid2D.from_degrees(2.0) @ wrong][n] if n < 2 else truth
         return dataclasses.replace(res, transform=transform, accepted=n < 2,
                                    reason=None if n < 2 else "test", centre=(0.0, 0.0))
 
@@ -253,15 +251,16 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     par.reset(seed=3)
     seen = []
     while par.agents and len(calls) < 4:
-        _, rewards, _, _, infos = par.step({a: np.array([0.8, 0.3]) for a in par.agents})
-        seen.append((len(calls), par.shared.transform, infos["robot_0"], rewards["robot_0"],
-                     par.merge_state()))
+        obs, rewards, _, _, infos = par.step({a: np.array([0.8, 0.3]) for a in par.agents})
+        state = par.merge_state()
+        seen.append((len(calls), state.transform, infos["robot_0"], rewards["robot_0"], state))
     assert len(calls) == 4, "the grid alignment did not keep running after the merge"
     in_use = {n: t for n, t, *_ in seen}
-    assert math.degrees(in_use[1].rotation_error(par.true_merge)) == pytest.approx(90.0)
+    truth = par.true_transform(0, 1)
+    assert math.degrees(in_use[1].rotation_error(truth)) == pytest.approx(90.0)
     assert math.degrees(in_use[2].rotation_error(in_use[1])) == pytest.approx(2.0)
     # the third alignment is rejected and 92° / 8 m away: the merge is dropped
-    assert in_use[3] is None and par.shared.transform is None
+    assert in_use[3] is None and seen[-1][1] is None
     info, reward, state = next((i, r, m) for n, _, i, r, m in seen if n == 3)
     assert info["merge_drops"] == 1 and not info["merge_accepted"]
     assert not info["merge_errors_valid"] and info["merge_method"] == 0
@@ -271,8 +270,9 @@ def test_grids_keep_checking_a_merge_and_drop_one_they_refute(monkeypatch):
     merged = next(i for n, _, i, _, _ in seen if n == 2)
     assert merged["merge_errors_valid"] and merged["merge_rotation_error_deg"] == pytest.approx(92.0)
     assert MERGE_METHODS[merged["merge_method"]] == "hybrid"
-    assert par.shared.count == par.maps[0].n_ever  # robot 1's cells left the shared map
-    assert par._observe_one(0)["teammate"][4] == 0.0
+    # robot 1's cells left the shared map, and robot 0 no longer sees where robot 1 is
+    assert infos["robot_0"]["shared_area_m2"] == infos["robot_0"]["own_area_m2"]
+    assert obs["robot_0"]["teammate"][4] == 0.0
 
 
 def test_the_accept_threshold_reaches_the_grid_alignment(monkeypatch):

@@ -71,7 +71,6 @@ def _drive(corrector: DriftCorrector, offset: tuple[float, float, float]) -> tup
         if step < 40:
             odometry[:] = (c * true[0] - s * true[1] + dx, s * true[0] + c * true[1] + dy,
                            true[2] + dth)
-            corrector._prev = None  # the test moves the odometry by hand: no propagation
         else:
             errors.append(math.dist(odometry[:2], true[:2]))
             odometry[:] = (c * true[0] - s * true[1] + dx, s * true[0] + c * true[1] + dy,
@@ -110,27 +109,42 @@ def test_bad_config_values_name_the_field(key, value, kind):
         RobotConfig(**{key: value})
 
 
-def _odometry(robot: dict, seed: int, steps: int) -> np.ndarray:
+def _odometry(robot: dict, seed: int, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Both robots' odometry ``(2, 3)`` after ``steps`` seeded random steps, their true poses
+    ``(2, 3)`` and their start poses ``(2, 3)`` (world frame)."""
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, robot=robot,
                                             mapping={"merge_method": "none"})
-    env.reset(seed=seed)
+    _, infos = env.reset(seed=seed)
+    starts = np.stack([infos[a]["pose"] for a in env.possible_agents])
     rng = np.random.default_rng(seed)
     for _ in range(steps):
-        env.step({a: rng.uniform(-1.0, 1.0, 2).astype(np.float32) for a in env.agents})
-    return np.stack([r.odometry for r in env.robots]), env
+        _, _, _, _, infos = env.step({a: rng.uniform(-1.0, 1.0, 2).astype(np.float32)
+                                      for a in env.agents})
+    return (np.stack([infos[a]["odometry"] for a in env.possible_agents]),
+            np.stack([infos[a]["pose"] for a in env.possible_agents]), starts)
 
 
 def test_off_without_odometry_noise():
-    plain, _ = _odometry({}, 3, 300)
-    asked, env = _odometry({"drift_correction": True}, 3, 300)
-    assert env._correctors == [None, None]
+    plain, *_ = _odometry({}, 3, 300)
+    asked, poses, starts = _odometry({"drift_correction": True}, 3, 300)
     np.testing.assert_array_equal(plain, asked)
+    # nothing moved the exact odometry: it is each true pose seen from the robot's start
+    for odometry, pose, start in zip(asked, poses, starts, strict=True):
+        c, s = math.cos(start[2]), math.sin(start[2])
+        d = pose[:2] - start[:2]
+        np.testing.assert_allclose(odometry[:2], [c * d[0] + s * d[1], -s * d[0] + c * d[1]],
+                                   atol=1e-9)
+        assert math.remainder(pose[2] - start[2] - odometry[2], math.tau) == pytest.approx(
+            0.0, abs=1e-9)
 
 
 def test_deterministic_with_noise():
     robot = {"odometry_noise": (0.02, 0.02), "drift_correction": True,
              "drift_correction_age": 50}
-    a, env = _odometry(robot, 5, 400)
-    b, _ = _odometry(robot, 5, 400)
+    a, *_ = _odometry(robot, 5, 400)
+    b, *_ = _odometry(robot, 5, 400)
     np.testing.assert_array_equal(a, b)
-    assert all(c is not None for c in env._correctors)
+    # the correction is on: the same noisy episode uncorrected ends elsewhere (the corrector
+    # draws no random numbers, so the motion and the noise are the same)
+    off, *_ = _odometry({**robot, "drift_correction": False}, 5, 400)
+    assert (np.abs(a - off).max(axis=1) > 1e-4).all()  # each robot's
