@@ -29,6 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fusion.inputs import check_point_count
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
 from topo.validation import as_points, check_int, check_real
@@ -47,10 +48,11 @@ SECONDS_PER_EVALUATION = 2e-6
 
 
 def endpoint_set(value: Any, name: str) -> np.ndarray:
-    """The paper's point set of a map: :meth:`TopoMap.endpoints` or an ``(N, 2)`` array."""
+    """The paper's point set of a map: :meth:`TopoMap.endpoints` or an ``(N, 2)`` array, of at
+    most :data:`fusion.inputs.MAX_POINTS` points."""
     if isinstance(value, TopoMap):
-        return value.endpoints()
-    return as_points(value, name)
+        return check_point_count(value.endpoints(), name)
+    return check_point_count(as_points(value, name), name)
 
 
 def similarity(map_a: Any, map_b: Any, transform: Rigid2D, eps: float = DEFAULT_EPS) -> int:
