@@ -65,6 +65,7 @@ import tyro
 from tqdm.auto import tqdm
 
 from agents.base import run_episode
+from agents.cli import one_line_errors
 from agents.workers import WORKER_ENV, Owner, check_owner, owner, pool_results, set_owner
 from fusion.evaluation.pairs import (
     FORMAT,
@@ -556,9 +557,13 @@ def main(argv: list[str] | None = None) -> None:
     A bad setting, an unusable ``--out`` (a file, a foreign folder, a dataset made with other
     settings, another run's lock) or an unreadable dataset prints one line naming the flag on
     stderr and exits with status 2 (``SystemExit(2)``); a full disk one line naming the folder,
-    status 1."""
-    cmd = tyro.extras.subcommand_cli_from_dict(
-        {"generate": _GenerateFlags, "info": InfoArgs}, args=argv, prog=PROG)
+    status 1. tyro's own errors (an unknown flag, a value of the wrong type) are one line
+    too."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = {"generate": _GenerateFlags, "info": InfoArgs}
+    cmd = one_line_errors(lambda: tyro.extras.subcommand_cli_from_dict(
+        commands, args=argv, prog=PROG), " ".join([PROG, *argv[:1]] if argv[:1] and argv[0]
+                                                  in commands else [PROG]))
     if isinstance(cmd, InfoArgs):
         try:
             print(info(cmd.root))

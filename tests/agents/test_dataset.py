@@ -438,3 +438,43 @@ def test_a_full_disk_is_one_line_and_the_same_command_resumes(tmp_path, capsys, 
     monkeypatch.setattr(dataset, "write_pair", real)
     main(argv)
     assert "wrote 1 pairs (1 already there)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["generate", "--out", "d", "--pairs", "abc"],
+         "python -m agents.dataset generate: error: value error: Error parsing --pairs: invalid "
+         "literal for int() with base 10: 'abc'"),
+        (["generate", "--out", "d", "--bogus", "1"],
+         "python -m agents.dataset generate: error: Unrecognized options: --bogus, 1"),
+        (["generate"], "python -m agents.dataset generate: error: required options: Missing "
+                       "from python -m agents.dataset generate: --out PATH"),
+        ([], "python -m agents.dataset: error: missing subcommand: Expected one of {generate, "
+             "info}."),
+        (["generate", "--out", "d", "--backend", "spark"],
+         "python -m agents.dataset generate: error: invalid choice 'spark' for argument "
+         "'--backend'. Expected one of ('process', 'ray')."),
+    ],
+)
+def test_cli_parse_errors_are_one_line_too(tmp_path, capsys, monkeypatch, argv, line):
+    monkeypatch.chdir(tmp_path)
+    assert cli_error(capsys, argv) == line + "\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_help_is_untouched(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["generate", "--help"])
+    assert exc.value.code == 0
+    assert "--max-cycles" in capsys.readouterr().out
+
+
+def test_cli_parse_error_on_the_command_line_is_one_line(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "agents.dataset", "generate", "--out",
+                          str(tmp_path / "d"), "--pairs", "abc"], capture_output=True, text=True,
+                         cwd=Path(__file__).parents[2], timeout=120)
+    assert run.returncode == 2
+    assert run.stderr == ("python -m agents.dataset generate: error: value error: Error parsing "
+                          "--pairs: invalid literal for int() with base 10: 'abc'\n")
+    assert list(tmp_path.iterdir()) == []
