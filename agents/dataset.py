@@ -28,27 +28,30 @@ Ray: ``--backend ray`` runs one task per episode on ``ray.init()`` (a local clus
 ``--workers`` CPUs) or on an existing cluster (``--address``); tasks write their pair files into
 the output folder, which must then be on storage that every node shares. Workers of either
 backend run with one BLAS/OpenMP thread (one episode per CPU). Starting and stopping a local
-Ray cluster takes about 6 s on a 2-core machine, so on jobs of a few pairs the process backend
-is faster; on jobs of a minute or more the two are alike (``benchmarks/explorers.py --only
-dataset`` compares them).
+Ray cluster takes seconds, so on jobs of a few pairs the process backend is faster; on long jobs
+the two are alike (``benchmarks/explorers.py --only dataset`` compares them).
 
-Safety: every setting is checked before anything is written (the env is built once and an
-``sb3:`` model loaded once, so a bad ``--world-size``, map file or model is refused up front).
-One writer at a time: a run holds the lock file ``OUT/.lock`` (the kernel's ``flock``, released
-when the run exits, even killed) and a second run on the same ``--out`` stops at once, naming
-the holder's pid. A new dataset whose run fails before its first pair is written is removed
-again (``dataset.json`` and the folders the run created), so the corrected command starts
-afresh; a run that wrote pairs leaves them, and the same command resumes. Bad settings, an
-``--out`` that is a file or a foreign folder, a dataset made with other settings and a held
-lock are one-line errors naming the flag (exit status 2).
+Safety: every setting is checked before anything is written (the env is built once and an ``sb3:``
+model loaded once, so a bad ``--world-size``, map file or model is refused up front). One writer at
+a time: a run holds the lock file ``OUT/.lock`` (the kernel's ``flock``, released when the run
+exits, even killed) and a second run on the same ``--out`` stops at once, naming the holder's pid.
+Worker processes die with the run that started them and write only while it holds the lock
+(:mod:`agents.workers`): a killed run leaves no worker behind. A new dataset whose run fails before
+its first pair is written is removed again (``dataset.json`` and the folders the run created), so
+the corrected command starts afresh; a run that wrote pairs leaves them, and the same command
+resumes. Bad settings, an ``--out`` that is a file or a foreign folder, a dataset made with other
+settings and a held lock are one-line errors naming the flag (exit status 2). ``dataset.json``
+records how many pairs the dataset holds (the largest ``--pairs`` run on it): a pair file beyond
+that count is a stray, refused by name rather than counted. A full disk stops the run with one line
+naming the folder (exit status 1): the pairs written are whole, and the same command resumes.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import math
-import os
 import sys
 import time
 from collections import Counter
@@ -62,6 +65,8 @@ import tyro
 from tqdm.auto import tqdm
 
 from agents.base import run_episode
+from agents.cli import one_line_errors
+from agents.workers import WORKER_ENV, Owner, check_owner, owner, pool_results, set_owner
 from fusion.evaluation.pairs import (
     FORMAT,
     FORMAT_VERSION,
@@ -70,6 +75,7 @@ from fusion.evaluation.pairs import (
     GridSnapshot,
     MapPair,
     load_pairs,
+    pair_count,
     pair_files,
     read_manifest,
     write_index,
@@ -80,8 +86,6 @@ from topo.fileio import TEMP_PREFIX, LockHeld, atomic_write_json, exclusive_lock
 from topo.validation import check_int
 
 BACKENDS = ("process", "ray")
-_WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-"""Environment of worker processes (either backend): one BLAS/OpenMP thread per episode."""
 
 
 class SettingsError(ValueError):
@@ -297,45 +301,28 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
         env.close()
     pairs = [pair for snapshot in taken for pair in snapshot if pair.pair_id < n_pairs]
     for pair in pairs:
+        check_owner()
         write_pair(root, pair)
     return len(pairs)
+
+
+def _ray_episode(run: Owner, root: str, episode: int, n_pairs: int,
+                 settings: dict[str, Any]) -> int:
+    """:func:`generate_episode` in a Ray worker, writing only while ``run`` holds the lock
+    (a task that outlives a killed driver writes nothing)."""
+    set_owner(run)
+    return generate_episode(root, episode, n_pairs, settings)
 
 
 Runner = Callable[[list[int]], Iterator[int]]
 
 
-@contextlib.contextmanager
-def _worker_env() -> Iterator[None]:
-    """Set :data:`_WORKER_ENV` while worker processes start (they inherit it), then restore."""
-    saved = {k: os.environ.get(k) for k in _WORKER_ENV}
-    os.environ.update(_WORKER_ENV)
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 def _process_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
     def run(episodes: list[int]) -> Iterator[int]:
+        calls = [(root, e, args.pairs, settings) for e in episodes]
         if args.workers == 1:
-            for e in episodes:
-                yield generate_episode(root, e, args.pairs, settings)
-            return
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods()
-                             else "spawn")
-        with _worker_env(), ProcessPoolExecutor(max_workers=args.workers,
-                                                 mp_context=ctx) as pool:
-            futures = [pool.submit(generate_episode, root, e, args.pairs, settings)
-                       for e in episodes]
-            for fut in as_completed(futures):
-                yield fut.result()
+            return (generate_episode(*call) for call in calls)
+        return pool_results(generate_episode, calls, args.workers, Path(root) / LOCK_FILE)
     return run
 
 
@@ -351,14 +338,15 @@ def _ray_runner(args: GenerateArgs, root: str, settings: dict) -> Runner:
         if started_here:
             # one thread per task, as the process backend's workers on a CPU each
             common = {"log_to_driver": False, "configure_logging": False,
-                      "runtime_env": {"env_vars": dict(_WORKER_ENV)}}
+                      "runtime_env": {"env_vars": dict(WORKER_ENV)}}
             if args.address is None:
                 ray.init(num_cpus=args.workers, include_dashboard=False, **common)
             else:
                 ray.init(address=args.address, **common)
         try:
-            task = ray.remote(num_cpus=1)(generate_episode)
-            pending = [task.remote(root, e, args.pairs, settings) for e in episodes]
+            task = ray.remote(num_cpus=1)(_ray_episode)
+            run = owner(Path(root) / LOCK_FILE)
+            pending = [task.remote(run, root, e, args.pairs, settings) for e in episodes]
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
                 yield ray.get(done[0])
@@ -391,12 +379,14 @@ def _cli_value(value: Any) -> str:
     return " ".join(map(str, value)) if isinstance(value, list) else str(value)
 
 
-def _open_manifest(root: Path, settings: dict[str, Any]) -> bool:
-    """Check ``root/dataset.json`` against ``settings``, or write it in a folder that holds
-    nothing else; returns whether it was written now. Called under the dataset's lock."""
+def _open_manifest(root: Path, settings: dict[str, Any], pairs: int) -> bool:
+    """Check ``root/dataset.json`` against ``settings`` and its pair files against its pair
+    count (a stray is an error), raising that count to ``pairs``; or write it in a folder
+    that holds nothing else. Returns whether it was written now. Called under the lock."""
     path = root / "dataset.json"
     if path.exists():
-        stored = read_manifest(root).get("settings") or {}
+        manifest = read_manifest(root)
+        stored = manifest.get("settings") or {}
         if stored != settings:
             diff = "; ".join(
                 f"--{k.replace('_', '-')} {_cli_value(stored.get(k, '(unset)'))} (this run: "
@@ -405,6 +395,11 @@ def _open_manifest(root: Path, settings: dict[str, Any]) -> bool:
             raise SettingsError("out", f"{root} holds a dataset made with other settings: "
                                        f"{diff}; run with its settings to resume it, or give "
                                        f"another --out for a new dataset")
+        count = pair_count(manifest)
+        found = pair_files(root, count=count)  # before the count grows: strays are refused
+        grown = max(pairs, max(found, default=-1) + 1 if count is None else count)
+        if grown != count:
+            atomic_write_json(path, {**manifest, "pairs": grown})
         return False
     others = sorted(p.name for p in root.iterdir()
                     if p.name != LOCK_FILE and not p.name.startswith(TEMP_PREFIX))
@@ -413,7 +408,8 @@ def _open_manifest(root: Path, settings: dict[str, Any]) -> bool:
                                    f"dataset.json; it holds {others[:3]}"
                                    f"{'...' if len(others) > 3 else ''}): give a new or empty "
                                    f"folder")
-    atomic_write_json(path, {"format": FORMAT, "version": FORMAT_VERSION, "settings": settings})
+    atomic_write_json(path, {"format": FORMAT, "version": FORMAT_VERSION, "settings": settings,
+                             "pairs": pairs})
     return True
 
 
@@ -453,8 +449,8 @@ def generate(args: GenerateArgs) -> dict[str, Any]:
         SettingsError: a setting the env or the explorer refuses; ``out`` is a file, a folder
             that is not a dataset, a dataset made with other settings, or being written by
             another run (its lock is held).
-        fusion.evaluation.pairs.DatasetError: a corrupt ``dataset.json`` or a foreign file in
-        ``pairs/``.
+        fusion.evaluation.pairs.DatasetError: a corrupt ``dataset.json``, a foreign or stray file
+            in ``pairs/``.
     """
     root = Path(args.out)
     settings = args.settings()
@@ -470,7 +466,7 @@ def generate(args: GenerateArgs) -> dict[str, Any]:
             raise ValueError(f"cannot create {root}: {exc.strerror}") from exc
     try:
         with _dataset_lock(root):
-            fresh = _open_manifest(root, settings)
+            fresh = _open_manifest(root, settings, args.pairs)
             try:
                 return _run(args, root, settings)
             except BaseException:
@@ -486,7 +482,7 @@ def generate(args: GenerateArgs) -> dict[str, Any]:
 
 
 def _run(args: GenerateArgs, root: Path, settings: dict[str, Any]) -> dict[str, Any]:
-    existing = pair_files(root, clean_temp=True)
+    existing = pair_files(root, clean_temp=True, count=pair_count(read_manifest(root)))
     per_episode = args.snapshots * len(robot_pairs(args.robots))
     todo = [e for e in range(args.n_episodes)
             if any(i not in existing and i < args.pairs
@@ -550,9 +546,9 @@ class _GenerateFlags(GenerateArgs):
 PROG = "python -m agents.dataset"
 
 
-def _fail(command: str, message: str) -> None:
+def _fail(command: str, message: str, status: int = 2) -> None:
     print(f"{PROG} {command}: error: {' '.join(message.split())}", file=sys.stderr)
-    raise SystemExit(2)
+    raise SystemExit(status)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -560,9 +556,14 @@ def main(argv: list[str] | None = None) -> None:
 
     A bad setting, an unusable ``--out`` (a file, a foreign folder, a dataset made with other
     settings, another run's lock) or an unreadable dataset prints one line naming the flag on
-    stderr and exits with status 2 (``SystemExit(2)``)."""
-    cmd = tyro.extras.subcommand_cli_from_dict(
-        {"generate": _GenerateFlags, "info": InfoArgs}, args=argv, prog=PROG)
+    stderr and exits with status 2 (``SystemExit(2)``); a full disk one line naming the folder,
+    status 1. tyro's own errors (an unknown flag, a value of the wrong type) are one line
+    too."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = {"generate": _GenerateFlags, "info": InfoArgs}
+    cmd = one_line_errors(lambda: tyro.extras.subcommand_cli_from_dict(
+        commands, args=argv, prog=PROG), " ".join([PROG, *argv[:1]] if argv[:1] and argv[0]
+                                                  in commands else [PROG]))
     if isinstance(cmd, InfoArgs):
         try:
             print(info(cmd.root))
@@ -576,6 +577,12 @@ def main(argv: list[str] | None = None) -> None:
         _fail("generate", f"{exc.flag}: {exc}")
     except DatasetError as exc:
         _fail("generate", f"--out: {exc}")
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        _fail("generate", f"{cmd.out}: no space left ({exc.strerror}) writing "
+                          f"{exc.filename or 'a pair'}: the pairs written are whole; free space "
+                          f"and rerun the same command to resume", status=1)
     print(f"wrote {summary['written']} pairs ({summary['already_there']} already there) in "
           f"{summary['seconds']:.1f} s: {summary['pairs_per_s'] * 60:.1f} pairs/min")
 

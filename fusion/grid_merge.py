@@ -66,6 +66,7 @@ from fusion.grid_refine import (
     native_evidence,
     native_walls,
 )
+from fusion.inputs import check_grid_inputs
 from fusion.rigid import Rigid2D
 from topo.validation import check_int, check_real
 
@@ -318,13 +319,16 @@ def distinct(a: Rigid2D, b: Rigid2D, centre: np.ndarray, cfg: GridMergeConfig) -
 def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                 ) -> GridMergeResult:
     """Align occupancy grid B onto grid A (module docstring): the best alignment, its
-    evidence and calibrated confidence, accepted or rejected with a reason. Never raises on
-    poor input: grids with too little known space come back rejected with a reason.
+    evidence and calibrated confidence, accepted or rejected with a reason. Grids with too
+    little known space come back rejected with a reason; malformed grids, a ``config`` that is
+    not a :class:`GridMergeConfig` and work beyond :mod:`fusion.inputs`' bounds raise a
+    ``TypeError``/``ValueError`` naming the argument (:func:`fusion.inputs.check_grid_inputs`).
 
     The rotation search runs coarse to fine: every ``step_deg`` rotation is scored at
     ``coarse_factor × resolution``; the ``refine_top`` best clearly different rotations are
     scored again at ``resolution`` on a ``step_deg / 3`` grid around each (the best is the
     estimate, the others its rivals, with far-away peaks at the estimate's rotation)."""
+    check_grid_inputs(grid_a, grid_b, config)
     t0 = time.perf_counter()
     cfg = config or GridMergeConfig()
     res = cfg.resolution

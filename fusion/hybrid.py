@@ -42,6 +42,7 @@ from scipy.spatial import cKDTree
 
 from fusion import grid_merge as gm
 from fusion.decision import DEFAULT_RULE, MergeRule
+from fusion.inputs import check_grid_inputs
 from fusion.rigid import Rigid2D
 from fusion.structural import MergeResult, fuse_maps, merge_maps
 
@@ -105,7 +106,11 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     Raises:
         TypeError: ``in_use`` is neither ``None`` nor a :class:`fusion.Rigid2D`; ``vouch``
             is not a bool.
+        TypeError, ValueError: malformed maps or grids (both grids are needed, even without
+            ``try_grids``: they check a structural merge), or work beyond
+            :mod:`fusion.inputs`' bounds, naming the argument.
     """
+    check_grid_inputs(grid_a, grid_b, config)
     _check_in_use(in_use, allow_none=True)
     if not isinstance(vouch, bool):
         raise TypeError(f"vouch must be a bool, got {type(vouch).__name__}")

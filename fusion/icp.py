@@ -33,6 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
+from fusion.inputs import check_point_count
 from fusion.rigid import Rigid2D
 from topo.validation import as_points, check_int, check_real
 
@@ -216,7 +217,8 @@ def icp_svd(
 
     Raises:
         TypeError: ``M``/``D`` not numeric arrays, ``init`` not a ``Rigid2D``.
-        ValueError: shapes other than ``(N, 2)``, fewer than two points, NaN/inf, ``tau <= 0``,
+        ValueError: shapes other than ``(N, 2)``, fewer than two points or more than
+            :data:`fusion.inputs.MAX_POINTS`, NaN/inf, ``tau <= 0``,
             ``max_iter < 1``, ``rel_tol <= 0``, ``max_distance <= 0``, ``trim`` outside ``(0, 1]``.
 
     Example (the paper's full-overlap case is recovered exactly):
@@ -227,8 +229,8 @@ def icp_svd(
         >>> bool(res.transform.allclose(truth, atol=1e-6))
         True
     """
-    M = as_points(M, "M", min_points=2)
-    D = as_points(D, "D", min_points=2)
+    M = check_point_count(as_points(M, "M", min_points=2), "M")
+    D = check_point_count(as_points(D, "D", min_points=2), "D")
     _check_options(tau, max_iter, rel_tol, max_distance, trim, init)
     return icp_checked(M, D, tau, max_iter, init, rel_tol, max_distance, trim)
 

@@ -29,6 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fusion.inputs import check_point_count
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
 from topo.validation import as_points, check_int, check_real
@@ -47,10 +48,11 @@ SECONDS_PER_EVALUATION = 2e-6
 
 
 def endpoint_set(value: Any, name: str) -> np.ndarray:
-    """The paper's point set of a map: :meth:`TopoMap.endpoints` or an ``(N, 2)`` array."""
+    """The paper's point set of a map: :meth:`TopoMap.endpoints` or an ``(N, 2)`` array, of at
+    most :data:`fusion.inputs.MAX_POINTS` points."""
     if isinstance(value, TopoMap):
-        return value.endpoints()
-    return as_points(value, name)
+        return check_point_count(value.endpoints(), name)
+    return check_point_count(as_points(value, name), name)
 
 
 def similarity(map_a: Any, map_b: Any, transform: Rigid2D, eps: float = DEFAULT_EPS) -> int:
@@ -111,17 +113,26 @@ class SearchResult:
         return len(self.ties) > 1
 
 
+def angle_count(step_deg: float) -> int:
+    """How many angles :func:`search_angles` gives for ``step_deg`` (181 for 2°), computed
+    without building them, so that a search too fine to run is refused before it allocates.
+
+    Raises:
+        TypeError, ValueError: ``step_deg`` not a real number in ``(0, 360]``.
+    """
+    step = check_real(step_deg, "step_deg", low=0.0, high=360.0)
+    return int(math.floor(360.0 / step + 1e-9)) + 1
+
+
 def search_angles(step_deg: float) -> np.ndarray:
     """Angles in degrees from 0 to 360 inclusive, as the paper counts them (181 for 2°)."""
-    step = check_real(step_deg, "step_deg", low=0.0, high=360.0)
-    n = int(math.floor(360.0 / step + 1e-9))
-    return np.arange(n + 1) * step
+    return np.arange(angle_count(step_deg)) * float(step_deg)
 
 
 def exhaustive_evaluations(n_a: int, n_b: int, step_deg: float = 2.0) -> int:
     """Placements :func:`exhaustive_search` scores on maps of ``n_a`` and ``n_b`` endpoints:
     ``n_a × n_b × len(search_angles(step_deg))`` (the paper's 4 × 7 × 181 = 5068)."""
-    return int(n_a) * int(n_b) * len(search_angles(step_deg))
+    return int(n_a) * int(n_b) * angle_count(step_deg)
 
 
 def fitting_step(n_a: int, n_b: int, max_evaluations: int) -> float | None:
@@ -152,7 +163,7 @@ def too_many_evaluations(n_a: int, n_b: int, step_deg: float, max_evaluations: i
     fit = fitting_step(n_a, n_b, max_evaluations)
     coarser = (f"{step_name} >= {fit:g} fits" if fit is not None
                else f"no {step_name} fits: the maps are too large")
-    return (f"{n_a} × {n_b} endpoints × {len(search_angles(step_deg))} angles ({step_name}="
+    return (f"{n_a} × {n_b} endpoints × {angle_count(step_deg)} angles ({step_name}="
             f"{step_deg:g}) = {count:,} placements, above max_evaluations={max_evaluations:,} "
             f"(about {_duration(count * SECONDS_PER_EVALUATION)} at "
             f"{SECONDS_PER_EVALUATION * 1e6:g} µs each; {coarser})")
@@ -190,7 +201,7 @@ def exhaustive_search(
         if len(pts) == 0:
             raise ValueError(f"{name} must have at least 1 endpoint, got 0")
     eps = check_real(eps, "eps", low=0.0)
-    angles = search_angles(step_deg)
+    angle_count(step_deg)  # checks step_deg; the angles are built only once the count is allowed
     n_a, n_b = len(a), len(b)
     if max_evaluations is not None:
         check_int(max_evaluations, "max_evaluations", low=1)
@@ -200,6 +211,7 @@ def exhaustive_search(
                              f"limit) to run it anyway, or a coarser step_deg (merge_maps: "
                              f"MergeConfig.exhaustive_step_deg)")
 
+    angles = search_angles(step_deg)
     best = -1
     tied: list[tuple[float, int, int, np.ndarray]] = []
     for deg in angles:

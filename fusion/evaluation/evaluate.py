@@ -47,7 +47,7 @@ import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -399,9 +399,17 @@ def plot_results(records: Sequence[Record], pairs: Sequence[EvalPair], out: str 
 
 
 # -------------------------------------------------------------------------------------- CLI
+class _OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ``PROG: error: MESSAGE`` (exit
+    status 2), without the usage block: what a script's log needs."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``python -m fusion.evaluation``."""
-    p = argparse.ArgumentParser(
+    """The argument parser of ``python -m fusion.evaluation`` (one-line usage errors)."""
+    p = _OneLineParser(
         prog="python -m fusion.evaluation",
         description="Evaluate topological map merging against ground truth and an oracle.")
     p.add_argument("pairs_dir", nargs="*", type=Path,
@@ -440,19 +448,35 @@ def _json_arg(parser: argparse.ArgumentParser, text: str | None, name: str) -> d
     return value
 
 
+def _noise_levels(text: str) -> list[float]:
+    """``--noise`` as numbers (comma-separated), or a ``ValueError`` naming the flag."""
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--noise must be comma-separated numbers (metres), got {text!r}"
+                         ) from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI (see the module docstring); returns the exit status."""
+    """Run the CLI (see the module docstring); returns the exit status.
+
+    A bad argument — a flag's value, an ``--out`` that is a file, an unreadable dataset — prints
+    one line, ``python -m fusion.evaluation: error: ...``, before anything is evaluated or
+    written, and exits with status 2; results that cannot be written, one line and status 1."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if (not args.pairs_dir) == (args.synthetic is None):
         parser.error("give either PAIRS_DIR or --synthetic N (exactly one)")
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out: {args.out} is a file, not a folder: give a folder for "
+                     f"results.json and the plots")
     try:
         methods = parse_methods(args.methods)
         config = config_from(MergeConfig, _json_arg(parser, args.config, "--config"), "--config")
         if args.synthetic is not None:
             if args.synthetic < 1:
                 raise ValueError(f"--synthetic must be >= 1, got {args.synthetic}")
-            noise = [float(v) for v in args.noise.split(",") if v.strip()]
+            noise = _noise_levels(args.noise)
             syn = _json_arg(parser, args.synthetic_config, "--synthetic-config")
             pairs = synthetic_pairs(args.synthetic, args.seed, noise, syn)
         else:
@@ -463,7 +487,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     loaded = [dataclasses.replace(p, name=f"{folder.name}/{p.name}")
                               for p in loaded]
                 pairs += loaded
-    except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
+    except (ValueError, TypeError, OSError, ImportError) as exc:
         parser.error(str(exc))
     overrides = _json_arg(parser, args.config, "--config")
     merge_config = overrides if args.for_noise else config
@@ -483,15 +507,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_threshold_tables(sweep, calibration, default))
     source = (f"synthetic N={args.synthetic} seed={args.seed} noise={args.noise}"
               if args.synthetic is not None else ", ".join(map(str, args.pairs_dir)))
-    atomic_write_json(args.out / "results.json", {
-        "source": source, "methods": methods, "config": asdict(config),
-        "config_for_noise": args.for_noise,
-        "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
-        "summary": summary, "threshold_sweep": sweep, "calibration": calibration,
-        "accept_threshold": default, "records": [asdict(r) for r in records]}, allow_nan=False)
-    if not args.no_plots:
-        plot_results(records, pairs, args.out, config)
-        plot_thresholds(sweep, records, args.out, default)
+    try:
+        atomic_write_json(args.out / "results.json", {
+            "source": source, "methods": methods, "config": asdict(config),
+            "config_for_noise": args.for_noise,
+            "thresholds": {"rotation_deg": ROTATION_OK_DEG, "translation_m": TRANSLATION_OK_M},
+            "summary": summary, "threshold_sweep": sweep, "calibration": calibration,
+            "accept_threshold": default, "records": [asdict(r) for r in records]},
+            allow_nan=False)
+        if not args.no_plots:
+            plot_results(records, pairs, args.out, config)
+            plot_thresholds(sweep, records, args.out, default)
+    except OSError as exc:
+        parser.exit(1, f"{parser.prog}: error: --out: cannot write {exc.filename or args.out} "
+                       f"({exc.strerror}): free space or give another --out, and rerun\n")
     print(f"\nwrote {args.out / 'results.json'}" + ("" if args.no_plots else " and plots"))
     return 0
 

@@ -9,7 +9,8 @@ Layout of a dataset folder (format ``topomerge.map_pairs``, version :data:`FORMA
 
     DIR/
       dataset.json          what generated it (explorer, world, seed, snapshots, env config) —
-                            a resumed run must match it
+                            a resumed run must match it — and ``pairs``, how many pairs it
+                            holds (ids 0 … pairs − 1; absent in datasets made before it existed)
       index.json            one summary row per pair (rebuilt from the pair files at any time)
       .lock                 only while a writer runs (:data:`LOCK_FILE`): one writer at a time
       pairs/
@@ -40,7 +41,10 @@ robot j's and the transform takes j's frame onto i's; a pair without that key is
 ``(0, 1)``.
 
 Every file is written to a temporary name in the same folder and renamed into place, so a pair
-file either exists whole or not at all; anything else in ``pairs/`` is an error naming the file.
+file either exists whole or not at all; anything else in ``pairs/`` is an error naming the file
+and what to do: a foreign file, a pair file beyond the manifest's ``pairs`` (a stray: indexing
+it would count a pair the dataset does not have), a pair file holding another pair id (a copy),
+a corrupt file (delete it and rerun the generating command, which writes it again).
 """
 
 from __future__ import annotations
@@ -69,6 +73,10 @@ LOCK_FILE = ".lock"
 
 class DatasetError(ValueError):
     """A dataset folder or file that is not what this format expects (names the file)."""
+
+
+_REWRITE = ("delete it and rerun the command that generated the dataset (python -m "
+            "agents.dataset generate with its settings): it writes the missing pair again")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -193,6 +201,11 @@ def read_pair(path: str | Path) -> MapPair:
                     f"{path}: not a {FORMAT} version {FORMAT_VERSION} pair "
                     f"(format={meta.get('format')!r}, version={meta.get('version')!r})")
             theta, tx, ty = meta["transform"]
+            named = PAIR_FILE.match(path.name)
+            if named is not None and int(named.group(1)) != int(meta["pair_id"]):
+                raise DatasetError(f"{path}: holds pair {int(meta['pair_id'])}, not "
+                                   f"{int(named.group(1))} (a copied or renamed file): "
+                                   f"{_REWRITE}")
             return MapPair(
                 pair_id=int(meta["pair_id"]),
                 map_a=_read_map(z, "a"), map_b=_read_map(z, "b"),
@@ -211,12 +224,16 @@ def read_pair(path: str | Path) -> MapPair:
     except FileNotFoundError:
         raise
     except (OSError, zipfile.BadZipFile, KeyError, ValueError, TypeError, EOFError) as exc:
-        raise DatasetError(f"{path}: corrupt or not a map-pair file ({exc})") from exc
+        raise DatasetError(f"{path}: corrupt or not a map-pair file ({exc}): {_REWRITE}"
+                           ) from exc
 
 
-def pair_files(root: str | Path, *, clean_temp: bool = False) -> dict[int, Path]:
+def pair_files(root: str | Path, *, clean_temp: bool = False,
+               count: int | None = None) -> dict[int, Path]:
     """The pair files of dataset ``root`` by id. Left-over temporary files of an interrupted
-    write are ignored (removed with ``clean_temp``); any other file in ``pairs/`` is an error."""
+    write are ignored (removed with ``clean_temp``); any other file in ``pairs/``, and with
+    ``count`` (the manifest's :func:`pair_count`) a pair file of an id ``>= count``, is a
+    :class:`DatasetError` naming the file and what to do."""
     folder = Path(root) / "pairs"
     found: dict[int, Path] = {}
     if not folder.is_dir():
@@ -230,8 +247,28 @@ def pair_files(root: str | Path, *, clean_temp: bool = False) -> dict[int, Path]
         if match is None or not p.is_file():
             raise DatasetError(f"{p}: foreign file in a map-pair dataset "
                                "(expected pair_NNNNNN.npz)")
-        found[int(match.group(1))] = p
+        pair_id = int(match.group(1))
+        if count is not None and pair_id >= count:
+            raise DatasetError(f"{p}: a stray file: this dataset holds pairs 0–{count - 1} "
+                               f"(dataset.json: pairs={count}); move it out of {folder} or "
+                               f"delete it")
+        found[pair_id] = p
     return found
+
+
+def pair_count(manifest: dict[str, Any]) -> int | None:
+    """How many pairs a dataset's manifest says it holds (``pairs``), or ``None`` for a
+    manifest written before that key existed.
+
+    Raises:
+        DatasetError: ``pairs`` is not an integer ``>= 0``.
+    """
+    count = manifest.get("pairs")
+    if count is None:
+        return None
+    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+        raise DatasetError(f"dataset.json: pairs must be an integer >= 0, got {count!r}")
+    return count
 
 
 def read_manifest(root: str | Path) -> dict[str, Any]:
@@ -253,8 +290,8 @@ def read_manifest(root: str | Path) -> dict[str, Any]:
 
 def iter_pairs(root: str | Path) -> Iterator[MapPair]:
     """Pairs of dataset ``root`` in id order, read one at a time."""
-    read_manifest(root)
-    for _, path in sorted(pair_files(root).items()):
+    count = pair_count(read_manifest(root))
+    for _, path in sorted(pair_files(root, count=count).items()):
         yield read_pair(path)
 
 
@@ -262,8 +299,8 @@ def load_pairs(root: str | Path) -> list[MapPair]:
     """All pairs of dataset ``root``, in id order (see the module docstring for the format).
 
     Raises:
-        DatasetError: missing/foreign manifest, a foreign file in ``pairs/``, or a corrupt pair
-            file — each naming the file.
+        DatasetError: missing/foreign manifest, a foreign or stray file in ``pairs/``, or a
+            corrupt pair file — each naming the file and what to do.
     """
     return list(iter_pairs(root))
 

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.icp import degeneracy
+from fusion.inputs import check_map_sizes
 from fusion.rigid import Rigid2D
 from fusion.structural.baselines import exhaustive, multistart_icp, paper_icp, ransac
 from fusion.structural.config import DEFAULT_ACCEPT_THRESHOLD, METHODS, MergeConfig, config_of
@@ -145,8 +146,8 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
 
     Raises:
         TypeError: a map that is not a :class:`topo.TopoMap`, a config of the wrong type.
-        ValueError: NaN/inf node positions, an unknown ``method``, invalid config values or
-            unknown config keys.
+        ValueError: NaN/inf node positions, more than :data:`fusion.inputs.MAX_NODES` nodes, an
+            unknown ``method``, invalid config values or unknown config keys.
 
     Example:
         >>> from fusion.evaluation.synthetic import make_pair
@@ -158,6 +159,7 @@ def merge_maps(map_a: TopoMap, map_b: TopoMap, method: str = "auto",
     start = time.perf_counter()
     map_a = check_map(map_a, "map_a")
     map_b = check_map(map_b, "map_b")
+    check_map_sizes(map_a, map_b)
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
     cfg = config_of(config)

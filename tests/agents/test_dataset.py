@@ -351,3 +351,130 @@ def test_bad_team_size_names_the_flag(tmp_path, capsys, robots):
     assert exc.value.field == "robots"
     err = cli_error(capsys, ["generate", "--out", str(tmp_path / "d"), "--robots", str(robots)])
     assert f"error: --robots: n_robots must be between 2 and 8, got {robots}" in err
+
+
+# ------------------------------------------------------------------------ dataset hygiene
+def copy_of(reference, tmp_path) -> Path:
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(reference[0], out)
+    return out
+
+
+def test_the_manifest_counts_the_pairs_and_a_stray_file_is_refused(reference, tmp_path,
+                                                                     capsys):
+    out = copy_of(reference, tmp_path)
+    assert json.loads((out / "dataset.json").read_text())["pairs"] == 4
+    stray = out / "pairs" / "pair_000025.npz"
+    stray.write_bytes((out / "pairs" / "pair_000000.npz").read_bytes())
+    err = cli_error(capsys, ["info", str(out)])
+    assert (f"error: ROOT: {stray}: a stray file: this dataset holds pairs 0–3 (dataset.json: "
+            f"pairs=4); move it out of {out / 'pairs'} or delete it") in err
+    # a run that would grow the dataset over it refuses it too, before counting it as written
+    err = cli_error(capsys, ["generate", "--out", str(out), "--pairs", "30", *_kw_flags()])
+    assert f"error: --out: {stray}: a stray file" in err
+    assert json.loads((out / "dataset.json").read_text())["pairs"] == 4
+    stray.unlink()
+    assert "4 pairs" in info(out)
+
+
+def _kw_flags() -> list[str]:
+    """:data:`KW` as command-line flags."""
+    return ["--explorer", KW["explorer"], "--snapshots", str(KW["snapshots"]), "--max-cycles",
+            str(KW["max_cycles"]), "--world-size", *map(str, KW["world_size"]), "--no-progress"]
+
+
+def test_a_copied_or_corrupt_pair_file_says_what_to_do(reference, tmp_path, capsys):
+    out = copy_of(reference, tmp_path)
+    (out / "pairs" / "pair_000001.npz").write_bytes((out / "pairs" / "pair_000000.npz")
+                                                     .read_bytes())
+    err = cli_error(capsys, ["info", str(out)])
+    assert ("pair_000001.npz: holds pair 0, not 1 (a copied or renamed file): delete it and "
+            "rerun the command that generated the dataset") in err
+    (out / "pairs" / "pair_000001.npz").write_bytes(b"PK\x03\x04 truncated")
+    err = cli_error(capsys, ["info", str(out)])
+    assert "pair_000001.npz: corrupt or not a map-pair file" in err
+    assert "delete it and rerun the command that generated the dataset" in err
+    (out / "pairs" / "pair_000001.npz").unlink()  # as told: the same command writes it again
+    summary = generate(GenerateArgs(out=out, pairs=4, **KW))
+    assert summary["written"] == 2 and summary["already_there"] == 3
+    assert [fields(p) for p in load_pairs(out)] == [fields(p) for p in reference[1]]
+
+
+def test_a_manifest_without_a_pair_count_gets_one(reference, tmp_path):
+    out = copy_of(reference, tmp_path)
+    manifest = json.loads((out / "dataset.json").read_text())
+    del manifest["pairs"]  # as written before the count existed
+    (out / "dataset.json").write_text(json.dumps(manifest))
+    assert "4 pairs" in info(out)
+    assert generate(GenerateArgs(out=out, pairs=2, **KW))["written"] == 0
+    assert json.loads((out / "dataset.json").read_text())["pairs"] == 4
+
+
+def test_a_full_disk_is_one_line_and_the_same_command_resumes(tmp_path, capsys, monkeypatch):
+    import errno
+
+    real = dataset.write_pair
+    calls = []
+
+    def disk_full(root, pair):
+        calls.append(pair.pair_id)
+        if len(calls) > 1:
+            raise OSError(errno.ENOSPC, "No space left on device", str(root))
+        return real(root, pair)
+
+    monkeypatch.setattr(dataset, "write_pair", disk_full)
+    argv = ["generate", "--out", str(tmp_path), *TINY[:1], "2", *TINY[2:]]
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err == (f"python -m agents.dataset generate: error: {tmp_path}: no space left (No "
+                   f"space left on device) writing {tmp_path}: the pairs written are whole; "
+                   f"free space and rerun the same command to resume\n")
+    assert sorted(pair_files(tmp_path)) == [0]
+    monkeypatch.setattr(dataset, "write_pair", real)
+    main(argv)
+    assert "wrote 1 pairs (1 already there)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["generate", "--out", "d", "--pairs", "abc"],
+         "python -m agents.dataset generate: error: value error: Error parsing --pairs: invalid "
+         "literal for int() with base 10: 'abc'"),
+        (["generate", "--out", "d", "--bogus", "1"],
+         "python -m agents.dataset generate: error: Unrecognized options: --bogus, 1"),
+        (["generate"], "python -m agents.dataset generate: error: required options: Missing "
+                       "from python -m agents.dataset generate: --out PATH"),
+        ([], "python -m agents.dataset: error: missing subcommand: Expected one of {generate, "
+             "info}."),
+        (["generate", "--out", "d", "--backend", "spark"],
+         "python -m agents.dataset generate: error: invalid choice 'spark' for argument "
+         "'--backend'. Expected one of ('process', 'ray')."),
+    ],
+)
+def test_cli_parse_errors_are_one_line_too(tmp_path, capsys, monkeypatch, argv, line):
+    monkeypatch.chdir(tmp_path)
+    assert cli_error(capsys, argv) == line + "\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_help_is_untouched(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["generate", "--help"])
+    assert exc.value.code == 0
+    assert "--max-cycles" in capsys.readouterr().out
+
+
+def test_cli_parse_error_on_the_command_line_is_one_line(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "agents.dataset", "generate", "--out",
+                          str(tmp_path / "d"), "--pairs", "abc"], capture_output=True, text=True,
+                         cwd=Path(__file__).parents[2], timeout=120)
+    assert run.returncode == 2
+    assert run.stderr == ("python -m agents.dataset generate: error: value error: Error parsing "
+                          "--pairs: invalid literal for int() with base 10: 'abc'\n")
+    assert list(tmp_path.iterdir()) == []

@@ -120,3 +120,25 @@ def test_fitting_step_is_the_finest_tenth_of_a_degree_that_fits(n_a, n_b, limit)
 def test_bad_input(call, error, match):
     with pytest.raises(error, match=match):
         call()
+
+
+def test_too_fine_a_step_is_refused_before_the_angles_are_built():
+    import tracemalloc
+
+    ex = paper_example()
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=r"360000001 angles \(step_deg=1e-06\).*coarser "
+                                             r"step_deg"):
+            exhaustive_search(ex.map_a, ex.map_b, step_deg=1e-6)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 10_000_000  # the 360 M angles alone would be 2.9 GB
+
+
+@pytest.mark.parametrize("step", ["2", None, float("nan"), 0.0, -1.0, 361.0])
+def test_bad_step_deg_names_it(step):
+    ex = paper_example()
+    with pytest.raises((TypeError, ValueError), match="step_deg"):
+        exhaustive_search(ex.map_a, ex.map_b, step_deg=step)
