@@ -363,12 +363,15 @@ class TeamMerging:
         (members or frames)."""
         changed = []
         for r in range(self.n):
-            key = self._knowledge(r, views)
+            # the pairs' transforms it knows and the teammates' maps it holds: a map received
+            # after its transform was known must join the fused map too
+            held = {j for j in range(self.n) if views.view(r, j) is not None}
+            knowledge = self._knowledge(r, views)
+            key = (knowledge, tuple(sorted(held)))
             if key == self._keys[r]:
                 continue
             self._keys[r] = key
-            edges = [Edge(i, j, t, c) for (i, j), (t, c) in key if t is not None]
-            held = {j for j in range(self.n) if views.view(r, j) is not None}
+            edges = [Edge(i, j, t, c) for (i, j), (t, c) in knowledge if t is not None]
             edges = [e for e in edges if e.i in held and e.j in held]
             check = consistent_edges(edges, centres, check=self.config.cycle_check,
                                      min_unconfirmed=self._min_unconfirmed)

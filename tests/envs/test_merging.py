@@ -129,11 +129,6 @@ def test_no_merging_never_merges():
             np.testing.assert_array_equal(obs[a]["teammates"][:, :5], 0.0)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known bug: TeamMerging.refresh keys a robot's fused map on the pair transforms it knows, "
-    "not on the maps it holds; with known poses robots 0 and 1 know every pair's transform "
-    "from the start, so receiving robot 2's map on contact changes no key and they never "
-    "take robot 2 in (robot 2 does)"))
 def test_known_poses_fuse_a_teammate_met_later(tmp_path):
     env, _ = placed_team(tmp_path, [(1.0, 1.0), (2.5, 1.0), (10.0, 1.0)], [0.0, 0.0, math.pi],
                          comm={"range": 2.0}, mapping={"merge_method": "known"})
