@@ -32,13 +32,13 @@ wrong and false accepts per threshold, the smallest threshold with at most
 **ceiling** of any threshold: pairs whose alignment is right and passes the gates. ``--json``
 writes every record.
 
-``--calibration-rows FILE`` instead writes the rows ``benchmarks/calibrate_merge.py --model
+``--calibration-rows FILE`` instead writes the rows ``python -m fusion.calibration fit --model
 structural`` fits the structural confidence on, for its ``--cache``: its own rows (the tune env
 pairs and its synthetic pairs) and, the same way, those of the generic pairs of the tuning
 seeds (``--tune-seeds``, never the reported one)::
 
     python benchmarks/generic_graphs.py --calibration-rows /tmp/rows.json
-    python benchmarks/calibrate_merge.py --model structural --cache /tmp/rows.json --write
+    python -m fusion.calibration fit --model structural --cache /tmp/rows.json --write
 """
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ def records(seed: int, pairs: int, noise_levels: list[float], methods: list[str]
 
 
 def calibration_rows(seeds: list[int], pairs: int, noise_levels: list[float]) -> list[dict]:
-    """``calibrate_merge.structural_rows``' rows of the generic pairs of ``seeds`` (set
+    """``fusion.calibration.rows.structural_rows``' rows of the generic pairs of ``seeds`` (set
     ``"generic"``, each pair its own cross-validation world)."""
     gated = MergeConfig()
     rows = []
@@ -247,21 +247,21 @@ def main(argv: list[str] | None = None) -> int:
                         help="also what other accept thresholds would give")
     parser.add_argument("--json", type=Path, default=None, help="write every record here")
     parser.add_argument("--calibration-rows", type=Path, default=None,
-                        help="write calibrate_merge.py's structural rows and the generic "
+                        help="write the structural fit's rows and the generic "
                              "tuning pairs' here instead")
     parser.add_argument("--tune-seeds", default=str(TUNE_SEED),
                         help="seeds of the generic pairs in --calibration-rows")
     parser.add_argument("--synthetic", type=int, default=150,
-                        help="calibrate_merge.py's synthetic pairs per noise level")
+                        help="the structural fit's synthetic pairs per noise level")
     args = parser.parse_args(argv)
     noise = [float(v) for v in args.noise.split(",")]
     if args.calibration_rows is not None:
-        import calibrate_merge  # benchmarks/ is on sys.path: the script's own folder
+        from fusion.calibration.rows import default_dirs, structural_rows
 
         seeds = [int(v) for v in args.tune_seeds.split(",")]
         if args.seed in seeds or REPORT_SEED in seeds:
             raise ValueError(f"--tune-seeds must not hold the reported seed, got {seeds}")
-        rows = calibrate_merge.structural_rows(calibrate_merge.default_dirs(), args.synthetic)
+        rows = structural_rows(default_dirs(), args.synthetic)
         rows += calibration_rows(seeds, args.pairs, noise)
         atomic_write_json(args.calibration_rows, rows)
         print(f"wrote {len(rows)} rows to {args.calibration_rows}")

@@ -177,7 +177,7 @@ GENERIC_CONFIG = SyntheticConfig(spacing=(2.5, 5.0), jitter=0.15, map_nodes=(12,
 """Generic corridor-lattice pairs (``benchmarks/generic_graphs.py``): a more regular lattice
 than the defaults' (jitter 0.15 m, spacing 2.5–5 m, so more chance alignments), smaller maps
 (12–50 explored world nodes), overlap 0.2–1, 10 % dropped nodes and more spurious spurs; the
-noise is set per level. Not what ``benchmarks/calibrate_merge.py`` fits on by default
+noise is set per level. Not what ``python -m fusion.calibration fit`` fits on by default
 (``fusion.evaluation.evaluate.synthetic_pairs`` uses :class:`SyntheticConfig`'s defaults): a graph
 source
 the structural merge was not made on."""
