@@ -27,14 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.explore._map_kernels import (
-    NO_STATES,
-    cell_box,
-    or_patch,
-    sample_image,
-    sample_states,
-    warp_patch,
-)
+from envs.explore._kernels import NO_STATES, sample_image, sample_states
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
@@ -56,12 +49,13 @@ class Geometry:
     def window(self, xy: np.ndarray, margin: int) -> tuple[slice, slice] | None:
         """Row and column slices of the cells covering points ``xy`` (``(N, 2)``) plus
         ``margin`` cells, clipped to the grid; ``None`` if that is empty."""
-        lo = xy.min(axis=0)
-        hi = xy.max(axis=0)
-        r0, r1, c0, c1 = cell_box(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]),
-                                  self.origin[0], self.origin[1], self.resolution,
-                                  self.shape[0], self.shape[1], margin).tolist()
-        if r0 == r1:
+        (lo_x, lo_y), (hi_x, hi_y) = xy.min(axis=0).tolist(), xy.max(axis=0).tolist()
+        inv = 1.0 / self.resolution
+        r0 = max(math.floor((lo_y - self.origin[1]) * inv) - margin, 0)
+        r1 = min(math.floor((hi_y - self.origin[1]) * inv) + margin + 1, self.shape[0])
+        c0 = max(math.floor((lo_x - self.origin[0]) * inv) - margin, 0)
+        c1 = min(math.floor((hi_x - self.origin[0]) * inv) + margin + 1, self.shape[1])
+        if r0 >= r1 or c0 >= c1:
             return None
         return slice(r0, r1), slice(c0, c1)
 
@@ -106,12 +100,24 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
     drs, dcs = dwin
     inv = transform.inverse() if inverse is None else inverse
     r, t = inv.R, inv.T
-    # the source cell under every destination cell centre, compiled
-    out = np.zeros((drs.stop - drs.start, dcs.stop - dcs.start), dtype=src_mask.dtype)
-    warp_patch(out, src_mask, rs.start, cs.start, rs.stop - rs.start, cs.stop - cs.start,
-               dst.origin[0], dst.origin[1], dst.resolution, drs.start, dcs.start, x0, y0, sres,
-               r[0, 0], r[0, 1], r[1, 0], r[1, 1], t[0], t[1])
+    # the source cell under every destination cell centre (moved by the inverse motion)
+    x = dst.origin[0] + (np.arange(dcs.start, dcs.stop) + 0.5) * dst.resolution
+    y = dst.origin[1] + (np.arange(drs.start, drs.stop) + 0.5) * dst.resolution
+    iu = np.floor((r[0, 0] * x[None, :] + r[0, 1] * y[:, None] + (t[0] - x0)) / sres)
+    iv = np.floor((r[1, 0] * x[None, :] + r[1, 1] * y[:, None] + (t[1] - y0)) / sres)
+    inside = (iu >= 0) & (iu < cs.stop - cs.start) & (iv >= 0) & (iv < rs.stop - rs.start)
+    out = np.zeros(inside.shape, dtype=src_mask.dtype)
+    out[inside] = src_mask[rs.start + iv[inside].astype(np.int64),
+                           cs.start + iu[inside].astype(np.int64)]
     return dwin, out
+
+
+def _or_patch(dst: np.ndarray, patch: np.ndarray, rs: slice, cs: slice) -> int:
+    """``dst[rs, cs] |= patch`` (bool); returns how many cells of ``dst`` became true."""
+    view = dst[rs, cs]
+    new = int(np.count_nonzero(patch & ~view))
+    view |= patch
+    return new
 
 
 class RobotMap:
@@ -291,7 +297,7 @@ class SharedMap:
             return 0
         if index == self.owner:
             rs, cs = window
-            new = or_patch(self.ever, robot_map.ever[rs, cs], rs.start, cs.start)
+            new = _or_patch(self.ever, robot_map.ever[rs, cs], rs, cs)
         else:
             member = self.members.get(index)
             if member is None:
@@ -301,7 +307,7 @@ class SharedMap:
             if res is None:
                 return 0
             (rs, cs), vals = res
-            new = or_patch(self.ever, vals, rs.start, cs.start)
+            new = _or_patch(self.ever, vals, rs, cs)
         self.count += new
         return new
 

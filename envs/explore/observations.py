@@ -14,7 +14,6 @@ from collections.abc import Sequence
 import numpy as np
 from gymnasium import spaces
 
-from envs.explore._map_kernels import adjacency, nearest_nodes
 from envs.explore.comm import TeamViews
 from envs.explore.config import EnvConfig
 from envs.explore.mapping import LocalMapSampler, RobotMap, compose_pose
@@ -71,6 +70,34 @@ def observation_space(config: EnvConfig, frame_radius: float,
         obs["teammates"] = spaces.Box(np.tile(lo, (n, 1)), np.tile(hi, (n, 1)))
     return spaces.Dict(obs)
 
+
+
+def nearest_nodes(xy: np.ndarray, x: float, y: float, c: float, s: float, static: np.ndarray,
+                  lim: float, nodes: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The ``graph_nodes`` rows: of the nodes ``xy``, seen from ``(x, y)`` at heading ``(cos,
+    sin) = (c, s)`` — offsets ``(c dx + s dy, -s dx + c dy)`` — the ``len(nodes)`` nearest (by
+    squared distance of their offsets; ties by index) get their offsets clipped to
+    ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``; returns their
+    indices."""
+    dx, dy = xy[:, 0] - x, xy[:, 1] - y
+    rel = np.column_stack((c * dx + s * dy, c * dy - s * dx))
+    order = np.argsort(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1], kind="stable")
+    order = order[:len(nodes)]
+    nodes[:len(order), :2] = np.clip(rel[order], -lim, lim)
+    nodes[:len(order), 2:2 + static.shape[1]] = static[order]
+    mask[:len(order)] = 1.0
+    return order
+
+
+def adjacency(order: np.ndarray, edges: np.ndarray, n_nodes: int, adj: np.ndarray) -> None:
+    """``graph_adjacency``: 1 in ``adj`` (zeros) at ``(j, k)`` and ``(k, j)`` for every edge
+    of ``edges`` (``(E, 2)`` node indices, ``n_nodes`` nodes) joining the listed nodes
+    ``order[j]`` and ``order[k]``."""
+    slot = np.full(n_nodes, -1, dtype=np.int64)
+    slot[order] = np.arange(len(order))
+    ends = slot[edges].reshape(-1, 2)
+    ends = ends[(ends >= 0).all(axis=1)]
+    adj[ends[:, 0], ends[:, 1]] = adj[ends[:, 1], ends[:, 0]] = 1.0
 
 class GraphEncoder:
     """One robot's ``graph_nodes``, ``graph_mask`` and ``graph_adjacency``.

@@ -1,0 +1,85 @@
+"""Compiled ``local_map`` sampling of :class:`envs.explore.mapping.LocalMapSampler` (numba,
+cached on disk): every robot, every step, a heading-up square of nearest cells gathered from
+one or more grids. numpy's fancy-indexed form of the same gather builds a dozen temporaries the
+size of the image per grid, which cost far more than the gather itself; a profile of the env
+step puts this sampling among its largest costs, so it stays one compiled pass. No kernel here
+calls one of another module, so numba's per-file cache stays valid."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, uint64
+
+NO_STATES = np.zeros((0, 0), dtype=np.int8)
+"""The ``states2`` argument of :func:`sample_image` when there is no second grid."""
+
+
+@njit(cache=True, nogil=True)
+def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
+    """``out[k] = max(out[k], state)`` of the cell of ``states`` (origin ``ox, oy``, cell size
+    ``res``) under each offset ``(forward, left)`` (``offsets``, ``(2, K)`` metres) of the pose
+    ``(x, y, theta)``; cells outside the grid are unknown (0)."""
+    h, w = states.shape
+    inv = 1.0 / res
+    c = math.cos(theta) * inv
+    s = math.sin(theta) * inv
+    u0 = (x - ox) * inv
+    v0 = (y - oy) * inv
+    for k in range(offsets.shape[1]):
+        f = offsets[0, k]
+        g = offsets[1, k]
+        u = u0 + c * f - s * g
+        v = v0 + s * f + c * g
+        if 0.0 <= u < w and 0.0 <= v < h:
+            val = states[int(v), int(u)]
+            if val > out[k]:
+                out[k] = val
+
+
+@njit(cache=True, nogil=True)
+def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
+                 states2, ox2, oy2, res2, x2, y2, theta2):
+    """The ``local_map`` pixels in one pass: pixel ``(i, j)`` of ``image`` (``(1, n, n)``
+    uint8) gets ``values[state]`` of :func:`sample_states`' state at the offset ``(fwd[i],
+    left[j])`` of ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of
+    the larger of that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid
+    with its own origin and cell size). The same arithmetic as :func:`sample_states`, in the
+    same order, with each row's and column's share computed once (and unsigned indices: the
+    bounds are checked first)."""
+    n = fwd.shape[0]
+    h, w = states.shape
+    inv = 1.0 / res
+    c = math.cos(theta) * inv
+    s = math.sin(theta) * inv
+    u0 = (x - ox) * inv
+    v0 = (y - oy) * inv
+    both = states2.size > 0
+    h2, w2 = states2.shape
+    inv2 = 1.0 / res2
+    c2 = math.cos(theta2) * inv2
+    s2 = math.sin(theta2) * inv2
+    u02 = (x2 - ox2) * inv2
+    v02 = (y2 - oy2) * inv2
+    flat, flat2 = states.ravel(), states2.ravel()
+    sg, cg = s * left, c * left
+    sg2, cg2 = s2 * left, c2 * left
+    for i in range(n):
+        f = fwd[i]
+        a, b = u0 + c * f, v0 + s * f  # u = u0 + c f - s g, left to right as sample_states
+        a2, b2 = u02 + c2 * f, v02 + s2 * f
+        for j in range(n):
+            u = a - sg[j]
+            v = b + cg[j]
+            st = 0
+            if 0.0 <= u < w and 0.0 <= v < h:
+                st = flat[uint64(int(v)) * uint64(w) + uint64(int(u))]
+            if both:
+                u = a2 - sg2[j]
+                v = b2 + cg2[j]
+                if 0.0 <= u < w2 and 0.0 <= v < h2:
+                    st2 = flat2[uint64(int(v)) * uint64(w2) + uint64(int(u))]
+                    if st2 > st:
+                        st = st2
+            image[0, i, j] = values[uint64(st)]
