@@ -1,0 +1,173 @@
+"""Compiled loops of :mod:`fusion` (numba, cached on disk): ICP's nearest-neighbour pass, its
+closed-form fit and stopping rules (:func:`fusion.icp_svd`), and the grid merge's pooling and
+rotated rasters (:func:`fusion.merge_grids`).
+
+Why compiled: ICP runs many times per merge on tens of points, where numpy's per-call
+overhead outweighs the arithmetic of an all-pairs pass; the grid merge reads a large, mostly
+unknown grid whose known part is small, so a loop over the known box replaces whole-grid
+passes and fancy-indexed rasters (tests check those loops against the numpy forms). No kernel
+here calls one of another module, so numba's per-file cache stays valid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep):
+    """Move ``D`` by ``(theta, tx, ty)`` and pair each point with its nearest point of ``M``.
+
+    Fills ``idx``, ``d2`` (squared distance) and ``keep`` (``d2 <= max_d2``). Returns the
+    objective over the kept pairs and whether the pairing (``idx`` and ``keep``) equals the
+    previous one.
+    """
+    c = math.cos(theta)
+    s = math.sin(theta)
+    f = 0.0
+    same = prev_idx.shape[0] == D.shape[0]
+    for i in range(D.shape[0]):
+        x = c * D[i, 0] - s * D[i, 1] + tx
+        y = s * D[i, 0] + c * D[i, 1] + ty
+        best = np.inf
+        arg = 0
+        for j in range(M.shape[0]):
+            dx = x - M[j, 0]
+            dy = y - M[j, 1]
+            dd = dx * dx + dy * dy
+            if dd < best:
+                best = dd
+                arg = j
+        idx[i] = arg
+        d2[i] = best
+        keep[i] = best <= max_d2
+        if keep[i]:
+            f += best
+        if same and (prev_idx[i] != arg or prev_keep[i] != keep[i]):
+            same = False
+    return f, same
+
+
+@njit(cache=True, nogil=True)
+def fit_rigid(D, M, idx, keep):
+    """Closed-form Step 2 on the kept pairs ``(D[i], M[idx[i]])``: the proper rotation and
+    translation minimising ``Σ ‖M[idx[i]] − (R D[i] + T)‖²``. Returns ``(theta, tx, ty, n)``;
+    ``n < 2`` means there was nothing to fit (identity returned)."""
+    n = 0
+    dx = dy = mx = my = 0.0
+    for i in range(D.shape[0]):
+        if keep[i]:
+            n += 1
+            dx += D[i, 0]
+            dy += D[i, 1]
+            mx += M[idx[i], 0]
+            my += M[idx[i], 1]
+    if n < 2:
+        return 0.0, 0.0, 0.0, n
+    dx /= n
+    dy /= n
+    mx /= n
+    my /= n
+    sin_sum = 0.0
+    cos_sum = 0.0
+    for i in range(D.shape[0]):
+        if keep[i]:
+            px = D[i, 0] - dx
+            py = D[i, 1] - dy
+            qx = M[idx[i], 0] - mx
+            qy = M[idx[i], 1] - my
+            sin_sum += px * qy - py * qx
+            cos_sum += px * qx + py * qy
+    theta = math.atan2(sin_sum, cos_sum)
+    c = math.cos(theta)
+    s = math.sin(theta)
+    return theta, mx - (c * dx - s * dy), my - (s * dx + c * dy), n
+
+
+@njit(cache=True, nogil=True)
+def spread(P):
+    """Centroid and principal second moments of ``P``: ``(cx, cy, big, small, scale)`` with
+    ``big >= small`` the eigenvalues of the centred scatter matrix and ``scale = n · max|P|²``."""
+    n = P.shape[0]
+    cx = cy = 0.0
+    top = 0.0
+    for i in range(n):
+        cx += P[i, 0]
+        cy += P[i, 1]
+        top = max(top, abs(P[i, 0]), abs(P[i, 1]))
+    cx /= n
+    cy /= n
+    a = b = c = 0.0
+    for i in range(n):
+        x = P[i, 0] - cx
+        y = P[i, 1] - cy
+        a += x * x
+        b += x * y
+        c += y * y
+    half_gap = math.hypot((a - c) / 2.0, b)
+    return cx, cy, (a + c) / 2.0 + half_gap, (a + c) / 2.0 - half_gap, n * top * top
+
+
+@njit(cache=True, nogil=True)
+def _per_block(n_blocks, ratio):
+    """How many fine cells fall in each of ``n_blocks`` blocks (cell ``n`` in block
+    ``int((n + 0.5) * ratio)``), counting cells past the grid's edge."""
+    counts = np.zeros(n_blocks, dtype=np.int64)
+    n = 0
+    while True:
+        i = int((n + 0.5) * ratio)
+        if i >= n_blocks:
+            break
+        counts[i] += 1
+        n += 1
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def pool(states, r0, c0, h, w, ratio, free, occupied):
+    """The ``(h, w)`` wall and free masks of blocks ``1 / ratio`` fine cells wide from
+    ``(r0, c0)`` (``ratio`` = fine cell / block cell; fine cell ``(r, c)`` falls in block
+    ``(int((r - r0 + 0.5) · ratio), int((c - c0 + 0.5) · ratio))``, so a block covers a whole
+    or fractional number of cells and the blocks keep their true size; cells past the grid's
+    edge count as unknown): a wall where any cell is ``occupied``, free where more than half
+    are ``free`` and none is ``occupied``."""
+    wall = np.zeros((h, w), dtype=np.bool_)
+    n_free = np.zeros((h, w), dtype=np.int64)
+    rows_in = _per_block(h, ratio)
+    cols_in = _per_block(w, ratio)
+    for r in range(r0, states.shape[0]):
+        i = int((r - r0 + 0.5) * ratio)
+        if i >= h:
+            break
+        for c in range(c0, states.shape[1]):
+            j = int((c - c0 + 0.5) * ratio)
+            if j >= w:
+                break
+            v = states[r, c]
+            if v == occupied:
+                wall[i, j] = True
+            elif v == free:
+                n_free[i, j] += 1
+    is_free = np.empty((h, w), dtype=np.bool_)
+    for i in range(h):
+        for j in range(w):
+            is_free[i, j] = n_free[i, j] * 2 > rows_in[i] * cols_in[j] and not wall[i, j]
+    return wall, is_free
+
+
+@njit(cache=True, nogil=True)
+def raster_rotated(k, pts, centre_x, centre_y, cos_t, sin_t, res, half):
+    """Set ``k[l, side - 1 - iy, side - 1 - ix] = 1`` for each point of ``pts`` rotated by the
+    angle of ``(cos_t[l], sin_t[l])`` about the centre (``ix = floor(x' / res) + half``, the
+    same for ``y``): the flipped kernels of the FFT correlation, one per rotation ``l``."""
+    side = k.shape[1]
+    for layer in range(cos_t.shape[0]):
+        c, s = cos_t[layer], sin_t[layer]
+        for p in range(pts.shape[0]):
+            dx, dy = pts[p, 0] - centre_x, pts[p, 1] - centre_y
+            ix = int(math.floor((c * dx - s * dy) / res)) + half
+            iy = int(math.floor((s * dx + c * dy) / res)) + half
+            k[layer, side - 1 - iy, side - 1 - ix] = 1.0
