@@ -1,12 +1,14 @@
-"""Compiled loops of :mod:`fusion` (numba, cached on disk): ICP's nearest-neighbour pass, its
-closed-form fit and stopping rules (:func:`fusion.icp_svd`), and the grid merge's pooling and
-rotated rasters (:func:`fusion.merge_grids`).
+"""Compiled loops of :mod:`fusion` (numba, cached on disk), each for a loop no numpy/scipy
+call does without whole-array temporaries:
 
-Why compiled: ICP runs many times per merge on tens of points, where numpy's per-call
-overhead outweighs the arithmetic of an all-pairs pass; the grid merge reads a large, mostly
-unknown grid whose known part is small, so a loop over the known box replaces whole-grid
-passes and fancy-indexed rasters (tests check those loops against the numpy forms). No kernel
-here calls one of another module, so numba's per-file cache stays valid.
+- :func:`match_brute`: ICP's all-pairs nearest neighbours of small sets, with the objective
+  and the repeat test in the same pass (a KD-tree pays off only for large sets).
+- :func:`pool`: the grid merge's block pooling with blocks of a fractional number of cells,
+  over the known box of a large, mostly unknown grid.
+- :func:`raster_rotated`: the rotated points scattered into one FFT kernel per rotation.
+
+Tests check the last two against the numpy forms. No kernel here calls one of another
+module, so numba's per-file cache stays valid.
 """
 
 from __future__ import annotations
@@ -49,66 +51,6 @@ def match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep)
         if same and (prev_idx[i] != arg or prev_keep[i] != keep[i]):
             same = False
     return f, same
-
-
-@njit(cache=True, nogil=True)
-def fit_rigid(D, M, idx, keep):
-    """Closed-form Step 2 on the kept pairs ``(D[i], M[idx[i]])``: the proper rotation and
-    translation minimising ``Σ ‖M[idx[i]] − (R D[i] + T)‖²``. Returns ``(theta, tx, ty, n)``;
-    ``n < 2`` means there was nothing to fit (identity returned)."""
-    n = 0
-    dx = dy = mx = my = 0.0
-    for i in range(D.shape[0]):
-        if keep[i]:
-            n += 1
-            dx += D[i, 0]
-            dy += D[i, 1]
-            mx += M[idx[i], 0]
-            my += M[idx[i], 1]
-    if n < 2:
-        return 0.0, 0.0, 0.0, n
-    dx /= n
-    dy /= n
-    mx /= n
-    my /= n
-    sin_sum = 0.0
-    cos_sum = 0.0
-    for i in range(D.shape[0]):
-        if keep[i]:
-            px = D[i, 0] - dx
-            py = D[i, 1] - dy
-            qx = M[idx[i], 0] - mx
-            qy = M[idx[i], 1] - my
-            sin_sum += px * qy - py * qx
-            cos_sum += px * qx + py * qy
-    theta = math.atan2(sin_sum, cos_sum)
-    c = math.cos(theta)
-    s = math.sin(theta)
-    return theta, mx - (c * dx - s * dy), my - (s * dx + c * dy), n
-
-
-@njit(cache=True, nogil=True)
-def spread(P):
-    """Centroid and principal second moments of ``P``: ``(cx, cy, big, small, scale)`` with
-    ``big >= small`` the eigenvalues of the centred scatter matrix and ``scale = n · max|P|²``."""
-    n = P.shape[0]
-    cx = cy = 0.0
-    top = 0.0
-    for i in range(n):
-        cx += P[i, 0]
-        cy += P[i, 1]
-        top = max(top, abs(P[i, 0]), abs(P[i, 1]))
-    cx /= n
-    cy /= n
-    a = b = c = 0.0
-    for i in range(n):
-        x = P[i, 0] - cx
-        y = P[i, 1] - cy
-        a += x * x
-        b += x * y
-        c += y * y
-    half_gap = math.hypot((a - c) / 2.0, b)
-    return cx, cy, (a + c) / 2.0 + half_gap, (a + c) / 2.0 - half_gap, n * top * top
 
 
 @njit(cache=True, nogil=True)

@@ -19,9 +19,9 @@ ICP minimises, and what is implemented, is the sum over nearest-neighbour pairs,
 
 Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'·m')``, identical to
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
-and free of LAPACK call overhead. For small sets the whole loop is one compiled call with an
-all-pairs nearest-neighbour pass (:func:`fusion._kernels.match_brute`, compiled); large ones use
-a KD-tree (scipy's ``cKDTree``, one thread) built once on ``M``. Both feed one loop.
+and free of LAPACK call overhead (:func:`rigid_fit`). Small sets find their nearest neighbours
+by one compiled all-pairs pass (:func:`fusion._kernels.match_brute`), large ones by a KD-tree
+(scipy's ``cKDTree``, one thread) built once on ``M``; both feed one loop.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fusion._kernels import fit_rigid, match_brute, spread
+from fusion._kernels import match_brute
 from fusion.rigid import Rigid2D
 from topo.validation import as_points, check_int, check_real
 
@@ -132,8 +132,19 @@ def degeneracy(points: np.ndarray, name: str, rel: float = 1e-9) -> str | None:
     return moments_degeneracy(spread(points), name, rel)
 
 
+def spread(P: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Centroid and principal second moments of the points ``P``: ``(cx, cy, big, small,
+    scale)`` with ``big >= small`` the eigenvalues of the centred scatter matrix and
+    ``scale = n · max|P|²``."""
+    centre = P.mean(axis=0)
+    X = P - centre
+    small, big = np.linalg.eigvalsh(X.T @ X).tolist()
+    top = float(np.abs(P).max())
+    return float(centre[0]), float(centre[1]), big, small, len(P) * top * top
+
+
 def moments_degeneracy(moments: tuple[float, ...], name: str, rel: float = 1e-9) -> str | None:
-    """:func:`degeneracy` of points from their :func:`fusion._kernels.spread` moments."""
+    """:func:`degeneracy` of points from their :func:`spread` moments."""
     _, _, big, small, scale = moments
     if big <= 1e-24 * scale + 1e-300:
         return f"all points of {name} coincide: rotation undetermined, identity used"
@@ -313,11 +324,11 @@ def _icp_loop(match, M: np.ndarray, D: np.ndarray, theta: float, t: np.ndarray, 
             break
         if iterations == max_iter:
             break
-        new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)
+        n_fit = int(np.count_nonzero(keep))
         if n_fit < 2:
             short = n_fit
             break
-        theta, t = new_theta, np.array([tx, ty])
+        theta, t = rigid_fit(D[keep], M[idx[keep]])
         iterations += 1
         idx, prev_idx = prev_idx, idx
         keep, prev_keep = prev_keep, keep
