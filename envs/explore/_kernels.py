@@ -1,9 +1,14 @@
-"""Compiled ``local_map`` sampling of :class:`envs.explore.mapping.LocalMapSampler` (numba,
-cached on disk): every robot, every step, a heading-up square of nearest cells gathered from
-one or more grids. numpy's fancy-indexed form of the same gather builds a dozen temporaries the
-size of the image per grid, which cost far more than the gather itself; a profile of the env
-step puts this sampling among its largest costs, so it stays one compiled pass. No kernel here
-calls one of another module, so numba's per-file cache stays valid."""
+"""Compiled per-step observation loops of :mod:`envs.explore` (numba, cached on disk), run for
+every robot at every step, where a profile of the env step shows numpy's forms costing far more
+than the loops:
+
+- :func:`sample_states`, :func:`sample_image`: the ``local_map`` gather of
+  :class:`envs.explore.mapping.LocalMapSampler`, nearest cells of one or more grids under a
+  heading-up square (numpy's fancy-indexed form builds a dozen image-sized temporaries per grid).
+- :func:`nearest_nodes`: the ``graph_nodes`` rows of :mod:`envs.explore.observations`, a few
+  dozen nodes (a dozen small numpy calls, each costing more than the arithmetic).
+
+No kernel here calls one of another module, so numba's per-file cache stays valid."""
 
 from __future__ import annotations
 
@@ -83,3 +88,30 @@ def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
                     if st2 > st:
                         st = st2
             image[0, i, j] = values[uint64(st)]
+
+
+@njit(cache=True, nogil=True)
+def nearest_nodes(xy, x, y, c, s, static, lim, nodes, mask):
+    """The ``graph_nodes`` rows: of the nodes ``xy``, seen from ``(x, y)`` at heading ``(cos,
+    sin) = (c, s)`` — offsets ``(c dx + s dy, -s dx + c dy)`` — the ``len(nodes)`` nearest (by
+    squared distance ``x² + y²`` of their offsets; stable order: ties by index) get their
+    offsets clipped to ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``;
+    returns their indices."""
+    n = xy.shape[0]
+    rel = np.empty((n, 2))
+    dist2 = np.empty(n)
+    for q in range(n):
+        dx = xy[q, 0] - x
+        dy = xy[q, 1] - y
+        rel[q, 0] = c * dx + s * dy
+        rel[q, 1] = c * dy - s * dx
+        dist2[q] = rel[q, 0] * rel[q, 0] + rel[q, 1] * rel[q, 1]
+    order = np.argsort(dist2, kind="mergesort")[: nodes.shape[0]]
+    for j in range(order.shape[0]):
+        q = order[j]
+        nodes[j, 0] = min(max(rel[q, 0], -lim), lim)
+        nodes[j, 1] = min(max(rel[q, 1], -lim), lim)
+        for f in range(static.shape[1]):
+            nodes[j, 2 + f] = static[q, f]
+        mask[j] = 1.0
+    return order

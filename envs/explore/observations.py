@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from gymnasium import spaces
 
+from envs.explore._kernels import nearest_nodes
 from envs.explore.comm import TeamViews
 from envs.explore.config import EnvConfig
 from envs.explore.mapping import LocalMapSampler, RobotMap, compose_pose
@@ -70,23 +71,6 @@ def observation_space(config: EnvConfig, frame_radius: float,
         obs["teammates"] = spaces.Box(np.tile(lo, (n, 1)), np.tile(hi, (n, 1)))
     return spaces.Dict(obs)
 
-
-
-def nearest_nodes(xy: np.ndarray, x: float, y: float, c: float, s: float, static: np.ndarray,
-                  lim: float, nodes: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The ``graph_nodes`` rows: of the nodes ``xy``, seen from ``(x, y)`` at heading ``(cos,
-    sin) = (c, s)`` — offsets ``(c dx + s dy, -s dx + c dy)`` — the ``len(nodes)`` nearest (by
-    squared distance of their offsets; ties by index) get their offsets clipped to
-    ``[-lim, lim]`` and their ``static`` features, and a 1 in ``mask``; returns their
-    indices."""
-    dx, dy = xy[:, 0] - x, xy[:, 1] - y
-    rel = np.column_stack((c * dx + s * dy, c * dy - s * dx))
-    order = np.argsort(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1], kind="stable")
-    order = order[:len(nodes)]
-    nodes[:len(order), :2] = np.clip(rel[order], -lim, lim)
-    nodes[:len(order), 2:2 + static.shape[1]] = static[order]
-    mask[:len(order)] = 1.0
-    return order
 
 
 def adjacency(order: np.ndarray, edges: np.ndarray, n_nodes: int, adj: np.ndarray) -> None:

@@ -241,7 +241,7 @@ def test_structural_merge_on_a_small_env_pair():
 def test_nearest_nodes_are_the_nearest_offsets(seed, n, n_max, theta):
     """More nodes than rows, equal distances (stable: ties by index), offsets beyond the clip,
     any heading: the rows of the rotated offsets, nearest first, at a tolerance."""
-    from envs.explore.observations import nearest_nodes
+    from envs.explore._kernels import nearest_nodes
 
     rng = np.random.default_rng(seed)
     xy = np.round(rng.uniform(-30, 30, (n, 2)), int(rng.integers(0, 2)))
