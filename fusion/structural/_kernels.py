@@ -1,18 +1,23 @@
-"""Compiled loops of the structural merge (numba, cached on disk): the distance-to-path raster
-of each map (:mod:`fusion.structural.prepare`), the hypotheses' motions, the raster of A, the
-refitted coarse score, distinct-candidate selection and batched refinement
-(:mod:`fusion.structural.hypotheses`), the evidence of an alignment
-(:mod:`fusion.structural.evidence`) and B's path points paired with A's paths
-(:mod:`fusion.structural.refine`).
+"""Compiled loops of the structural merge (numba, cached on disk); the once-per-merge steps are
+numpy in their modules. Each kernel here, and why no numpy/scipy call does it as is:
 
-Each runs per hypothesis (thousands a merge), per path sample or per raster cell, where
-numpy's ``(H, N_B, N_A)`` temporaries and per-call overhead would cost more than the
-arithmetic, and each keeps a branchy rule (nearest of a compatible kind, mutual nearest, a
-greedy suppression, a per-segment band of cells) that no numpy/scipy routine computes as is;
-the once-per-merge steps are numpy in their modules. Conventions: a transform is
-``(theta, tx, ty)`` with ``p_A = R(theta) p_B + (tx, ty)``; ``compat`` is the node-code
-compatibility table indexed ``[code_a, code_b]``. Kernels call only kernels of this module, so
-numba's per-file cache stays valid.
+- :func:`path_field` (:mod:`~fusion.structural.prepare`): each segment's band of raster cells,
+  row by row; a dense points × segments distance would cost far more.
+- :func:`pair_motions`, :func:`refined_scores`, :func:`select_distinct`, :func:`refine_batch`
+  (:mod:`~fusion.structural.hypotheses`): per hypothesis (thousands a merge) a motion, a raster
+  lookup with one closed-form refit, a greedy suppression (sequential by nature), a nearest
+  compatible node per gate; numpy's ``(H, N_B, N_A)`` forms are slower and sum in another order.
+- :func:`paint_nearest`, :func:`paint_segments`: A's raster, the nearest compatible node per cell
+  (ties to the earlier node) and the cells near A's paths.
+- :func:`evidence`, :func:`evidence_batch`, :func:`path_agreement`
+  (:mod:`~fusion.structural.evidence`): per hypothesis, mutual nearest nodes of compatible kinds,
+  conflicts, crossings and branches; path samples read off the other map's raster.
+- :func:`nearest_on_paths` (:mod:`~fusion.structural.refine`): each path sample's nearest
+  segment point within a gate, skipping samples by the raster.
+
+Conventions: a transform is ``(theta, tx, ty)`` with ``p_A = R(theta) p_B + (tx, ty)``;
+``compat`` is the node-code compatibility table indexed ``[code_a, code_b]``. Kernels call only
+kernels of this module, so numba's per-file cache stays valid.
 """
 
 from __future__ import annotations
