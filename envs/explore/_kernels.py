@@ -2,7 +2,7 @@
 every robot at every step, where a profile of the env step shows numpy's forms costing far more
 than the loops:
 
-- :func:`sample_states`, :func:`sample_image`: the ``local_map`` gather of
+- :func:`sample_image`: the ``local_map`` gather of
   :class:`envs.explore.mapping.LocalMapSampler`, nearest cells of one or more grids under a
   heading-up square (numpy's fancy-indexed form builds a dozen image-sized temporaries per grid).
 - :func:`nearest_nodes`: the ``graph_nodes`` rows of :mod:`envs.explore.observations`, a few
@@ -22,37 +22,15 @@ NO_STATES = np.zeros((0, 0), dtype=np.int8)
 
 
 @njit(cache=True, nogil=True)
-def sample_states(out, states, offsets, ox, oy, res, x, y, theta):
-    """``out[k] = max(out[k], state)`` of the cell of ``states`` (origin ``ox, oy``, cell size
-    ``res``) under each offset ``(forward, left)`` (``offsets``, ``(2, K)`` metres) of the pose
-    ``(x, y, theta)``; cells outside the grid are unknown (0)."""
-    h, w = states.shape
-    inv = 1.0 / res
-    c = math.cos(theta) * inv
-    s = math.sin(theta) * inv
-    u0 = (x - ox) * inv
-    v0 = (y - oy) * inv
-    for k in range(offsets.shape[1]):
-        f = offsets[0, k]
-        g = offsets[1, k]
-        u = u0 + c * f - s * g
-        v = v0 + s * f + c * g
-        if 0.0 <= u < w and 0.0 <= v < h:
-            val = states[int(v), int(u)]
-            if val > out[k]:
-                out[k] = val
-
-
-@njit(cache=True, nogil=True)
 def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
                  states2, ox2, oy2, res2, x2, y2, theta2):
     """The ``local_map`` pixels in one pass: pixel ``(i, j)`` of ``image`` (``(1, n, n)``
-    uint8) gets ``values[state]`` of :func:`sample_states`' state at the offset ``(fwd[i],
-    left[j])`` of ``states`` around ``(x, y, theta)`` or, when ``states2`` is not empty, of
-    the larger of that and the state of ``states2`` around ``(x2, y2, theta2)`` (each grid
-    with its own origin and cell size). The same arithmetic as :func:`sample_states`, in the
-    same order, with each row's and column's share computed once (and unsigned indices: the
-    bounds are checked first)."""
+    uint8) gets ``values[state]``, ``state`` the code of the cell of ``states`` (origin ``ox,
+    oy``, cell size ``res``; unknown, 0, outside the grid) under the offset ``(fwd[i],
+    left[j])`` (forward, left; metres) of the pose ``(x, y, theta)`` or, when ``states2`` is
+    not empty, the larger of that and the code of ``states2`` under the same offset of ``(x2,
+    y2, theta2)`` (each grid with its own origin and cell size). Each row's and column's share
+    is computed once; indices are unsigned (the bounds are checked first)."""
     n = fwd.shape[0]
     h, w = states.shape
     inv = 1.0 / res
@@ -72,7 +50,7 @@ def sample_image(image, values, fwd, left, states, ox, oy, res, x, y, theta,
     sg2, cg2 = s2 * left, c2 * left
     for i in range(n):
         f = fwd[i]
-        a, b = u0 + c * f, v0 + s * f  # u = u0 + c f - s g, left to right as sample_states
+        a, b = u0 + c * f, v0 + s * f  # u = u0 + c f - s g, left to right
         a2, b2 = u02 + c2 * f, v02 + s2 * f
         for j in range(n):
             u = a - sg[j]

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.explore._kernels import NO_STATES, sample_image, sample_states
+from envs.explore._kernels import NO_STATES, sample_image
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
@@ -408,6 +408,10 @@ class OracleCoverage:
         return new
 
 
+_STATE_CODES = np.arange(len(LOCAL_MAP_VALUES), dtype=np.uint8)
+"""The identity table: :meth:`LocalMapSampler.sample` gathers the cells' state codes."""
+
+
 class LocalMapSampler:
     """The egocentric ``local_map``: a heading-up square around a pose, nearest-cell sampling.
 
@@ -416,14 +420,12 @@ class LocalMapSampler:
     centre facing up, its left on the image's left.
     """
 
-    __slots__ = ("size", "_steps", "_offsets")
+    __slots__ = ("size", "_steps")
 
     def __init__(self, size: int, resolution: float) -> None:
         self.size = size
         # row r lies _steps[r] ahead, column c _steps[c] to the left
         self._steps = (size / 2.0 - np.arange(size) - 0.5) * resolution
-        fwd, left = np.meshgrid(self._steps, self._steps, indexing="ij")
-        self._offsets = np.ascontiguousarray(np.stack([fwd.ravel(), left.ravel()]))
 
     def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
                out: np.ndarray | None = None) -> np.ndarray:
@@ -431,10 +433,14 @@ class LocalMapSampler:
         grid's frame); outside the grid is unknown. With ``out`` (a previous sample), the
         cell-wise maximum of both is written there (known beats unknown, occupied beats
         free) and returned."""
+        img = np.empty((1, self.size, self.size), dtype=np.uint8)
+        sample_image(img, _STATE_CODES, self._steps, self._steps, states, geometry.origin[0],
+                     geometry.origin[1], geometry.resolution, float(pose[0]), float(pose[1]),
+                     float(pose[2]), NO_STATES, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+        got = img.reshape(-1).view(np.int8)
         if out is None:
-            out = np.zeros(self.size * self.size, dtype=np.int8)
-        sample_states(out, states, self._offsets, geometry.origin[0], geometry.origin[1],
-                      geometry.resolution, float(pose[0]), float(pose[1]), float(pose[2]))
+            return got
+        np.maximum(out, got, out=out)
         return out
 
     def image(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
