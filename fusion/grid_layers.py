@@ -17,7 +17,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
 
-from fusion import _grid_kernels as GK
+from fusion import _kernels as GK
 
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2  # topo.grid.CellState codes
 
@@ -39,9 +39,11 @@ def pooled_layers(grid: Any, res: float | tuple[float, ...]
     resolutions, a list of them (the grid is read once); ``None`` if nothing is known. Grids
     coarser than ``res`` give pooled layers with gaps."""
     states = cell_states(grid)
-    r0, r1, c0, c1 = GK.known_box(states, UNKNOWN)
-    if r0 < 0:
+    known = states != UNKNOWN
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if not len(rows):
         return None
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
     fine = float(grid.resolution)
     origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * fine
     out = []

@@ -19,9 +19,9 @@ ICP minimises, and what is implemented, is the sum over nearest-neighbour pairs,
 
 Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'·m')``, identical to
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
-and free of LAPACK call overhead. For small sets the whole loop is one compiled call with an
-all-pairs nearest-neighbour pass (:func:`fusion._icp_kernels.icp_brute`); large ones use a KD-tree
-(scipy's ``cKDTree``, one thread) built once on ``M``.
+and free of LAPACK call overhead (:func:`rigid_fit`). Small sets find their nearest neighbours
+by one compiled all-pairs pass (:func:`fusion._kernels.match_brute`), large ones by a KD-tree
+(scipy's ``cKDTree``, one thread) built once on ``M``; both feed one loop.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fusion._icp_kernels import fit_rigid, icp_brute, spread, stops
+from fusion._kernels import match_brute
 from fusion.inputs import check_point_count
 from fusion.rigid import Rigid2D
 from topo.validation import as_points, check_int, check_real
@@ -133,14 +133,39 @@ def degeneracy(points: np.ndarray, name: str, rel: float = 1e-9) -> str | None:
     return moments_degeneracy(spread(points), name, rel)
 
 
+def spread(P: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Centroid and principal second moments of the points ``P``: ``(cx, cy, big, small,
+    scale)`` with ``big >= small`` the eigenvalues of the centred scatter matrix and
+    ``scale = n · max|P|²``."""
+    centre = P.mean(axis=0)
+    X = P - centre
+    small, big = np.linalg.eigvalsh(X.T @ X).tolist()
+    top = float(np.abs(P).max())
+    return float(centre[0]), float(centre[1]), big, small, len(P) * top * top
+
+
 def moments_degeneracy(moments: tuple[float, ...], name: str, rel: float = 1e-9) -> str | None:
-    """:func:`degeneracy` of points from their :func:`fusion._icp_kernels.spread` moments."""
+    """:func:`degeneracy` of points from their :func:`spread` moments."""
     _, _, big, small, scale = moments
     if big <= 1e-24 * scale + 1e-300:
         return f"all points of {name} coincide: rotation undetermined, identity used"
     if small <= rel * big:
         return f"{name} is collinear: rotation about the line is ambiguous"
     return None
+
+
+class _BruteMatcher:
+    """All-pairs nearest neighbours (small sets): one compiled pass,
+    :func:`fusion._kernels.match_brute`."""
+
+    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
+        self.M, self.D, self.max_d2 = M, D, max_d2
+
+    def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
+                 prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
+                 keep: np.ndarray) -> tuple[float, bool]:
+        return match_brute(self.D, self.M, theta, t[0], t[1], self.max_d2, prev_idx, prev_keep,
+                           idx, d2, keep)
 
 
 class _TreeMatcher:
@@ -254,13 +279,9 @@ def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
     n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
     rule_tau = -1.0 if tau is None else tau  # the stopping rules, off when negative
     rule_rel = -1.0 if rel_tol is None else rel_tol
-    if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS:  # the whole loop compiled
-        theta, tx, ty, iterations, errors, converged, idx, keep, short = icp_brute(
-            D, M, theta, t[0], t[1], max_d2, n_trim, rule_tau, rule_rel, max_iter)
-        t = np.array([tx, ty])
-    else:
-        theta, t, iterations, errors, converged, idx, keep, short = _icp_tree(
-            M, D, theta, t, max_d2, n_trim, rule_tau, rule_rel, max_iter)
+    matcher = _BruteMatcher if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS else _TreeMatcher
+    theta, t, iterations, errors, converged, idx, keep, short = _icp_loop(
+        matcher(M, D, max_d2), M, D, theta, t, n_trim, rule_tau, rule_rel, max_iter)
     if short >= 0:
         degenerate = degenerate or (
             f"only {short} pair(s) within max_distance/trim: transform not updated")
@@ -270,12 +291,20 @@ def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
                      degenerate=degenerate)
 
 
-def _icp_tree(M: np.ndarray, D: np.ndarray, theta: float, t: np.ndarray, max_d2: float,
-              n_trim: int, tau: float, rel_tol: float, max_iter: int):
-    """:func:`icp_svd`'s loop with the KD-tree matcher (large point sets); the same rules and
-    result tuple as the compiled brute-force loop ``fusion._icp_kernels.icp_brute``, but
-    ``(theta, t, ...)`` with ``t`` an array."""
-    match = _TreeMatcher(M, D, max_d2)
+def _stops(prev: float, f: float, same: bool, tau: float, rel_tol: float) -> bool:
+    """ICP's stopping rules after an update: the pairs repeat, or the objective changed from
+    ``prev`` to ``f`` by less than ``tau`` or by at most ``rel_tol × prev`` (each rule off when
+    negative)."""
+    change = abs(prev - f)
+    return same or (tau >= 0.0 and change < tau) or (rel_tol >= 0.0 and change <= rel_tol * prev)
+
+
+def _icp_loop(match, M: np.ndarray, D: np.ndarray, theta: float, t: np.ndarray, n_trim: int,
+              tau: float, rel_tol: float, max_iter: int):
+    """:func:`icp_svd`'s loop (Steps 2–4) with the nearest-neighbour pass ``match``
+    (:class:`_BruteMatcher` or :class:`_TreeMatcher`); ``tau`` / ``rel_tol`` negative when
+    unused. Returns ``(theta, t, iterations, errors, converged, idx, keep, short)``: ``short``
+    the number of pairs of a fit that had fewer than 2 (the loop stopped there), else ``-1``."""
     idx = np.empty(len(D), dtype=np.int64)
     d2 = np.empty(len(D))
     keep = np.empty(len(D), dtype=bool)
@@ -292,16 +321,16 @@ def _icp_tree(M: np.ndarray, D: np.ndarray, theta: float, t: np.ndarray, max_d2:
             f = float(d2[keep].sum())
             same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         errors.append(f)
-        if iterations and stops(errors[-2], f, same, tau, rel_tol):
+        if iterations and _stops(errors[-2], f, same, tau, rel_tol):
             converged = True
             break
         if iterations == max_iter:
             break
-        new_theta, tx, ty, n_fit = fit_rigid(D, M, idx, keep)
+        n_fit = int(np.count_nonzero(keep))
         if n_fit < 2:
             short = n_fit
             break
-        theta, t = new_theta, np.array([tx, ty])
+        theta, t = rigid_fit(D[keep], M[idx[keep]])
         iterations += 1
         idx, prev_idx = prev_idx, idx
         keep, prev_keep = prev_keep, keep

@@ -21,7 +21,7 @@ depends on the unknown is flagged:
    (the clearance must fall by that much on every way to a higher maximum) and whose
    clearance is at least ``min_clearance``: room centres, corridor crossings and bends, the
    middle of wide spots. The merge tree of the field's superlevel sets (a compiled union-find,
-   :func:`topo._extract_kernels.merge_tree`) finds them, with each pixel's basin by steepest
+   :func:`topo._kernels.merge_tree`) finds them, with each pixel's basin by steepest
    ascent; the basins of the other maxima join the place they drain into. A place sits at the
    middle of its summit (the cells within ``summit_tolerance`` of its maximum): a room's
    clearance peaks on a nearly flat ridge. Persistence is what
@@ -76,7 +76,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import remove_small_holes, skeletonize
 
-from topo._extract_kernels import basin_paths, box_counts, merge_tree, route, touching
+from topo._kernels import basin_paths, merge_tree, route
 from topo.graph import NodeKind, TopoMap, kinds_from_degree
 from topo.grid import CellState
 from topo.validation import check_real, config_from
@@ -267,13 +267,26 @@ def _free_space(states: np.ndarray, res: float, cfg: ExtractConfig) -> np.ndarra
 
 
 # ------------------------------------------------------------------------------ graph
+def _touching(basins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of 8-connected cells in two different basins (labels ``>= 0``), once:
+    ``(a, b)`` flat indices, ``b`` the right, lower-left, lower or lower-right neighbour."""
+    flat = np.arange(basins.size).reshape(basins.shape)
+    ia, ib = [], []
+    for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, 1:], np.s_[1:, :-1]),
+                 (np.s_[:-1, :], np.s_[1:, :]), (np.s_[:-1, :-1], np.s_[1:, 1:])):
+        across = (basins[a] >= 0) & (basins[b] >= 0) & (basins[a] != basins[b])
+        ia.append(flat[a][across])
+        ib.append(flat[b][across])
+    return np.concatenate(ia), np.concatenate(ib)
+
+
 def _passes(basins: np.ndarray, field: np.ndarray
             ) -> dict[tuple[int, int], tuple[tuple[int, int], tuple[int, int]]]:
     """For every pair ``(p, q)``, ``p < q``, of touching basins (labels ≥ 0, 8-connected): the
     two touching cells of their common boundary whose lower value is the highest, the lower
     cell (the pass) first."""
     h, w = basins.shape
-    ia, ib = touching(basins)
+    ia, ib = _touching(basins)
     if not len(ia):
         return {}
     fa, fb = field.flat[ia], field.flat[ib]
@@ -291,7 +304,7 @@ def _passes(basins: np.ndarray, field: np.ndarray
 
 def _route(parent: np.ndarray, width: int, start: tuple[int, int]) -> np.ndarray:
     """``(K, 2)`` cells ``(row, col)`` from ``start`` along ``parent``
-    (:func:`topo._extract_kernels.basin_paths`) to its basin's place."""
+    (:func:`topo._kernels.basin_paths`) to its basin's place."""
     return route(parent, width, start[0] * width + start[1])
 
 
@@ -359,6 +372,16 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _box_sums(mask: np.ndarray, cells: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Per node ``k``, the cells of ``mask`` set in the square of half-side ``half[k]`` about
+    ``cells[k]`` (row, col), clipped to the grid: read off a summed-area table."""
+    table = np.zeros((mask.shape[0] + 1, mask.shape[1] + 1), dtype=np.int64)
+    np.cumsum(np.cumsum(mask, axis=0, dtype=np.int64), axis=1, out=table[1:, 1:])
+    r0, r1 = (np.clip(cells[:, 0] + d, 0, mask.shape[0]) for d in (-half, half + 1))
+    c0, c1 = (np.clip(cells[:, 1] + d, 0, mask.shape[1]) for d in (-half, half + 1))
+    return table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+
+
 def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
               wall_distance: np.ndarray, res: float, cfg: ExtractConfig) -> np.ndarray:
     """Whether the edge of the free space around each node (its non-free cells that touch a
@@ -366,7 +389,7 @@ def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
     ``frontier_fraction`` open unknown rather than occupied. Counted on the edge, so that thick
     walls (a floor plan) and thin ones (a sonar map) weigh alike; unknown within
     ``frontier_margin`` of an occupied cell (``wall_distance``) is a gap in a wall seen in
-    fragments, not open unknown, and is not counted (:func:`topo._extract_kernels.box_counts`).
+    fragments, not open unknown, and is not counted (:func:`_box_sums`).
     Also flagged: a node with open unknown within its clearance less ``frontier_margin`` (a
     square of that half-side: inside its own free disc, which a wall bounds)."""
     free = states == _FREE
@@ -374,8 +397,9 @@ def _frontier(cells: np.ndarray, clearance: np.ndarray, states: np.ndarray,
     open_unknown = edge & (states == _UNKNOWN) & (wall_distance > cfg.frontier_margin)
     outer = np.ceil((clearance + cfg.frontier_margin) / res).astype(np.int64)
     inner = np.floor((clearance - cfg.frontier_margin) / res).astype(np.int64)
-    n_unknown, n_occupied, inside = box_counts(open_unknown, edge & (states == _OCCUPIED),
-                                               cells, outer, inner)
+    n_unknown = _box_sums(open_unknown, cells, outer)
+    n_occupied = _box_sums(edge & (states == _OCCUPIED), cells, outer)
+    inside = (inner >= 0) & (_box_sums(open_unknown, cells, np.maximum(inner, 0)) > 0)
     return (n_unknown > cfg.frontier_fraction * (n_unknown + n_occupied)) | inside
 
 

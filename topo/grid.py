@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from topo._grid_kernels import NO_COUNTS, NO_MASK, sonar_update
+from topo._kernels import NO_COUNTS, NO_MASK, sonar_update
 from topo.validation import as_points, check_real
 
 

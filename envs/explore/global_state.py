@@ -15,7 +15,6 @@ from collections.abc import Sequence
 import numpy as np
 from gymnasium import spaces
 
-from envs.explore._map_kernels import block_fractions
 from envs.explore.mapping import OracleCoverage, SharedMap, cell_indices
 from fusion.rigid import Rigid2D
 
@@ -48,9 +47,9 @@ def state_space(robots: int = 2) -> spaces.Box:
 def _blocks(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Mean of ``mask`` at the sampled ``cells`` (listed block by block; ``-1``: outside,
     False) per block, ``(STATE_MAP_SIZE**2,)`` float32, row-major, row 0 at the bottom."""
-    out = np.empty(STATE_MAP_SIZE ** 2, dtype=np.float32)
-    block_fractions(mask, cells, out)
-    return out
+    hits = (cells >= 0) & mask.ravel()[np.maximum(cells, 0)]
+    per_block = hits.reshape(STATE_MAP_SIZE ** 2, -1)
+    return (per_block.sum(axis=1) / per_block.shape[1]).astype(np.float32)
 
 
 class GlobalState:

@@ -27,14 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.explore._map_kernels import (
-    NO_STATES,
-    cell_box,
-    or_patch,
-    sample_image,
-    sample_states,
-    warp_patch,
-)
+from envs.explore._kernels import NO_STATES, sample_image
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
@@ -56,12 +49,13 @@ class Geometry:
     def window(self, xy: np.ndarray, margin: int) -> tuple[slice, slice] | None:
         """Row and column slices of the cells covering points ``xy`` (``(N, 2)``) plus
         ``margin`` cells, clipped to the grid; ``None`` if that is empty."""
-        lo = xy.min(axis=0)
-        hi = xy.max(axis=0)
-        r0, r1, c0, c1 = cell_box(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]),
-                                  self.origin[0], self.origin[1], self.resolution,
-                                  self.shape[0], self.shape[1], margin).tolist()
-        if r0 == r1:
+        (lo_x, lo_y), (hi_x, hi_y) = xy.min(axis=0).tolist(), xy.max(axis=0).tolist()
+        inv = 1.0 / self.resolution
+        r0 = max(math.floor((lo_y - self.origin[1]) * inv) - margin, 0)
+        r1 = min(math.floor((hi_y - self.origin[1]) * inv) + margin + 1, self.shape[0])
+        c0 = max(math.floor((lo_x - self.origin[0]) * inv) - margin, 0)
+        c1 = min(math.floor((hi_x - self.origin[0]) * inv) + margin + 1, self.shape[1])
+        if r0 >= r1 or c0 >= c1:
             return None
         return slice(r0, r1), slice(c0, c1)
 
@@ -106,12 +100,24 @@ def warp_window(dst: Geometry, src: Geometry, src_mask: np.ndarray,
     drs, dcs = dwin
     inv = transform.inverse() if inverse is None else inverse
     r, t = inv.R, inv.T
-    # the source cell under every destination cell centre, compiled
-    out = np.zeros((drs.stop - drs.start, dcs.stop - dcs.start), dtype=src_mask.dtype)
-    warp_patch(out, src_mask, rs.start, cs.start, rs.stop - rs.start, cs.stop - cs.start,
-               dst.origin[0], dst.origin[1], dst.resolution, drs.start, dcs.start, x0, y0, sres,
-               r[0, 0], r[0, 1], r[1, 0], r[1, 1], t[0], t[1])
+    # the source cell under every destination cell centre (moved by the inverse motion)
+    x = dst.origin[0] + (np.arange(dcs.start, dcs.stop) + 0.5) * dst.resolution
+    y = dst.origin[1] + (np.arange(drs.start, drs.stop) + 0.5) * dst.resolution
+    iu = np.floor((r[0, 0] * x[None, :] + r[0, 1] * y[:, None] + (t[0] - x0)) / sres)
+    iv = np.floor((r[1, 0] * x[None, :] + r[1, 1] * y[:, None] + (t[1] - y0)) / sres)
+    inside = (iu >= 0) & (iu < cs.stop - cs.start) & (iv >= 0) & (iv < rs.stop - rs.start)
+    out = np.zeros(inside.shape, dtype=src_mask.dtype)
+    out[inside] = src_mask[rs.start + iv[inside].astype(np.int64),
+                           cs.start + iu[inside].astype(np.int64)]
     return dwin, out
+
+
+def _or_patch(dst: np.ndarray, patch: np.ndarray, rs: slice, cs: slice) -> int:
+    """``dst[rs, cs] |= patch`` (bool); returns how many cells of ``dst`` became true."""
+    view = dst[rs, cs]
+    new = int(np.count_nonzero(patch & ~view))
+    view |= patch
+    return new
 
 
 class RobotMap:
@@ -291,7 +297,7 @@ class SharedMap:
             return 0
         if index == self.owner:
             rs, cs = window
-            new = or_patch(self.ever, robot_map.ever[rs, cs], rs.start, cs.start)
+            new = _or_patch(self.ever, robot_map.ever[rs, cs], rs, cs)
         else:
             member = self.members.get(index)
             if member is None:
@@ -301,7 +307,7 @@ class SharedMap:
             if res is None:
                 return 0
             (rs, cs), vals = res
-            new = or_patch(self.ever, vals, rs.start, cs.start)
+            new = _or_patch(self.ever, vals, rs, cs)
         self.count += new
         return new
 
@@ -402,6 +408,10 @@ class OracleCoverage:
         return new
 
 
+_STATE_CODES = np.arange(len(LOCAL_MAP_VALUES), dtype=np.uint8)
+"""The identity table: :meth:`LocalMapSampler.sample` gathers the cells' state codes."""
+
+
 class LocalMapSampler:
     """The egocentric ``local_map``: a heading-up square around a pose, nearest-cell sampling.
 
@@ -410,14 +420,12 @@ class LocalMapSampler:
     centre facing up, its left on the image's left.
     """
 
-    __slots__ = ("size", "_steps", "_offsets")
+    __slots__ = ("size", "_steps")
 
     def __init__(self, size: int, resolution: float) -> None:
         self.size = size
         # row r lies _steps[r] ahead, column c _steps[c] to the left
         self._steps = (size / 2.0 - np.arange(size) - 0.5) * resolution
-        fwd, left = np.meshgrid(self._steps, self._steps, indexing="ij")
-        self._offsets = np.ascontiguousarray(np.stack([fwd.ravel(), left.ravel()]))
 
     def sample(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,
                out: np.ndarray | None = None) -> np.ndarray:
@@ -425,10 +433,14 @@ class LocalMapSampler:
         grid's frame); outside the grid is unknown. With ``out`` (a previous sample), the
         cell-wise maximum of both is written there (known beats unknown, occupied beats
         free) and returned."""
+        img = np.empty((1, self.size, self.size), dtype=np.uint8)
+        sample_image(img, _STATE_CODES, self._steps, self._steps, states, geometry.origin[0],
+                     geometry.origin[1], geometry.resolution, float(pose[0]), float(pose[1]),
+                     float(pose[2]), NO_STATES, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+        got = img.reshape(-1).view(np.int8)
         if out is None:
-            out = np.zeros(self.size * self.size, dtype=np.int8)
-        sample_states(out, states, self._offsets, geometry.origin[0], geometry.origin[1],
-                      geometry.resolution, float(pose[0]), float(pose[1]), float(pose[2]))
+            return got
+        np.maximum(out, got, out=out)
         return out
 
     def image(self, states: np.ndarray, geometry: Geometry, pose: np.ndarray,

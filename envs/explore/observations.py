@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from gymnasium import spaces
 
-from envs.explore._map_kernels import adjacency, nearest_nodes
+from envs.explore._kernels import nearest_nodes
 from envs.explore.comm import TeamViews
 from envs.explore.config import EnvConfig
 from envs.explore.mapping import LocalMapSampler, RobotMap, compose_pose
@@ -71,6 +71,17 @@ def observation_space(config: EnvConfig, frame_radius: float,
         obs["teammates"] = spaces.Box(np.tile(lo, (n, 1)), np.tile(hi, (n, 1)))
     return spaces.Dict(obs)
 
+
+
+def adjacency(order: np.ndarray, edges: np.ndarray, n_nodes: int, adj: np.ndarray) -> None:
+    """``graph_adjacency``: 1 in ``adj`` (zeros) at ``(j, k)`` and ``(k, j)`` for every edge
+    of ``edges`` (``(E, 2)`` node indices, ``n_nodes`` nodes) joining the listed nodes
+    ``order[j]`` and ``order[k]``."""
+    slot = np.full(n_nodes, -1, dtype=np.int64)
+    slot[order] = np.arange(len(order))
+    ends = slot[edges].reshape(-1, 2)
+    ends = ends[(ends >= 0).all(axis=1)]
+    adj[ends[:, 0], ends[:, 1]] = adj[ends[:, 1], ends[:, 0]] = 1.0
 
 class GraphEncoder:
     """One robot's ``graph_nodes``, ``graph_mask`` and ``graph_adjacency``.

@@ -14,10 +14,10 @@ from scipy.spatial import cKDTree
 from fusion.icp import icp_svd, rigid_fit
 from fusion.rigid import Rigid2D
 from fusion.search import exhaustive_search
-from fusion.structural import _search_kernels as SK
+from fusion.structural import _kernels as K
 from fusion.structural.config import MergeConfig
 from fusion.structural.evidence import Evaluated, evaluate, with_evidence
-from fusion.structural.hypotheses import runner_up_of
+from fusion.structural.hypotheses import _centroid_image, runner_up_of
 from fusion.structural.prepare import Prepared
 from fusion.structural.refine import polish
 from topo.graph import TopoMap
@@ -77,7 +77,7 @@ within ``eps`` has a compatible kind (the nearest of those counts)."""
 def _all_pairs(xy: np.ndarray, min_distance: float, both: bool
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every node pair ``(i, j)`` at least ``min_distance`` apart, by length (stable); with
-    ``both``, in both orientations (what :func:`fusion.structural._search_kernels.pair_candidates`
+    ``both``, in both orientations (what :func:`fusion.structural.hypotheses._pair_candidates`
     reads)."""
     i, j = np.triu_indices(len(xy), 1)
     if both:
@@ -131,14 +131,14 @@ def ransac(pa: Prepared, pb: Prepared, cfg: MergeConfig) -> Evaluated | str:
     if len(keep) == 0:
         return "no pair of nodes of B matches a pair of A in length and kinds"
     hyp_p, hyp_q = hyp_p[keep], hyp_q[keep]
-    theta, tx, ty, _, _ = SK.pair_motions(pa.xy, a_i, a_j, pb.xy, b_i, b_j, hyp_p, hyp_q)
+    theta, tx, ty, _, _ = K.pair_motions(pa.xy, a_i, a_j, pb.xy, b_i, b_j, hyp_p, hyp_q)
     tree = cKDTree(pa.xy)
     counts, _ = _inliers(tree, pa, pb, theta, tx, ty, cfg.eps)
     centre = pb.xy.mean(axis=0)
-    cx, cy = SK.centroid_image(np.cos(theta), np.sin(theta), tx, ty, centre[0], centre[1])
+    cx, cy = _centroid_image(theta, tx, ty, centre)
     order = np.argsort(-counts, kind="stable")
-    chosen = SK.select_distinct(order, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
-                                cfg.distinct_distance, 8)
+    chosen = K.select_distinct(order, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
+                               cfg.distinct_distance, 8)
     starts = []
     for h in chosen:
         th, t = float(theta[h]), np.array([tx[h], ty[h]])

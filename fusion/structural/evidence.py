@@ -10,9 +10,9 @@ import numpy as np
 
 from fusion.calibration import load_weights
 from fusion.decision import MergeRule
-from fusion.icp import moments_degeneracy
+from fusion.icp import degeneracy
 from fusion.rigid import Rigid2D, wrap_angle
-from fusion.structural import _evidence_kernels as EK
+from fusion.structural import _kernels as K
 from fusion.structural.config import MergeConfig, config_of
 from fusion.structural.prepare import PATH_CELL, PATH_OFF, PATH_REACH, PATH_TOL, Prepared
 
@@ -69,7 +69,7 @@ class MergeEvidence:
         hypotheses: how many rigid hypotheses the method scored.
         likelihood: how much likelier the match distances are for copies of the same nodes
             than for chance matches: the best over the node noise levels of
-            :data:`fusion.structural._evidence_kernels.LIKELIHOOD_SIGMAS` of the summed log-ratios
+            :data:`fusion.structural._kernels.LIKELIHOOD_SIGMAS` of the summed log-ratios
             (a
             generalised likelihood ratio; it adapts to the maps' noise, so tightly matched nodes
             of low-noise maps count for more than ``closeness`` alone gives them).
@@ -183,7 +183,7 @@ _FEATURE_COLUMNS = {"closeness": 0, "inliers": 1, "matched_edges": 2, "conflicts
 (``likelihood``: the best of the columns :data:`_LIKELIHOOD`)."""
 
 
-_LIKELIHOOD = slice(9, EK.N_FEATURES)
+_LIKELIHOOD = slice(9, K.N_FEATURES)
 
 
 def evidence_args(pa: Prepared, pb: Prepared) -> tuple:
@@ -192,8 +192,7 @@ def evidence_args(pa: Prepared, pb: Prepared) -> tuple:
 
 
 def _path_args(pa: Prepared, pb: Prepared) -> tuple:
-    """What :func:`fusion.structural._evidence_kernels.path_agreement` reads of the two maps, and
-    its
+    """What :func:`fusion.structural._kernels.path_agreement` reads of the two maps, and its
     constants."""
     return (pa.path_pts, pa.path_w, pa.field, *pa.field_origin, pb.path_pts, pb.path_w, pb.field,
             *pb.field_origin, 1.0 / PATH_CELL, PATH_TOL, PATH_OFF, PATH_REACH)
@@ -203,7 +202,7 @@ def path_evidence(pa: Prepared, pb: Prepared, theta: np.ndarray, tx: np.ndarray,
                   ty: np.ndarray, both: bool = True) -> np.ndarray:
     """``(H, 2)`` :attr:`MergeEvidence.path_agree` and ``path_off`` of each hypothesis (without
     ``both``, twice what B's paths alone give: the quick estimate the re-ranking uses)."""
-    return EK.path_agreement(theta, tx, ty, *_path_args(pa, pb), both)
+    return K.path_agreement(theta, tx, ty, *_path_args(pa, pb), both)
 
 
 _FEATURE_COLS = list(_FEATURE_COLUMNS.values())
@@ -218,7 +217,7 @@ PATH_WEIGHTS = np.array([CONFIDENCE_WEIGHTS["path_agree"], CONFIDENCE_WEIGHTS["p
 
 
 def score_rows(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> np.ndarray:
-    """:attr:`MergeEvidence.score` of rows of :func:`fusion.structural._evidence_kernels.evidence`
+    """:attr:`MergeEvidence.score` of rows of :func:`fusion.structural._kernels.evidence`
     features and of :func:`path_evidence`."""
     const = CONFIDENCE_WEIGHTS["bias"] + CONFIDENCE_WEIGHTS["log_pairs"] * math.log(n_a * n_b)
     return (features[:, _FEATURE_COLS] @ _FEATURE_WEIGHTS + const
@@ -229,13 +228,17 @@ def score_rows(features: np.ndarray, paths: np.ndarray, n_a: int, n_b: int) -> n
 def evaluate(pa: Prepared, pb: Prepared, theta: float, t: np.ndarray,
              cfg: MergeConfig) -> Evaluated:
     """The full evidence (:class:`MergeEvidence`) and matches of B moved by ``(theta, t)``."""
-    f, matches, (agree, off), moments = EK.evaluation(
-        *evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
-        pa.compat, pa.loose, BRANCH_TOL, MIN_CROSSING_SIN, cfg.near_miss,
-        *_path_args(pa, pb))
+    match_b = np.empty(len(pb.xy), dtype=np.int64)
+    f = K.evidence(*evidence_args(pa, pb), float(theta), float(t[0]), float(t[1]), cfg.eps,
+                   pa.compat, pa.loose, BRANCH_TOL, MIN_CROSSING_SIN, cfg.near_miss, match_b,
+                   np.empty(len(pb.xy)))
     f = f.tolist()  # Python floats: cheaper to read one by one
+    b = np.flatnonzero(match_b >= 0)
+    matches = np.column_stack((match_b[b], b)).astype(np.int64)
+    agree, off = path_evidence(pa, pb, np.array([float(theta)]), np.array([float(t[0])]),
+                               np.array([float(t[1])]))[0].tolist()
     n = len(matches)
-    collinear = n < 3 or moments_degeneracy(moments, "matches", 1e-3) is not None
+    collinear = n < 3 or degeneracy(pa.xy[matches[:, 0]], "matches", 1e-3) is not None
     ev = MergeEvidence(n, f[0], int(f[2]), int(f[3]), int(f[4]), int(f[5]), int(f[6]),
                        int(f[8]), math.sqrt(f[7] / n) if n else math.inf, collinear, len(pa.xy),
                        len(pb.xy), likelihood=max(f[_LIKELIHOOD]), path_agree=agree,

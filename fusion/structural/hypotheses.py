@@ -10,8 +10,7 @@ import numpy as np
 
 from fusion.icp import degeneracy
 from fusion.rigid import Rigid2D
-from fusion.structural import _evidence_kernels as EK
-from fusion.structural import _search_kernels as SK
+from fusion.structural import _kernels as K
 from fusion.structural.config import MergeConfig, config_of
 from fusion.structural.evidence import (
     BRANCH_TOL,
@@ -34,7 +33,8 @@ from topo.graph import TopoMap
 def _centroid_image(theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
                     centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where each motion ``(theta, tx, ty)`` puts the point ``centre``: ``(cx, cy)``."""
-    return SK.centroid_image(np.cos(theta), np.sin(theta), tx, ty, centre[0], centre[1])
+    c, s = np.cos(theta), np.sin(theta)
+    return c * centre[0] - s * centre[1] + tx, s * centre[0] + c * centre[1] + ty
 
 
 def runner_up(best: Evaluated, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray,
@@ -50,8 +50,9 @@ def runner_up(best: Evaluated, theta: np.ndarray, tx: np.ndarray, ty: np.ndarray
     p = best.transform.apply(centre)
     cx, cy = _centroid_image(theta, tx, ty, centre)
     gap = np.abs(np.angle(np.exp(1j * (theta - best.theta))))
-    return SK.best_distinct_score(scores, gap, cx, cy, p[0], p[1],
-                                  math.radians(cfg.distinct_angle_deg), cfg.distinct_distance)
+    distinct = ((gap >= math.radians(cfg.distinct_angle_deg))
+                | (np.hypot(cx - p[0], cy - p[1]) >= cfg.distinct_distance))
+    return float(scores[distinct].max(initial=-math.inf))
 
 
 def runner_up_of(best: Evaluated, others: list[Evaluated], b_xy: np.ndarray,
@@ -66,21 +67,24 @@ def runner_up_of(best: Evaluated, others: list[Evaluated], b_xy: np.ndarray,
 
 def hit_grid(pa: Prepared, tol: float, path_tol: float
              ) -> tuple[np.ndarray, float, float, float]:
-    """The raster of A that :func:`fusion.structural._search_kernels.refined_scores` reads, cells
+    """The raster of A that :func:`fusion.structural._kernels.refined_scores` reads, cells
     ``tol / 2`` wide: ``table[iy, ix, k]`` (``k`` < 3) the A node of a kind compatible with B
     kind ``k`` nearest to the cell within ~``tol`` (``-1`` if none); ``table[iy, ix, 3]`` the bits
-    :data:`~fusion.structural._search_kernels.NEAR_ANY_NODE` (within ~``tol`` of an A node) and
-    :data:`~fusion.structural._search_kernels.ON_PATH` (within ~``path_tol`` of an A path).
+    :data:`~fusion.structural._kernels.NEAR_ANY_NODE` (within ~``tol`` of an A node) and
+    :data:`~fusion.structural._kernels.ON_PATH` (within ~``path_tol`` of an A path).
     Returns ``(table, x0, y0, 1 / cell)``."""
     # the smallest dtype that holds a node index keeps the table in cache
     n = len(pa.xy)
-    like = _INT8 if n < 127 else _INT16 if n < 32767 else _INT32
-    return SK.hit_table(pa.xy, pa.kinds, pa.edges, tol, path_tol, pa.compat, like)
-
-
-_INT8, _INT16, _INT32 = (np.empty(0, dtype=t) for t in (np.int8, np.int16, np.int32))
-"""Empty arrays of the :func:`hit_grid` table's dtypes (a compiled kernel takes an array's
-dtype, not a dtype)."""
+    dtype = np.int8 if n < 127 else np.int16 if n < 32767 else np.int32
+    cell = tol / 2.0
+    (x0, y0), (x1, y1) = pa.xy.min(axis=0).tolist(), pa.xy.max(axis=0).tolist()
+    x0, y0 = x0 - tol - cell, y0 - tol - cell
+    shape = (int(math.ceil((y1 - y0 + tol) / cell) + 2), int(math.ceil((x1 - x0 + tol) / cell) + 2))
+    table = np.full((*shape, pa.compat.shape[1] + 1), -1, dtype=dtype)
+    table[:, :, -1] = 0
+    K.paint_nearest(table, x0, y0, cell, pa.xy, pa.kinds, tol, pa.compat)
+    K.paint_segments(table[:, :, -1], x0, y0, cell, pa.xy, pa.edges, path_tol, 1 << K.ON_PATH)
+    return table, x0, y0, 1.0 / cell
 
 
 _COARSE_MIN_PAIRS = 4
@@ -95,49 +99,67 @@ least this per landed node (a mean distance of about 0.27 m at ``eps`` 0.5), whi
 alignments of maps with node noise up to 0.15 m pass and loose chance landings do not."""
 
 
+def _pair_candidates(pa: Prepared, pb: Prepared, tol: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """2-point consensus: every (A pair ``p``, B pair ``q``, B's pairs in both orientations by
+    length) whose lengths agree within ``tol`` and whose end kinds are compatible, in the order
+    ``p``, then ``q``: ``(p, q, weight)``, ``weight`` the shorter length (longer pairs fix the
+    angle better)."""
+    lo = np.searchsorted(pb.both_len, pa.pair_len - tol)
+    count = np.searchsorted(pb.both_len, pa.pair_len + tol, side="right") - lo
+    p = np.repeat(np.arange(len(lo)), count)
+    q = lo[p] + np.arange(len(p)) - np.repeat(np.cumsum(count) - count, count)
+    ok = (pa.compat[pa.kinds[pa.pair_i[p]], pb.kinds[pb.both_i[q]]]
+          & pa.compat[pa.kinds[pa.pair_j[p]], pb.kinds[pb.both_j[q]]])
+    p, q = p[ok], q[ok]
+    return p, q, np.minimum(pa.pair_len[p], pb.both_len[q])
+
+
 def search_candidates(pa: Prepared, pb: Prepared, cfg: MergeConfig) -> tuple | str:
     """Steps 1–4 of the module docstring: the ``scored`` candidates' motions, evidence
     features and path evidence, and how many hypotheses there were (or why there are none)."""
     b_i, b_j = pb.both_i, pb.both_j
-    hyp_p, hyp_q, weight = SK.pair_candidates(pa.kinds, pa.pair_i, pa.pair_j, pa.pair_len,
-                                              pb.kinds, b_i, b_j, pb.both_len,
-                                              cfg.pair_tolerance, pa.compat)
+    hyp_p, hyp_q, weight = _pair_candidates(pa, pb, cfg.pair_tolerance)
     n_hyp = len(hyp_p)
     if n_hyp == 0:
         return "no pair of nodes of B matches a pair of A in length and kinds"
     if n_hyp > cfg.max_hypotheses:  # the motions of the kept ones only
         keep = np.sort(np.argpartition(-weight, cfg.max_hypotheses - 1)[:cfg.max_hypotheses])
         hyp_p, hyp_q = hyp_p[keep], hyp_q[keep]
-    theta, tx, ty, cos_t, sin_t = SK.pair_motions(pa.xy, pa.pair_i, pa.pair_j, pb.xy, b_i, b_j,
-                                                  hyp_p, hyp_q)
+    theta, tx, ty, cos_t, sin_t = K.pair_motions(pa.xy, pa.pair_i, pa.pair_j, pb.xy, b_i, b_j,
+                                                 hyp_p, hyp_q)
     table, x0, y0, inv_cell = hit_grid(pa, cfg.coarse_tolerance, cfg.eps)
     landed = np.zeros(len(theta), dtype=np.int64)
     min_pairs = max(cfg.min_inliers, _COARSE_MIN_PAIRS)
     reserve = cfg.sparse_pool if cfg.min_inliers < min_pairs else 0
-    coarse = SK.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
-                               y0, inv_cell, cfg.eps, pa.loose,
-                               cfg.min_inliers if reserve else min_pairs, landed)
+    coarse = K.refined_scores(theta, tx, ty, cos_t, sin_t, pa.xy, pb.xy, pb.kinds, table, x0,
+                              y0, inv_cell, cfg.eps, pa.loose,
+                              cfg.min_inliers if reserve else min_pairs, landed)
     centre = pb.xy.mean(axis=0)
     cx, cy = _centroid_image(theta, tx, ty, centre)
     # those landing fewer than min_pairs are ranked with the unscored ones (0), and pooled apart
-    ranked, small = SK.coarse_ranking(coarse, landed, min_pairs, _SPARSE_MIN)
-    chosen = SK.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
-                                cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
+    few = landed < min_pairs
+    ranked = np.argsort(np.where(few, 0.0, -coarse), kind="stable")
+    small = np.flatnonzero(few & (coarse > _SPARSE_MIN * landed))
+    small = small[np.argsort(-coarse[small], kind="stable")]
+    chosen = K.select_distinct(ranked, theta, cx, cy, math.radians(cfg.distinct_angle_deg),
+                               cfg.distinct_distance, max(cfg.path_pool, cfg.candidates))
     if reserve:  # the best distinct ones landing only min_inliers..3 nodes: sparse_pool
-        chosen = SK.select_distinct(np.concatenate([chosen, small]), theta, cx, cy,
-                                    math.radians(cfg.distinct_angle_deg), cfg.distinct_distance,
-                                    len(chosen) + reserve)
+        chosen = K.select_distinct(np.concatenate([chosen, small]), theta, cx, cy,
+                                   math.radians(cfg.distinct_angle_deg), cfg.distinct_distance,
+                                   len(chosen) + reserve)
     if len(chosen) > cfg.candidates:  # re-ranked with the path evidence, in node units
         w = CONFIDENCE_WEIGHTS
         paths = path_evidence(pa, pb, theta[chosen], tx[chosen], ty[chosen], both=False)
-        chosen = SK.best_by_gain(chosen, coarse, paths @ PATH_WEIGHTS,
-                                 w["closeness"] + w["inliers"], cfg.candidates)  # best first
-    th, txc, tyc = SK.refine_most_matched(theta, tx, ty, chosen, pa.xy, pa.kinds, pb.xy, pb.kinds,
-                                          pa.compat,
-                                          np.array([cfg.coarse_tolerance, cfg.eps]), cfg.scored)
-    features = EK.evidence_batch(*evidence_args(pa, pb), th, txc, tyc, cfg.eps, pa.compat,
-                                 pa.loose, BRANCH_TOL, MIN_CROSSING_SIN,
-                                 cfg.near_miss)
+        gain = coarse[chosen] + paths @ PATH_WEIGHTS / (w["closeness"] + w["inliers"])
+        chosen = chosen[np.argsort(-gain, kind="stable")[:cfg.candidates]]  # best first
+    th, txc, tyc = theta[chosen], tx[chosen], ty[chosen]  # refined; the most matched kept
+    counts = K.refine_batch(th, txc, tyc, pa.xy, pa.kinds, pb.xy, pb.kinds, pa.compat,
+                            np.array([cfg.coarse_tolerance, cfg.eps]))
+    best = np.sort(np.argsort(-counts, kind="stable")[:cfg.scored])
+    th, txc, tyc = th[best], txc[best], tyc[best]
+    features = K.evidence_batch(*evidence_args(pa, pb), th, txc, tyc, cfg.eps, pa.compat,
+                                pa.loose, BRANCH_TOL, MIN_CROSSING_SIN, cfg.near_miss)
     return th, txc, tyc, features, path_evidence(pa, pb, th, txc, tyc), n_hyp
 
 

@@ -4,11 +4,12 @@ rasters for the path evidence (:class:`Prepared`)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.structural import _prepare_kernels as PK
+from fusion.structural import _kernels as K
 from fusion.structural.config import MergeConfig
 from topo.graph import NodeKind, TopoMap
 
@@ -143,7 +144,7 @@ class Prepared:
     segments: np.ndarray  # (S, 4) straight pieces of the paths (path_segments)
     path_pts: np.ndarray  # (S, 2) points along the paths, every ~PATH_STEP
     path_w: np.ndarray  # (S,) metres of path each stands for
-    field: np.ndarray  # squared distance to the nearest path (PK.path_field), PATH_CELL cells
+    field: np.ndarray  # squared distance to the nearest path (K.path_field), PATH_CELL cells
     field_origin: tuple[float, float]
     compat: np.ndarray  # [code, code] of the pair's codes (MATCH_COMPATIBLE, renumbered)
     loose: int  # the code of an undescribed dead end (makes no conflicts), -1 if unused
@@ -170,33 +171,105 @@ def _prepare(m: TopoMap, cfg: MergeConfig, codes: np.ndarray, compat: np.ndarray
     xy = np.ascontiguousarray(m.xy, dtype=np.float64)
     edges = np.ascontiguousarray(m.edges, dtype=np.int64)
     pieces = path_segments(m)
-    near, i, j, length, both_i, both_j, both_len, pts, w, margin, x0, y0, field, *slots = (
-        PK.map_fields(xy, edges, pieces, cfg.knn, max(cfg.min_pair_distance, 1e-9), PATH_STEP,
-                      cfg.eps, PATH_REACH, PATH_CELL))
+    near, i, j, length = _node_pairs(xy, edges, cfg.knn, max(cfg.min_pair_distance, 1e-9))
+    both_len = np.concatenate((length, length))  # both orientations by length: B's hypotheses
+    order = np.argsort(both_len, kind="stable")
+    both_i, both_j = np.concatenate((i, j))[order], np.concatenate((j, i))[order]
+    gap = xy[edges[:, 0]] - xy[edges[:, 1]]
+    margin = np.minimum(0.5, cfg.eps / np.maximum(np.sqrt(gap[:, 0] * gap[:, 0]
+                                                          + gap[:, 1] * gap[:, 1]), 1e-12))
+    every = np.vstack((xy, pieces.reshape(-1, 2)))  # the raster: nodes and paths, padded
+    x0, y0 = (float(v) - PATH_REACH - PATH_CELL for v in every.min(axis=0))
+    x1, y1 = (float(v) + PATH_REACH + PATH_CELL for v in every.max(axis=0))
+    field = K.path_field(pieces, x0, y0, PATH_CELL, math.ceil((y1 - y0) / PATH_CELL) + 1,
+                         math.ceil((x1 - x0) / PATH_CELL) + 1, PATH_REACH)
+    pts, w = _path_samples(pieces, PATH_STEP)
     return Prepared(xy, codes.astype(np.int64), edges, near, i, j, length, both_i, both_j,
-                    both_len, margin, _branches(len(xy), *slots), pieces, pts, w, field,
-                    (x0, y0), compat, loose, m.paths is not None and len(m.paths) > 0)
+                    both_len[order], margin, _branches(xy, edges),
+                    pieces, pts, w, field, (x0, y0), compat, loose,
+                    m.paths is not None and len(m.paths) > 0)
+
+
+def _node_pairs(xy: np.ndarray, edges: np.ndarray, knn: int, min_dist: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The node pairs 2-point consensus uses: ``(near, i, j, length)``, ``near[a, b]`` when
+    ``a`` and ``b`` are joined by a path or by two; pairs ``i < j`` that are near or among each
+    other's ``knn`` nearest nodes (ties to the lower index), at least ``min_dist`` apart, and
+    their distances."""
+    n = len(xy)
+    adj = np.zeros((n, n), dtype=np.int64)
+    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = 1
+    near = (adj + adj @ adj) > 0
+    np.fill_diagonal(near, False)
+    dist = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    cand = near.copy()
+    k = min(knn, n - 1)
+    if k > 0:
+        others = dist.copy()
+        np.fill_diagonal(others, np.inf)
+        nearest = np.argsort(others, axis=1, kind="stable")[:, :k]
+        cand[np.repeat(np.arange(n), k), nearest.ravel()] = True
+        cand |= cand.T
+    i, j = np.nonzero(np.triu(cand & (dist >= min_dist), 1))
+    return near, i.astype(np.int64), j.astype(np.int64), dist[i, j]
+
+
+def _path_samples(seg: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points along the segments ``seg[k] = (x1, y1, x2, y2)``: each cut into
+    ``max(1, ceil(length / step))`` equal pieces, a point at each piece's middle. Returns
+    ``(points (S, 2), metres of path each stands for (S,))``."""
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    count = np.maximum(1, np.ceil(length / step)).astype(np.int64)
+    k = np.repeat(np.arange(len(seg)), count)
+    f = (np.arange(len(k)) - np.repeat(np.cumsum(count) - count, count) + 0.5) / count[k]
+    pts = np.column_stack((seg[k, 0] + f * (seg[k, 2] - seg[k, 0]),
+                           seg[k, 1] + f * (seg[k, 3] - seg[k, 1])))
+    return pts, length[k] / count[k]
 
 
 def path_segments(m: TopoMap) -> np.ndarray:
     """``(S, 4)`` straight pieces ``(x1, y1, x2, y2)`` of the map's paths: chords of its
-    polylines about :data:`PATH_CHORD` long, or the straight node-to-node segments of a map
-    without polylines."""
+    polylines about :data:`PATH_CHORD` long (a chord end at the first point past each multiple
+    of it of arc length along the polyline, and at its ends), or the straight node-to-node
+    segments of a map without polylines."""
     if m.paths is None or not len(m.paths):
         return np.hstack([m.xy[m.edges[:, 0]], m.xy[m.edges[:, 1]]]).reshape(-1, 4).astype(
             np.float64)
-    pts = np.ascontiguousarray(np.concatenate(m.paths), dtype=np.float64)
-    sizes = np.fromiter((len(q) for q in m.paths), dtype=np.int64, count=len(m.paths))
-    return PK.polyline_chords(pts, sizes, PATH_CHORD)
+    return _polyline_chords(np.concatenate(m.paths).astype(np.float64),
+                            np.array([len(q) for q in m.paths]), PATH_CHORD)
 
 
-def _branches(n: int, node: np.ndarray, slot: np.ndarray, d: np.ndarray,
-              degree: int) -> np.ndarray:
-    """``(n, max degree)`` angle of each path leaving each node (toward its other end), from
-    :func:`fusion.structural._prepare_kernels.branch_slots`."""
-    out = np.full((n, max(1, degree)), np.nan)
-    if len(node):  # numpy's arctan2 (numba's differs in the last bit), on the same layout
-        out[node, slot] = np.arctan2(d[:, 1], d[:, 0])
+def _polyline_chords(pts: np.ndarray, sizes: np.ndarray, chord: float) -> np.ndarray:
+    """``(S, 4)`` chords of the polylines stacked in ``pts`` (``sizes[k]`` points each)."""
+    last = np.cumsum(sizes) - 1
+    first = last - sizes + 1
+    step = np.zeros(len(pts))
+    step[1:] = np.hypot(*(pts[1:] - pts[:-1]).T)
+    step[first] = 0.0
+    arc = np.cumsum(step)
+    arc -= np.repeat(arc[first], sizes)
+    bucket = np.floor(arc / chord)
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = bucket[1:] != bucket[:-1]
+    keep[first] = keep[last] = True
+    kept = np.flatnonzero(keep)
+    starts = np.zeros(len(pts), dtype=bool)
+    starts[first] = True
+    inner = ~starts[kept[1:]]
+    return np.hstack([pts[kept[:-1][inner]], pts[kept[1:][inner]]])
+
+
+def _branches(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``(n, max degree)`` angle of each path leaving each node (toward its other end), in
+    order of listing, NaN padded."""
+    ends = np.concatenate((edges, edges[:, ::-1]))
+    ends = ends[np.argsort(ends[:, 0], kind="stable")]
+    degree = np.bincount(ends[:, 0], minlength=len(xy))
+    slot = np.arange(len(ends)) - np.repeat(np.cumsum(degree) - degree, degree)
+    out = np.full((len(xy), max(1, int(degree.max(initial=0)))), np.nan)
+    if len(ends):
+        d = xy[ends[:, 1]] - xy[ends[:, 0]]
+        out[ends[:, 0], slot] = np.arctan2(d[:, 1], d[:, 0])
     return out
 
 

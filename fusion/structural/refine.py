@@ -4,10 +4,12 @@ line for polylines)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fusion.icp import icp_checked, rigid_fit
-from fusion.structural import _refine_kernels as RK
+from fusion.structural import _kernels as K
 from fusion.structural.config import MergeConfig
 from fusion.structural.evidence import Evaluated, evaluate
 from fusion.structural.prepare import PATH_CELL, PATH_FIT_WEIGHT, PATH_TOL, Prepared
@@ -32,10 +34,13 @@ def least_squares(pa: Prepared, pb: Prepared, matches: np.ndarray, theta: float,
     are routes through each one's own free space and run apart by a few decimetres: paired
     point by point they pull the rotation off."""
     weight = 0.0 if pa.polylines or pb.polylines else PATH_FIT_WEIGHT
-    P, Q, w = RK.fit_points(pa.xy, pb.xy, matches, pa.segments, pb.path_pts, pb.path_w,
-                            weight, theta, t[0], t[1], PATH_TOL, pa.field,
-                            *pa.field_origin, PATH_CELL)
     n = len(matches)
+    P, Q, w = pb.xy[matches[:, 1]], pa.xy[matches[:, 0]], np.ones(n)
+    if weight > 0.0:  # and B's path points on A's paths, onto their nearest A path points
+        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1], PATH_TOL,
+                                       pa.field, *pa.field_origin, PATH_CELL)
+        P, Q = np.vstack((P, pb.path_pts[idx])), np.vstack((Q, near))
+        w = np.concatenate((w, weight * pb.path_w[idx]))
     c, s = np.cos(theta), np.sin(theta)
     moved = P[:n] @ np.array([[c, s], [-s, c]]) + t
     # (a pair right at the gate keeps a little weight, so that the weights never all vanish)
@@ -59,8 +64,8 @@ def line_fit(pa: Prepared, pb: Prepared, pairs: np.ndarray, theta: float, t: np.
         dp = P @ rot.T
         res = Q - dp - t
         w = np.maximum(1.0 - np.sum(res * res, axis=1) / (eps * eps), 1e-3)
-        idx, near = RK.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1],
-                                        LINE_FIT_GATE, pa.field, *pa.field_origin, PATH_CELL)
+        idx, near = K.nearest_on_paths(pa.segments, pb.path_pts, theta, t[0], t[1],
+                                       LINE_FIT_GATE, pa.field, *pa.field_origin, PATH_CELL)
         dq = pb.path_pts[idx] @ rot.T
         off = dq + t - near
         dist = np.hypot(off[:, 0], off[:, 1])
@@ -75,6 +80,22 @@ def line_fit(pa: Prepared, pb: Prepared, pairs: np.ndarray, theta: float, t: np.
                                (J * weights[:, None]).T @ r)
         theta, t = theta + float(step[0]), t + step[1:]
     return theta, t
+
+
+def _mutual_pairs(A: np.ndarray, B: np.ndarray, theta: float, t: np.ndarray,
+                  dist: float) -> np.ndarray:
+    """``(K, 2)`` pairs ``(a, b)``, ``b`` ascending: A node and B node (moved by ``(theta,
+    t)``) mutually nearest (no other B node strictly nearer to ``a``; ties to the lower A
+    node) and within ``dist``, any kinds."""
+    c, s = math.cos(theta), math.sin(theta)
+    x, y = c * B[:, 0] - s * B[:, 1] + t[0], s * B[:, 0] + c * B[:, 1] + t[1]
+    d2 = (x[:, None] - A[None, :, 0]) ** 2 + (y[:, None] - A[None, :, 1]) ** 2
+    if not d2.size:
+        return np.zeros((0, 2), dtype=np.int64)
+    a = d2.argmin(axis=1)
+    best = d2[np.arange(len(B)), a]
+    b = np.flatnonzero((best <= dist * dist) & ~(d2[:, a] < best).any(axis=0))
+    return np.column_stack((a[b], b)).astype(np.int64)
 
 
 def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Evaluated:
@@ -94,12 +115,12 @@ def polish(pa: Prepared, pb: Prepared, start: Evaluated, cfg: MergeConfig) -> Ev
         best = max((best, ev), key=Evaluated.key)
     theta, t, moved = best.theta, best.t, False
     for _ in range(3):
-        pairs = RK.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
+        pairs = _mutual_pairs(pa.xy, pb.xy, theta, t, cfg.fit_eps)
         if len(pairs) < 3:
             break
         theta, t, moved = *least_squares(pa, pb, pairs, theta, t, cfg.fit_eps), True
     if moved and pa.polylines and pb.polylines:
-        pairs = RK.mutual_pairs(pa.xy, pb.xy, theta, t[0], t[1], cfg.fit_eps)
+        pairs = _mutual_pairs(pa.xy, pb.xy, theta, t, cfg.fit_eps)
         if len(pairs) >= 3:
             theta, t = line_fit(pa, pb, pairs, theta, t, cfg.fit_eps)
     return evaluate(pa, pb, theta, t, cfg) if moved else best

@@ -258,7 +258,7 @@ def _pooled_numpy(states: np.ndarray, fine: float, res: float):
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10_000), res=st.sampled_from([0.1, 0.2, 0.3, 0.4]))
 def test_pooling_kernels_are_the_numpy_form(seed, res):
-    """fusion._grid_kernels.known_box and pool (via grid_merge._pooled, one or several
+    """The known box and fusion._kernels.pool (via grid_merge._pooled, one or several
     resolutions in one read) give the masks and origin of the numpy reductions, known cells
     reaching the grid's edges included."""
     from fusion.grid_merge import _pooled
@@ -286,8 +286,8 @@ def test_pooling_kernels_are_the_numpy_form(seed, res):
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_rotated_raster_kernel_is_the_numpy_form(seed):
-    """fusion._grid_kernels.raster_rotated sets the cells the fancy-indexed numpy form sets."""
-    from fusion import _grid_kernels as GK
+    """fusion._kernels.raster_rotated sets the cells the fancy-indexed numpy form sets."""
+    from fusion import _kernels as GK
 
     rng = np.random.default_rng(seed)
     pts = rng.uniform(-3.0, 3.0, (int(rng.integers(1, 60)), 2))

@@ -294,11 +294,11 @@ def test_zero_length_paths_do_not_crash_the_evidence_kernel():
 
 
 def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
-    """The refitted coarse score (fusion.structural._search_kernels.refined_scores): a hypothesis 0.5° and
+    """The refitted coarse score (fusion.structural._kernels.refined_scores): a hypothesis 0.5° and
     0.1 m off the motion that made B from A lands on it after one fit, every B node exactly on
     its A node (score = node count); one landing fewer than ``min_pairs`` nodes is left as is,
     scored 0. ``landed`` counts the nodes each paired before its refit."""
-    from fusion.structural import _search_kernels as K
+    from fusion.structural import _kernels as K
     from fusion.structural.hypotheses import hit_grid
     from fusion.structural.prepare import prepare_pair
 
@@ -324,7 +324,7 @@ def test_coarse_score_refits_a_near_hypothesis_onto_the_truth(pair):
 def test_likelihood_rewards_tight_matches(pair):
     """MergeEvidence.likelihood: exact matches score the tightest spread's full log-ratio each;
     the same matches 0.3 m off score less (a chance-like distance), and the score with them."""
-    from fusion.structural import _evidence_kernels as K
+    from fusion.structural import _kernels as K
     from fusion.structural.evidence import evaluate
     from fusion.structural.prepare import prepare_pair
 
@@ -341,13 +341,24 @@ def test_likelihood_rewards_tight_matches(pair):
     assert off.score < exact.score
 
 
+def _path_field_numpy(seg, x0, y0, cell, ny, nx, reach):
+    """The obvious distance-to-path raster: every cell centre's squared distance to every
+    segment, the nearest kept, capped at reach²."""
+    cx, cy = np.meshgrid(x0 + (np.arange(nx) + 0.5) * cell, y0 + (np.arange(ny) + 0.5) * cell)
+    p = np.stack([cx.ravel(), cy.ravel()], axis=1)[:, None, :]
+    u, v = seg[:, :2], seg[:, 2:] - seg[:, :2]
+    ll = (v * v).sum(axis=1)
+    t = np.clip(((p - u) * v).sum(axis=-1) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
+    d2 = ((u + t[..., None] * v - p) ** 2).sum(axis=-1).min(axis=1)
+    return np.minimum(d2, reach**2).reshape(ny, nx)
+
+
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_path_field_is_the_distance_to_the_nearest_segment(seed):
-    """fusion.structural._prepare_kernels.path_field against the obvious computation: every cell centre's
-    squared distance to every segment (horizontal, vertical and zero-length ones included),
-    capped at reach²."""
-    from fusion.structural import _prepare_kernels as K
+    """fusion.structural._kernels.path_field against the obvious computation (horizontal,
+    vertical and zero-length segments included)."""
+    from fusion.structural import _kernels as K
 
     rng = np.random.default_rng(seed)
     seg = rng.uniform(0.0, 12.0, (9, 4))
@@ -356,59 +367,17 @@ def test_path_field_is_the_distance_to_the_nearest_segment(seed):
     seg[2, 2:] = seg[2, :2]  # a point
     x0, y0, cell, ny, nx, reach = -2.5, -2.0, 0.3, 55, 52, 2.0
     field = K.path_field(seg, x0, y0, cell, ny, nx, reach)
-    cx, cy = np.meshgrid(x0 + (np.arange(nx) + 0.5) * cell, y0 + (np.arange(ny) + 0.5) * cell)
-    p = np.stack([cx.ravel(), cy.ravel()], axis=1)[:, None, :]
-    u, v = seg[:, :2], seg[:, 2:] - seg[:, :2]
-    ll = (v * v).sum(axis=1)
-    t = np.clip(((p - u) * v).sum(axis=-1) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
-    d2 = ((u + t[..., None] * v - p) ** 2).sum(axis=-1).min(axis=1)
-    assert field == pytest.approx(np.minimum(d2, reach**2).reshape(ny, nx), abs=1e-5)
-
-
-def _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach):
-    """fusion.structural._prepare_kernels.path_field as it was written before its rows were laid out first
-    (54fa37b), in plain Python: each row's extent, then its cells, one row after the other."""
-    d2 = np.full((ny, nx), reach * reach, dtype=np.float32)
-    for ux, uy, wx, wy in seg.tolist():
-        vx, vy = wx - ux, wy - uy
-        ll = vx * vx + vy * vy
-        inv_ll = 0.0 if ll == 0.0 else 1.0 / ll
-        band = reach * math.sqrt(ll)
-        bx0, bx1 = min(ux, wx) - reach, max(ux, wx) + reach
-        iy0 = max(0, math.floor((min(uy, wy) - reach - y0) / cell))
-        iy1 = min(ny, math.ceil((max(uy, wy) + reach - y0) / cell) + 1)
-        for iy in range(iy0, iy1):
-            py = y0 + (iy + 0.5) * cell
-            lo, hi = bx0, bx1
-            if vy != 0.0:
-                e1 = ux + ((py - uy) * vx - band) / vy
-                e2 = ux + ((py - uy) * vx + band) / vy
-                lo, hi = max(lo, min(e1, e2)), min(hi, max(e1, e2))
-            elif abs(py - uy) > reach:
-                continue
-            ix0 = max(0, math.floor((lo - x0) / cell - 0.5))
-            ix1 = min(nx, math.ceil((hi - x0) / cell - 0.5) + 1)
-            px = x0 + (ix0 + 0.5) * cell
-            t = ((px - ux) * vx + (py - uy) * vy) * inv_ll
-            dt = cell * vx * inv_ll
-            for ix in range(ix0, ix1):
-                tc = min(1.0, max(0.0, t))
-                dx, dy = ux + tc * vx - px, uy + tc * vy - py
-                dd = dx * dx + dy * dy
-                if dd < float(d2[iy, ix]):
-                    d2[iy, ix] = dd
-                px += cell
-                t += dt
-    return d2
+    assert field == pytest.approx(_path_field_numpy(seg, x0, y0, cell, ny, nx, reach), abs=1e-5)
 
 
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000))
-def test_path_field_is_the_row_by_row_walk_bit_for_bit(seed):
-    """fusion.structural._prepare_kernels.path_field lays a segment's rows out before walking them, for
-    speed: the same raster, bit for bit, as walking one row after the other (grid-aligned
-    coordinates, so that horizontal, vertical, zero-length and shared-end segments occur)."""
-    from fusion.structural import _prepare_kernels as K
+def test_path_field_on_grid_aligned_segments(seed):
+    """fusion.structural._kernels.path_field walks each segment's band of cells row by row:
+    on grid-aligned coordinates (ends on cell edges, rows exactly at a segment's reach;
+    horizontal, vertical, zero-length and shared-end segments) it still finds every cell's
+    nearest segment (float32 raster: to a tolerance)."""
+    from fusion.structural import _kernels as K
 
     rng = np.random.default_rng(seed)
     seg = np.round(rng.uniform(0.0, 12.0, (12, 4)) * 2.5) / 2.5
@@ -418,8 +387,7 @@ def test_path_field_is_the_row_by_row_walk_bit_for_bit(seed):
     seg[3, :2] = seg[4, 2:]  # chained
     x0, y0, cell, ny, nx, reach = -2.4, -2.0, 0.4, 41, 42, 2.0
     got = K.path_field(seg, x0, y0, cell, ny, nx, reach)
-    want = _path_field_row_by_row(seg, x0, y0, cell, ny, nx, reach)
-    assert np.array_equal(got.view(np.int32), want.view(np.int32))
+    assert got == pytest.approx(_path_field_numpy(seg, x0, y0, cell, ny, nx, reach), abs=1e-5)
 
 
 def _corridors(shift: float = 0.0) -> TopoMap:
@@ -583,43 +551,33 @@ def test_pixel_fine_polylines_are_read_as_chords():
     assert ev_fine.path_agree == pytest.approx(ev_plain.path_agree, rel=0.05)
 
 
-def _chords_numpy(paths: list[np.ndarray], chord: float) -> np.ndarray:
-    """The numpy form of fusion.structural._prepare_kernels.polyline_chords (what
-    fusion.structural.prepare.path_segments was)."""
-    pts = np.concatenate(paths).astype(np.float64)
-    sizes = np.array([len(q) for q in paths])
-    last = np.cumsum(sizes) - 1
-    first = last - sizes + 1
-    step = np.zeros(len(pts))
-    step[1:] = np.hypot(*(pts[1:] - pts[:-1]).T)
-    step[first] = 0.0
-    arc = np.cumsum(step)
-    arc -= np.repeat(arc[first], sizes)
-    bucket = np.floor(arc / chord)
-    starts = np.zeros(len(pts), dtype=bool)
-    starts[first] = True
-    keep = np.ones(len(pts), dtype=bool)
-    keep[1:] = bucket[1:] != bucket[:-1]
-    keep[first] = keep[last] = True
-    kept = np.flatnonzero(keep)
-    inner = ~starts[kept[1:]]
-    return np.hstack([pts[kept[:-1][inner]], pts[kept[1:][inner]]])
+def _chords_plain(paths: list[np.ndarray], chord: float) -> np.ndarray:
+    """Polyline chords the obvious way: along each polyline, its first and last point and the
+    first point past each multiple of ``chord`` of arc length, joined in order."""
+    out = []
+    for q in paths:
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(q, axis=0).T))])
+        bucket = np.floor(arc / chord)
+        ends = [0] + [k for k in range(1, len(q))
+                      if k == len(q) - 1 or bucket[k] != bucket[k - 1]]
+        out += [(*q[i], *q[k]) for i, k in zip(ends[:-1], ends[1:], strict=True)]
+    return np.array(out).reshape(-1, 4)
 
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), chord=st.sampled_from([0.05, 0.4, 1.3]))
-def test_polyline_chords_are_the_numpy_form(seed, chord):
-    """fusion.structural._prepare_kernels.polyline_chords: the same chords, bit for bit, as the numpy form
-    (cumulative arc length, a chord end at the first point past each multiple of ``chord``),
-    single-point polylines and repeated points included."""
-    from fusion.structural import _prepare_kernels as K
+def test_polyline_chords_are_the_plain_walk(seed, chord):
+    """The chords of fusion.structural.prepare.path_segments (vectorised over every polyline
+    at once) are the plain walk's along each polyline, single-point polylines and repeated
+    points included."""
+    from fusion.structural.prepare import _polyline_chords
 
     rng = np.random.default_rng(seed)
     paths = [np.cumsum(rng.normal(0.0, 0.2, (int(rng.integers(1, 40)), 2)), axis=0)
              for _ in range(int(rng.integers(1, 6)))]
     paths[0] = np.vstack([paths[0], paths[0][-1:]])  # a repeated point
-    got = K.polyline_chords(np.concatenate(paths), np.array([len(q) for q in paths]), chord)
-    np.testing.assert_array_equal(got, _chords_numpy(paths, chord))
+    got = _polyline_chords(np.concatenate(paths), np.array([len(q) for q in paths]), chord)
+    np.testing.assert_allclose(got, _chords_plain(paths, chord), rtol=0, atol=1e-12)
 
 
 def test_point_to_line_fit_takes_the_rotation_from_long_corridors():

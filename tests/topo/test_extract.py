@@ -12,8 +12,8 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from topo import CellState, NodeKind, OccupancyGrid, TopoMap
-from topo._extract_kernels import basin_paths, box_counts, merge_tree, touching
-from topo.extract import ExtractConfig, extract_topomap
+from topo._kernels import basin_paths, merge_tree
+from topo.extract import ExtractConfig, _box_sums, _touching, extract_topomap
 from topo.maps import FloorPlan, load_floor_plan
 
 MAPS = Path(__file__).resolve().parents[3] / "shared" / "maps"
@@ -359,11 +359,11 @@ def test_basin_routes_are_shortest_and_stay_in_their_basin(seed):
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 9), st.integers(1, 9))
 def test_touching_cells_are_every_8_neighbour_pair_across_basins(seed, h, w):
-    """The kernel finds each pair of 8-neighbours in two different basins exactly once, as
-    the four shifted comparisons it replaces did."""
+    """The four shifted comparisons find each pair of 8-neighbours in two different basins
+    exactly once."""
     rng = np.random.default_rng(seed)
     basins = np.where(rng.random((h, w)) > 0.2, rng.integers(0, 3, (h, w)), -1)
-    a, b = touching(basins)
+    a, b = _touching(basins)
     found = [tuple(sorted(pq)) for pq in zip(a.tolist(), b.tolist(), strict=True)]
     expected = set()
     for y, x in np.ndindex(h, w):
@@ -377,15 +377,16 @@ def test_touching_cells_are_every_8_neighbour_pair_across_basins(seed, h, w):
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 12), st.integers(1, 12))
 def test_box_counts_are_the_sums_over_clipped_squares(seed, h, w):
-    """The kernel's counts are the masks' sums over each node's squares clipped to the grid
-    (what the summed-area tables it replaces gave)."""
+    """The summed-area tables' counts are the masks' sums over each node's squares clipped to
+    the grid."""
     rng = np.random.default_rng(seed)
     a, b = rng.random((h, w)) > 0.6, rng.random((h, w)) > 0.5
     n = 5
     cells = np.column_stack([rng.integers(0, h, n), rng.integers(0, w, n)])
     outer = rng.integers(0, 6, n)
     inner = outer - rng.integers(0, 4, n)  # negative: no inner square
-    n_a, n_b, inside = box_counts(a, b, cells, outer, inner)
+    n_a, n_b = _box_sums(a, cells, outer), _box_sums(b, cells, outer)
+    inside = (inner >= 0) & (_box_sums(a, cells, np.maximum(inner, 0)) > 0)
     for k, (y, x) in enumerate(cells):
         box = np.s_[max(y - outer[k], 0):y + outer[k] + 1, max(x - outer[k], 0):x + outer[k] + 1]
         assert n_a[k] == a[box].sum() and n_b[k] == b[box].sum()

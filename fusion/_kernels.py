@@ -1,9 +1,15 @@
-"""Compiled inner loops of :func:`fusion.merge_grids` (numba, cached on disk after the first call).
+"""Compiled loops of :mod:`fusion` (numba, cached on disk), each for a loop no numpy/scipy
+call does without whole-array temporaries:
 
-The env's grids are ~500 × 500 cells of which a few thousand are known: numpy's whole-grid
-passes (``!=``, ``nonzero``, block reductions over a reshaped crop) and the fancy-indexed
-rasters of the rotated points cost more than the FFT correlation they feed, so they are loops
-here. They compute exactly what the numpy forms did (same cells, same flags)."""
+- :func:`match_brute`: ICP's all-pairs nearest neighbours of small sets, with the objective
+  and the repeat test in the same pass (a KD-tree pays off only for large sets).
+- :func:`pool`: the grid merge's block pooling with blocks of a fractional number of cells,
+  over the known box of a large, mostly unknown grid.
+- :func:`raster_rotated`: the rotated points scattered into one FFT kernel per rotation.
+
+Tests check the last two against the numpy forms. No kernel here calls one of another
+module, so numba's per-file cache stays valid.
+"""
 
 from __future__ import annotations
 
@@ -14,18 +20,37 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def known_box(states, unknown):
-    """``(r0, r1, c0, c1)``: the first and last rows and columns holding a cell other than
-    ``unknown`` (``r0 = -1`` if there is none)."""
-    r0 = r1 = c0 = c1 = -1
-    for r in range(states.shape[0]):
-        for c in range(states.shape[1]):
-            if states[r, c] != unknown:
-                if r0 < 0:
-                    r0, c0, c1 = r, c, c
-                r1 = r
-                c0, c1 = min(c0, c), max(c1, c)
-    return r0, r1, c0, c1
+def match_brute(D, M, theta, tx, ty, max_d2, prev_idx, prev_keep, idx, d2, keep):
+    """Move ``D`` by ``(theta, tx, ty)`` and pair each point with its nearest point of ``M``.
+
+    Fills ``idx``, ``d2`` (squared distance) and ``keep`` (``d2 <= max_d2``). Returns the
+    objective over the kept pairs and whether the pairing (``idx`` and ``keep``) equals the
+    previous one.
+    """
+    c = math.cos(theta)
+    s = math.sin(theta)
+    f = 0.0
+    same = prev_idx.shape[0] == D.shape[0]
+    for i in range(D.shape[0]):
+        x = c * D[i, 0] - s * D[i, 1] + tx
+        y = s * D[i, 0] + c * D[i, 1] + ty
+        best = np.inf
+        arg = 0
+        for j in range(M.shape[0]):
+            dx = x - M[j, 0]
+            dy = y - M[j, 1]
+            dd = dx * dx + dy * dy
+            if dd < best:
+                best = dd
+                arg = j
+        idx[i] = arg
+        d2[i] = best
+        keep[i] = best <= max_d2
+        if keep[i]:
+            f += best
+        if same and (prev_idx[i] != arg or prev_keep[i] != keep[i]):
+            same = False
+    return f, same
 
 
 @njit(cache=True, nogil=True)
