@@ -14,7 +14,8 @@ them into ground-truth topological maps.
 * DungeonMaps (``load_dungeon_png``): grey > 150 is free (the 208-grey start square too),
   darker is an obstacle; no scale is stored, so ``resolution`` is an argument.
 
-Every problem with a file (missing, truncated, bad header, missing YAML key) raises
+Every problem with a file (missing, truncated, bad header, missing YAML key, an image over
+:data:`MAX_MAP_PIXELS`) raises
 :class:`MapFileError` naming the file and what is wrong.
 """
 
@@ -28,6 +29,11 @@ from typing import Any
 import numpy as np
 
 from topo.validation import check_real
+
+MAX_MAP_PIXELS = 2 ** 26
+"""Largest map image read, in pixels: the image is held as float64 grey levels (8 bytes a
+pixel, 512 MiB at this size) before it becomes masks, so a larger one is refused from its header
+before it is decoded."""
 
 DUNGEON_FREE_ABOVE = 150
 """DungeonMaps grey levels above this are free space."""
@@ -78,6 +84,10 @@ def _read_image(path: Path, what: str) -> np.ndarray:
         raise MapFileError(f"{path}: {what} file not found")
     try:
         with Image.open(path) as im:
+            width, height = im.size
+            if width * height > MAX_MAP_PIXELS:
+                raise MapFileError(f"{path}: {what} of {width} x {height} pixels is larger "
+                                   f"than MAX_MAP_PIXELS = {MAX_MAP_PIXELS}")
             im.load()
             if im.mode in _WIDE_MODES:
                 grey = np.asarray(im, dtype=np.float64) * (255.0 / 65535.0)

@@ -85,7 +85,8 @@ class WorldConfig:
             (``{"verts": [[x, y], ...]}`` in metres).
         size: procedural building width and height in metres, each ``>= 6``.
         resolution: cell size of the world grid in metres (procedural and JSON worlds).
-        png_resolution: metres per pixel of PNG maps (DungeonMaps give none; 0.05–0.1 is typical).
+        png_resolution: metres per pixel of PNG maps (DungeonMaps give none; 0.05–0.1 is typical),
+            at most 0.5 (as ``resolution``).
         room_size: procedural ``(min, max)`` room side in metres.
         corridor_prob: chance that a procedural row/column of rooms is a corridor (1.4–2 m wide).
         door_width: procedural door width in metres (must let a robot through).
@@ -94,7 +95,9 @@ class WorldConfig:
         wall_thickness: procedural wall thickness in metres.
         start_clearance: minimum free distance around a start position, metres, ``>=`` the robot
             radius.
-        min_start_separation: minimum distance between the two start positions, metres.
+        min_start_separation: minimum distance between two start positions, metres, ``>=``
+            twice the robot radius (the env refuses teams that cannot start this far apart:
+            ``envs.explore.feasibility``).
     """
 
     source: str = "procedural"
@@ -128,7 +131,7 @@ class WorldConfig:
         _set(self, "resolution", check_real(self.resolution, "world.resolution", low=0.01,
                                             low_inclusive=True, high=0.5))
         _set(self, "png_resolution", check_real(self.png_resolution, "world.png_resolution",
-                                                low=0.0))
+                                                low=0.0, high=0.5))
         rs = _check_pair(self.room_size, "world.room_size", low=0.0)
         if not 2.0 <= rs[0] <= rs[1]:
             raise ValueError(f"world.room_size must satisfy 2 <= min <= max, got {rs}")
@@ -523,6 +526,12 @@ class EnvConfig:
             raise ValueError(
                 f"world.start_clearance must be >= robot.radius ({self.robot.radius}), "
                 f"got {self.world.start_clearance}"
+            )
+        if self.world.min_start_separation < 2 * self.robot.radius:
+            raise ValueError(
+                f"world.min_start_separation must be >= 2 * robot.radius "
+                f"({2 * self.robot.radius} m) so robots do not start on top of each other, "
+                f"got {self.world.min_start_separation}"
             )
         if self.world.source == "procedural" and self.world.door_width <= 2 * self.robot.radius:
             raise ValueError(

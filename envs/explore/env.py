@@ -262,6 +262,7 @@ from envs.explore.comm import TeamViews
 from envs.explore.config import EnvConfig
 from envs.explore.copies import History, ReplayCopies
 from envs.explore.drift import odometry_noise_level
+from envs.explore.feasibility import check_feasible, draw_world_and_starts, frame_radius
 from envs.explore.global_state import (
     STATE_MAP_SIZE,
     STATE_SAMPLES,
@@ -296,7 +297,7 @@ from envs.explore.observations import (
 from envs.explore.raycast import RayCaster
 from envs.explore.robot import Robot, build_space, simulate
 from envs.explore.sonar import Sonar
-from envs.explore.starts import check_start_poses, parse_reset_options
+from envs.explore.starts import check_seed, check_start_poses, parse_reset_options
 from envs.explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
 
@@ -385,11 +386,11 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         if cfg.world.source != "procedural":
             if self._file_world is None:
                 self._file_world = load_world(cfg.world, robot_radius=cfg.robot.radius)
-            x0, y0, x1, y1 = self._file_world.extent
-            diag = math.hypot(x1 - x0, y1 - y0)
+            extent = self._file_world.extent
         else:
-            diag = math.hypot(*cfg.world.size)
-        self.frame_radius = float(diag + cfg.sonar.max_range + 1.0)
+            extent = (0.0, 0.0, *cfg.world.size)
+        check_feasible(cfg, self._file_world)  # works for every seed, or refused here
+        self.frame_radius = frame_radius(cfg, extent)
         self._build_spaces()
         self.state_space = state_space(config.n_robots)
         self._observer = Observer(config, self.frame_radius, self.two_robot)
@@ -450,10 +451,20 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
     # ------------------------------------------------------------------ reset
     def reset(self, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[dict, dict]:
-        """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``."""
+        """Start an episode; ``seed`` re-creates the env's one ``numpy.random.Generator``.
+
+        Raises:
+            TypeError, ValueError: a ``seed`` that is not ``None`` or an integer ``>= 0``, bad
+                ``options`` or start poses; the env is then left with no episode.
+        """
+        self._ready = False  # a reset that raises leaves no episode (manual, Starting State)
+        self.agents = []
+        self._history = None
+        seed = check_seed(seed)
+        starts = parse_reset_options(options, self.n_robots, self.metadata["name"])
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
-        self._begin(parse_reset_options(options, self.n_robots, self.metadata["name"]))
+        self._begin(starts)
         if self.render_mode == "human":
             self.render()
         return self._observe(), self._infos()
@@ -468,17 +479,14 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         self._history = None
         cfg = self.config
         rng = self._rng
-        if self._file_world is not None:
-            self._world = self._file_world
+        if starts is None:
+            self._world, starts = draw_world_and_starts(cfg, rng, self._file_world)
         else:
-            self._world = procedural_world(cfg.world, rng, robot_radius=cfg.robot.radius)
+            self._world = (self._file_world if self._file_world is not None else
+                           procedural_world(cfg.world, rng, robot_radius=cfg.robot.radius))
+            check_start_poses(starts, self._world, cfg.robot.radius)
         world = self._world
         n = self.n_robots
-        if starts is None:
-            starts = world.sample_starts(rng, cfg.world.start_clearance,
-                                         cfg.world.min_start_separation, n)
-        else:
-            check_start_poses(starts, world, cfg.robot.radius)
         self.robots = [Robot(i, starts[i], cfg.robot) for i in range(n)]
         self.space = build_space(world.segments, self.robots)
         self.caster = RayCaster(world.segments, cfg.robot.radius, robots=n)

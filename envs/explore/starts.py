@@ -1,17 +1,36 @@
-"""Start poses given to ``reset``: the ``start_poses`` reset option, read and checked.
+"""What ``reset`` is given, read and checked: the seed and the ``start_poses`` option.
 
-Without it the env draws the starts (:meth:`World.sample_starts`, manual, Starting State).
+Without start poses the env draws the starts (``envs.explore.feasibility.draw_world_and_starts``,
+manual, Starting State).
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 from typing import Any
 
 import numpy as np
 
 from envs.explore.worlds import World
+
+
+def check_seed(seed: object) -> int | None:
+    """``reset``'s ``seed`` as an ``int`` (or ``None``: continue the env's generator).
+
+    Raises:
+        TypeError: not ``None`` or an integer (``bool`` is refused, numpy integers are fine).
+        ValueError: a negative integer (``numpy.random.default_rng`` takes none).
+    """
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise TypeError(f"seed must be None or a non-negative integer, got {seed!r} "
+                        f"({type(seed).__name__})")
+    if seed < 0:
+        raise ValueError(f"seed must be None or a non-negative integer, got {seed}")
+    return int(seed)
 
 
 def parse_reset_options(options: dict[str, Any] | None, n: int, env_name: str

@@ -32,6 +32,17 @@ from skimage.measure import approximate_polygon, find_contours
 
 from envs.explore.config import WorldConfig
 
+MAX_WORLD_CELLS = 2 ** 24
+"""Most cells of a world grid (a procedural ``world.size`` over ``world.resolution``, or a map
+file's). Building one holds, per cell, the distance transform's float64 distances and int32
+feature indices (16 bytes), two int32 label arrays (8), the float32 clearance (4), a float32
+copy for the wall tracing (4) and a few bool masks: about 40 bytes, so 2**24 cells stay under
+1 GiB while the world is built."""
+
+MAX_FILE_RESOLUTION = 0.5
+"""Coarsest map file accepted, metres per cell (as ``world.resolution``): a robot needs a
+few cells across a doorway, and a coarse map of a large area asks for huge robot maps."""
+
 _COLLINEAR_SIN = 0.02
 """Two consecutive segments whose directions differ by less than ~1.1° are merged."""
 
@@ -184,6 +195,55 @@ class World:
             poses[k, 1] = self.origin[1] + (cy + 0.5) * self.resolution
         poses[:, 2] = rng.uniform(-math.pi, math.pi, size=n)
         return poses
+
+    def spread_starts(self, clearance: float, min_separation: float,
+                      n: int) -> np.ndarray | None:
+        """``n`` start poses ``(n, 3)`` (headings 0) placed without randomness, or ``None`` if
+        this placement finds none: :func:`spread_points` over the centres of the drivable cells
+        with ``clearance`` metres of free space.
+
+        Why: the fallback of the random draw, and what ``check_feasible`` runs on a map file's
+        world, so a file world that passes the check has starts for every seed.
+        """
+        cells = np.flatnonzero(self.drivable & (self.clearance >= clearance))
+        iy, ix = np.divmod(cells, self.free.shape[1])
+        xy = np.stack([ix + 0.5, iy + 0.5], axis=1) * self.resolution + np.asarray(self.origin)
+        chosen = spread_points(xy, min_separation, n)
+        if chosen is None:
+            return None
+        poses = np.zeros((n, 3))
+        poses[:, :2] = xy[chosen]
+        return poses
+
+
+def spread_points(xy: np.ndarray, min_separation: float, n: int) -> np.ndarray | None:
+    """Indices of ``n`` of the points ``xy`` ``(M, 2)`` at least ``min_separation`` apart, found
+    by farthest-point placement, or ``None``. The placement starts from each of the five points
+    extreme along ``x + y``, ``x − y`` (the corners of a room) and nearest to the points' mean,
+    in that order, and adds the point farthest from those chosen until ``n`` are chosen or the
+    farthest is nearer than ``min_separation``; the first start that places ``n`` wins.
+
+    Why: deterministic, and from a corner it finds the best placements of a few points in a
+    rectangle (its corners, then their middles).
+    """
+    if len(xy) == 0:
+        return None
+    s, t = xy.sum(axis=1), xy[:, 0] - xy[:, 1]
+    mean = np.hypot(*(xy - xy.mean(axis=0)).T)
+    firsts = dict.fromkeys(int(i) for i in (np.argmin(s), np.argmax(s), np.argmin(t),
+                                            np.argmax(t), np.argmin(mean)))
+    for first in firsts:
+        chosen = [first]
+        nearest = np.hypot(*(xy - xy[first]).T)
+        while len(chosen) < n:
+            k = int(np.argmax(nearest))
+            if nearest[k] < min_separation:
+                break
+            chosen.append(k)
+            np.minimum(nearest, np.hypot(*(xy - xy[k]).T), out=nearest)
+        if len(chosen) == n:
+            return np.asarray(chosen)
+    return None
 
 
 def _drop_collinear(poly: np.ndarray, closed: bool) -> np.ndarray:
@@ -373,7 +433,8 @@ def load_houseexpo_json(path: str | Path, resolution: float = 0.1) -> tuple[np.n
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: not JSON, no ``verts`` key, fewer than 3 vertices, non-finite values.
+        ValueError: not JSON, no ``verts`` key, fewer than 3 vertices, non-finite values, a
+            polygon over :data:`MAX_WORLD_CELLS` cells at ``resolution``.
     """
     path = Path(path)
     if not path.is_file():
@@ -399,6 +460,8 @@ def load_houseexpo_json(path: str | Path, resolution: float = 0.1) -> tuple[np.n
     lo = verts.min(axis=0) - margin
     hi = verts.max(axis=0) + margin
     w, h = (np.ceil((hi - lo) / resolution)).astype(int)
+    _check_cells(int(w) * int(h), f"world file {str(path)!r} ({hi[0] - lo[0]:g} x "
+                                  f"{hi[1] - lo[1]:g} m at {resolution} m)")
     rows = (verts[:, 1] - lo[1]) / resolution - 0.5
     cols = (verts[:, 0] - lo[0]) / resolution - 0.5
     free = np.zeros((h, w), dtype=bool)
@@ -407,12 +470,19 @@ def load_houseexpo_json(path: str | Path, resolution: float = 0.1) -> tuple[np.n
     return free, float(resolution), (float(lo[0]), float(lo[1]))
 
 
+def _check_cells(cells: int, what: str) -> None:
+    if cells > MAX_WORLD_CELLS:
+        raise ValueError(f"{what} needs {cells} cells, more than MAX_WORLD_CELLS = "
+                         f"{MAX_WORLD_CELLS} (envs.explore.worlds)")
+
+
 def load_world(cfg: WorldConfig, *, robot_radius: float = 0.25) -> World:
     """A :class:`World` from the map file ``cfg.source`` (see the module docstring).
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: a malformed file, or a map with no room for two robots.
+        ValueError: a malformed file, a map coarser than :data:`MAX_FILE_RESOLUTION` or over
+            :data:`MAX_WORLD_CELLS`, or a map with no room for a robot.
     """
     path = Path(cfg.source)
     if not path.is_file():
@@ -426,4 +496,10 @@ def load_world(cfg: WorldConfig, *, robot_radius: float = 0.25) -> World:
 
         plan = load_floor_plan(path, resolution=cfg.png_resolution if suffix == ".png" else None)
         free, res, origin, name = plan.free, plan.resolution, tuple(plan.origin), plan.name
+        if res > MAX_FILE_RESOLUTION:
+            raise ValueError(f"world.source {cfg.source!r} has a resolution of {res} m per "
+                             f"cell (its YAML's resolution); at most {MAX_FILE_RESOLUTION} is "
+                             f"allowed")
+        _check_cells(free.size, f"world.source {cfg.source!r} ({free.shape[1]} x "
+                                f"{free.shape[0]} cells)")
     return World.from_free_mask(free, res, origin, name=name, robot_radius=robot_radius)

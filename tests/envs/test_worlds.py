@@ -91,6 +91,30 @@ def test_starts_are_drivable_apart_and_seeded():
                                       world.sample_starts(np.random.default_rng(seed), 0.45, 3.0))
 
 
+def test_spread_starts_are_deterministic_apart_and_refused_when_impossible():
+    free = np.zeros((60, 60), bool)
+    free[5:55, 5:55] = True  # a 5 m square room
+    world = World.from_free_mask(free, 0.1)
+    poses = world.spread_starts(0.45, 3.5, 4)  # only the corners of its 4 m start area work
+    assert poses.shape == (4, 3) and (poses[:, 2] == 0).all()
+    assert world.is_free(poses[:, :2]).all()
+    gaps = [math.dist(a, b) for i, a in enumerate(poses[:, :2]) for b in poses[i + 1:, :2]]
+    assert min(gaps) >= 3.5
+    np.testing.assert_array_equal(poses, world.spread_starts(0.45, 3.5, 4))
+    assert world.spread_starts(0.45, 3.5, 5) is None
+    assert world.spread_starts(3.0, 0.5, 2) is None  # no cell with that clearance
+
+
+def test_json_world_over_the_cell_limit_is_refused(tmp_path, monkeypatch):
+    import envs.explore.worlds as worlds
+
+    monkeypatch.setattr(worlds, "MAX_WORLD_CELLS", 1000)
+    path = _write_json(tmp_path / "big.json", {"verts": [[0, 0], [8, 0], [8, 3], [0, 3]]})
+    with pytest.raises(ValueError, match=r"world file '.*big.json' \(8.4 x 3.4 m at 0.1 m\) "
+                                         r"needs \d+ cells, more than MAX_WORLD_CELLS = 1000"):
+        load_world(WorldConfig(source=str(path)))
+
+
 def _write_json(path, data):
     path.write_text(json.dumps(data))
     return path

@@ -126,3 +126,18 @@ def test_sixteen_bit_pgm_is_scaled_not_clipped(tmp_path):
     assert plan.occupied[top, 0] and not plan.free[top, 0]
     assert not plan.occupied[top, 1] and not plan.free[top, 1]
     assert plan.free[top, 2] and plan.free[0].all()
+
+
+def test_image_over_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):
+    import topo.maps
+
+    yml = write_pgm_map(tmp_path, np.full((4, 5), 254))
+    monkeypatch.setattr(topo.maps, "MAX_MAP_PIXELS", 19)
+    with pytest.raises(MapFileError, match=r"m\.pgm: map image of 5 x 4 pixels is larger than "
+                                           r"MAX_MAP_PIXELS = 19"):
+        load_ros_map(yml)
+    Image.fromarray(np.full((4, 5), 200, dtype=np.uint8)).save(tmp_path / "d.png")
+    with pytest.raises(MapFileError, match=r"d\.png: DungeonMaps PNG of 5 x 4 pixels"):
+        load_dungeon_png(tmp_path / "d.png")
+    monkeypatch.setattr(topo.maps, "MAX_MAP_PIXELS", 20)
+    assert load_ros_map(yml).shape == (4, 5)
