@@ -52,7 +52,7 @@ ENV_ID = "two_robot_explore_v0"
 
 DEFAULT_WORLD_SIZE_MAX = 20.0
 """The largest training building by default (``Args.world_size_max``): the held-out worlds of
-``benchmarks/training_eval.py`` are 10–20 m, and ``benchmarks/training.md`` trains on that
+``benchmarks/training_eval.py`` are 10–20 m, and ``docs/notes/training.md`` trains on that
 range."""
 
 
@@ -82,7 +82,7 @@ class Args:
     known_poses: bool = False
     """The robots know their relative start poses (the env's ``mapping.merge_method="known"``:
     teammates are placed from the first step, no merging), in training and evaluation; the
-    setting most multi-robot exploration work assumes (``benchmarks/training.md``)."""
+    setting most multi-robot exploration work assumes (``docs/notes/training.md``)."""
     level: Literal["goals", "motion"] = "goals"
     """What the policy decides: a frontier sector every ``hold`` steps (a planner drives), or
     the velocity command every step."""
@@ -104,7 +104,7 @@ class Args:
     """With the sector scorer, logits subtracted per metre by which a sector's frontier is
     dearer than the cheapest one: > 0 starts the policy as a soft ``Frontier`` that PPO
     refines (:class:`agents.policy.SectorPolicy`); 0 learns from scratch
-    (``benchmarks/training.md`` compares both)."""
+    (``docs/notes/training.md`` compares both)."""
     central_critic: bool = False
     """At the goals level with the sector scorer (SB3): the value function also reads the
     env's global ``state()`` (MAPPO-style centralised critic; the actors stay decentralised,
@@ -134,18 +134,18 @@ class Args:
     """``--backend sb3``: train on buildings of several sizes, the ``n_envs`` envs spread
     evenly from ``world_size`` to this side (metres), each env's episodes lengthened in
     proportion (``max_cycles`` is the first's); evaluation stays on ``world_size``. Default:
-    :data:`DEFAULT_WORLD_SIZE_MAX` (20 m: the measured recipe, ``benchmarks/training.md``), or
+    :data:`DEFAULT_WORLD_SIZE_MAX` (20 m: the measured recipe, ``docs/notes/training.md``), or
     every env on ``world_size`` when that is as large or the backend is RLlib. Set it to
     ``max(world_size)`` for one size."""
     max_cycles: int = 500
     """Env steps per episode (truncation); long enough in 10 m buildings for ``Frontier`` to
-    reach 85 % coverage, so T85 separates explorers (``benchmarks/training.md``)."""
+    reach 85 % coverage, so T85 separates explorers (``docs/notes/training.md``)."""
     learning_rate: float = 3e-4
     """Adam learning rate."""
     lr_schedule: Literal["constant", "linear"] = "constant"
     """``constant``, or ``linear``: from ``learning_rate`` down to 0 at ``total_timesteps``
     (SB3's ``LinearSchedule``; ``--backend sb3`` only). A constant rate let a motion policy
-    fall back after its best point (``benchmarks/training.md``)."""
+    fall back after its best point (``docs/notes/training.md``)."""
     n_steps: int | None = None
     """Rollout length (policy decisions) per sub-environment between updates; default 32 at
     the goals level (a decision spans ``hold`` steps), 128 at the motion level."""

@@ -47,7 +47,7 @@ STRUCTURAL_ACCEPT_THRESHOLD = 0.8
 """The default :attr:`fusion.MergeConfig.accept_threshold`: the structural merge called alone
 (:func:`fusion.merge_maps`), whose confidence model is fitted and thresholded on its own
 (``--model structural``); kept above the threshold rule's choice when that one sits at the
-limit, for pairs unlike the tuning ones (``benchmarks/fusion.md``)."""
+limit, for pairs unlike the tuning ones (``docs/notes/fusion.md``)."""
 
 TEAM_ACCEPT_THRESHOLD = 0.97
 """Default :attr:`MergeRule.team_accept_threshold` (the env's

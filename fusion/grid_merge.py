@@ -20,7 +20,7 @@ more evidence — every wall cell — so this method aligns them directly:
    rivals) on a ``2·step_deg / 3`` one — and the best is refined by gated ICP-SVD on wall
    cells, then (``native_refine``) on the grids' own cells: two gated ICP passes on their
    occupied cells, after a local correlation at 0.1 m for grids finer than that (so that maps
-   of fine cells are aligned as precisely as their cells allow: ``benchmarks/fusion.md``);
+   of fine cells are aligned as precisely as their cells allow: ``docs/notes/fusion.md``);
 4. its evidence — the margin of its score over the best alignment that is clearly different
    (more than ``distinct_deg`` or ``distinct_m`` away: the refined rivals, and far-away peaks
    at the best rotation), the overlapping area, how many of B's walls land on A's known cells
@@ -88,7 +88,7 @@ def drift_prior(odometry_noise: float, steps: int) -> float:
     """:attr:`GridMergeConfig.drift_prior` of maps made over ``steps`` env steps by robots whose
     odometry has relative noise ``odometry_noise`` (``RobotConfig.odometry_noise``, the larger
     of its two; ``0`` for perfect odometry): ``odometry_noise · steps / 1000``. The drift of a
-    frontier robot grows about linearly with the steps (``benchmarks/drift.md``); the confidence
+    frontier robot grows about linearly with the steps (``docs/notes/drift.md``); the confidence
     model weighs it (fitted on ``benchmarks/env_pairs.py --odometry-noise`` pairs).
 
     Raises:
@@ -121,7 +121,7 @@ class GridMergeConfig:
     ``drift_prior``: how far the maps' odometry may have drifted, :func:`drift_prior` (``0``:
     perfect odometry) — evidence of the confidence model, which the grids alone cannot give:
     drift bends both maps, and how far an alignment of bent maps is from the robots' current
-    frames depends on the drift, not on how well the walls fit (``benchmarks/drift.md``);
+    frames depends on the drift, not on how well the walls fit (``docs/notes/drift.md``);
     above 0, :func:`fusion.hybrid.hybrid_merge` also asks the grids about a structural merge."""
 
     resolution: float = 0.2

@@ -60,7 +60,7 @@ def local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray
     """The best alignment within :data:`LOCAL_REACH` and ``step_deg / 3`` of ``estimate`` by
     the correlation score on layers pooled to :data:`LOCAL_CELL` (finer than ``resolution``):
     on maps of fine cells it fixes a rotation the ICP refinement alone can leave degrees off
-    (``benchmarks/fusion.md``, fine maps). ``estimate`` itself if the grids' cells are not
+    (``docs/notes/fusion.md``, fine maps). ``estimate`` itself if the grids' cells are not
     finer than :data:`LOCAL_CELL`."""
     fine = max(float(grid_a.resolution), float(grid_b.resolution))
     cell = LOCAL_CELL

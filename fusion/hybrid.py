@@ -49,7 +49,7 @@ from fusion.structural import MergeResult, fuse_maps, merge_maps
 HYBRID_EPS = 0.6
 """Node fusion radius (m) when a grid alignment builds the merged topological map: sonar
 topological maps of the same place put their nodes apart by up to about this much
-(``benchmarks/fusion.md``)."""
+(``docs/notes/fusion.md``)."""
 
 IN_USE_MARGIN = DEFAULT_RULE.in_use_margin
 """A confident result clearly different from the transform in use replaces it unless the grids
@@ -95,7 +95,7 @@ def hybrid_merge(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, *,
     grids' weighs it. The env asks ``vouch`` of a pair's first merge: early in an episode the
     two maps often share no place at all — far more often than in the map pairs the
     structural confidence was calibrated on — and a room row then fits its twin with a high
-    structural confidence (``benchmarks/fusion.md``).
+    structural confidence (``docs/notes/fusion.md``).
 
     With ``in_use``, the transform the caller uses now, an accepted result clearly different
     from it (``distinct_deg`` / ``distinct_m`` at B's node centroid) is rejected when the grids
@@ -131,7 +131,7 @@ def recheck(map_a: Any, map_b: Any, grid_a: Any, grid_b: Any, in_use: Rigid2D,
     ``accept_threshold − drop_margin`` (:class:`fusion.grid_merge.GridMergeConfig`):
     drifting odometry bends the maps until no rigid transform is right, and the merge must
     then be dropped, not kept on old evidence. Without drift the rule is off: there the grids'
-    confidence in a right merge can dip for a while (``benchmarks/drift.md``).
+    confidence in a right merge can dip for a while (``docs/notes/drift.md``).
 
     An accepted result (the same alignment refined, or a distinct one the grids do not support
     ``in_use`` clearly better than: :func:`hybrid_merge`'s ``in_use``) is for the caller to use

@@ -172,9 +172,8 @@ class _TreeMatcher:
     """KD-tree nearest neighbours (built once on the fixed set ``M``; large sets).
 
     scipy's ``cKDTree`` on one thread, the squared distances recomputed from the pairs
-    (``dx² + dy²``, what pykdtree returned before). pykdtree's OpenMP threads made a query on
-    a busy 2-core machine take 2–10 ms instead of 0.05 ms (they wait for each other's cores):
-    the grid merge's ICP cost 20–90 ms a call instead of ~1 ms."""
+    (``dx² + dy²``). One thread: a threaded KD-tree's workers wait for each other's cores on
+    a busy machine, and a query then costs many times more."""
 
     def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
         self.tree = cKDTree(M)

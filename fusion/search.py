@@ -11,9 +11,8 @@ placement with the largest ω. With a 4-vertex A, a 7-vertex B and 2° steps fro
 so only 4 × 7 × 180 = 5040 of them are distinct. The paper rotates map A; topomerge keeps its one
 convention and moves B onto A (``p_A = R p_B + T``), so a paper angle θ corresponds to −θ here.
 
-The search costs about 2 µs per placement, so it grows with the product of the map sizes: 1.4 M
-placements (two 90-endpoint maps) take about 3 s, two 300-endpoint maps 16 M placements, over
-half a minute. Beyond :data:`DEFAULT_MAX_EVALUATIONS` placements (about 10 s) it refuses at once
+Its cost grows with the product of the map sizes (the placements counted above). Beyond
+:data:`DEFAULT_MAX_EVALUATIONS` placements it refuses at once, before allocating anything,
 with a ``ValueError`` stating the count, the estimated time and the two ways out:
 ``max_evaluations=None`` (or a larger limit), or a coarser ``step_deg``.
 """
@@ -38,13 +37,12 @@ DEFAULT_EPS = 0.3
 """Default coincidence tolerance in metres (the evaluation's translation-success threshold)."""
 
 DEFAULT_MAX_EVALUATIONS = 5_000_000
-"""Placements :func:`exhaustive_search` scores before refusing unless told otherwise (about 10 s
-at :data:`SECONDS_PER_EVALUATION`; the paper's example has 5068, two 160-endpoint maps 4.6 M)."""
+"""Placements :func:`exhaustive_search` scores before refusing unless told otherwise (the
+paper's example has 5068; two 160-endpoint maps 4.6 M)."""
 
 SECONDS_PER_EVALUATION = 2e-6
-"""Cost of one placement for the time estimates in :func:`exhaustive_search`'s refusal:
-1.1–2.2 µs from 20 to 300 endpoints per map on one core of a 2-core machine
-(``benchmarks/exhaustive_cost.py``; see ``benchmarks/fusion.md``)."""
+"""Cost of one placement (s) for the time estimate in :func:`exhaustive_search`'s refusal
+(fitted in ``docs/notes/fusion.md``)."""
 
 
 def endpoint_set(value: Any, name: str) -> np.ndarray:

@@ -202,7 +202,7 @@ class RobotConfig:
             :data:`ODOMETRY_PRESETS` (``"pioneer3dx"``), stored as its four numbers.
         drift_correction: correct the odometry against the robot's own map by scan-to-map
             matching (``envs.explore.localize``); only with noisy odometry.
-            Experimental: measured not to reduce these robots' drift (``benchmarks/drift.md``).
+            Experimental, off: it did not reduce these robots' drift (``docs/notes/drift.md``).
         drift_correction_every: steps between two matches.
         drift_correction_window: steps of sonar echoes in a match's submap.
         drift_correction_age: the match's reference is the walls occupied this many steps ago.
@@ -338,7 +338,7 @@ class MappingConfig:
             free the cone up to it and mark no wall (``topo.SensorModel.usable_range``;
             ``None`` uses every reading in full). Far readings are where a lost echo reads
             through a wall and a wide arc closes a doorway (the choice of 2.5 m:
-            ``benchmarks/fusion.md``).
+            ``docs/notes/fusion.md``).
         topo_every: re-extract each robot's topological map every this many steps (``0`` never).
         topo: settings of the extraction (``topo.ExtractConfig``, or a dict of its fields;
             ``None`` for its defaults).
@@ -346,7 +346,7 @@ class MappingConfig:
         merge_method: ``"hybrid"`` (default), a ``fusion.merge_maps`` method, ``"known"``
             (every pair's true start-frame transform from the first step: the known-poses
             baseline) or ``"none"`` (:data:`MERGE_METHODS`).
-        grid_merge_every: with ``"hybrid"``, the (slower, ~25–100 ms) occupancy-grid alignment
+        grid_merge_every: with ``"hybrid"``, the (slower) occupancy-grid alignment
             runs on merge steps that are multiples of this: to find a merge, and once one is in
             use to re-examine it (replace or drop it, see the env's manual); ``0`` never. A
             multiple of ``merge_every`` (unused when ``merge_every`` is 0).
@@ -373,7 +373,7 @@ class MappingConfig:
             after a drop) from the structural merge also needs the grids' own alignment to be
             the same one at ``accept_threshold`` (``fusion.hybrid.hybrid_merge``'s ``vouch``):
             early maps that share no place let a room row fit its twin. ``False`` merges
-            sooner in large buildings, with look-alikes (``benchmarks/fusion.md``).
+            sooner in large buildings, with look-alikes (``docs/notes/fusion.md``).
     """
 
     grid_resolution: float = 0.1

@@ -42,7 +42,7 @@ stored model's, bit for bit."""
 
 MODEL_FEATURES = BASE_FEATURES + DRIFT_FEATURES
 """The evidence the ``"grid"`` model weighs. How the features were chosen (the cross-validated
-scores of the candidates tried): ``benchmarks/fusion.md`` and ``benchmarks/drift.md``."""
+scores of the candidates tried): ``docs/notes/fusion.md`` and ``docs/notes/drift.md``."""
 
 MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES}
 """The features of each calibrated model."""

@@ -62,7 +62,7 @@ class MergeConfig:
         ransac_seed: seed of the generator ``"ransac"`` draws them with (a merge is
             reproducible).
 
-    How the defaults were chosen: ``benchmarks/merge_tuning.md``.
+    How the defaults were chosen: ``docs/notes/merge_tuning.md``.
     """
 
     eps: float = 0.5
@@ -117,7 +117,7 @@ class MergeConfig:
 
         Raises:
             ValueError: ``sigma`` outside ``[0, 0.3]``, the range it was calibrated on (wider
-                tolerances let more chance alignments score; ``benchmarks/merge_tuning.md``).
+                tolerances let more chance alignments score; ``docs/notes/merge_tuning.md``).
         """
         sigma = check_real(sigma, "sigma", low=0.0, low_inclusive=True, high=0.3)
         base = cls()
