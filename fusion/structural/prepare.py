@@ -197,8 +197,8 @@ def _node_pairs(xy: np.ndarray, edges: np.ndarray, knn: int, min_dist: float
     other's ``knn`` nearest nodes (ties to the lower index), at least ``min_dist`` apart, and
     their distances."""
     n = len(xy)
-    adj = np.zeros((n, n), dtype=np.int64)
-    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = 1
+    adj = np.zeros((n, n))  # float: the product is BLAS's, and exact (counts of at most n)
+    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = 1.0
     near = (adj + adj @ adj) > 0
     np.fill_diagonal(near, False)
     dist = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
