@@ -123,9 +123,13 @@ merged) 80 cells, 30 of which robot 0 had already seen, at 0.1 m: the shared map
 ``N`` random drivable cells (two for ``two_robot_explore_v0``) at least
 ``world.start_clearance`` (0.45 m) from any wall and ``world.min_start_separation`` (2 m)
 apart, in one connected region, random headings; each robot's odometry starts at ``(0, 0, 0)``.
+Where a building has no such cells the draw retries from the same generator (other cells, then
+the most spread-out cells, then another building), so every seed starts; settings no building
+can hold (too many robots for the world, a world or map too large to allocate) are refused
+when the env is made, naming the setting and the limit (``envs.explore.feasibility``).
 A fresh ``pymunk.Space`` every reset; the first scan is taken at reset. A ``reset`` that raises
-(bad ``start_poses``) leaves no episode (``agents`` empty): ``step()`` raises until a ``reset``
-succeeds.
+(a ``seed`` that is not ``None`` or an integer ≥ 0, bad ``options`` or ``start_poses``) leaves
+no episode (``agents`` empty): ``step()`` raises until a ``reset`` succeeds.
 
 ## Episode End
 
@@ -243,7 +247,8 @@ radians) places the robots; other keys are ignored with a warning.
   ``graph_nodes`` has 9 features and merges, hence rewards, differ; sonar readings beyond
   ``mapping.usable_range`` no longer draw walls or free space past it, so maps, coverage and
   rewards differ; a pair's first structural merge needs the grids to agree, so some merges
-  come later.)
+  come later; a start draw that finds no cells retries instead of raising, so seeds that
+  failed to reset now start — every seed that started before starts the same.)
 """
 
 from __future__ import annotations
