@@ -233,3 +233,26 @@ def test_real_map_crops_merge(tmp_path, capsys):
     assert code == EXIT_MERGED
     assert_close(placed(tmp_path / "out", "b"),
                  Rigid2D(math.pi / 2, (w * plan.resolution - 2.0, -3.0)), tol_m=0.1)
+
+
+def test_map_pair_files_give_their_grids(tmp_path, capsys):
+    from fusion.evaluation.pairs import GridSnapshot, MapPair, write_pair
+    from topo import TopoMap
+
+    a, b, truth = crops(building(6))
+    topo = TopoMap.from_arrays(np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([[0, 1]]))
+
+    def snapshot(p):
+        return GridSnapshot(np.where(p.occupied, 2, np.where(p.free, 1, 0)).astype(np.int8),
+                            p.resolution, p.origin)
+
+    path = write_pair(tmp_path, MapPair(0, topo, topo, snapshot(a), snapshot(b), truth, 0.3,
+                                        "test", 0, "none", 0, 0, 0))
+    assert [m.name for m in load_input(str(path))] == ["pair_000000:a", "pair_000000:b"]
+    assert [m.name for m in load_input(f"{path}:b")] == ["pair_000000:b"]
+    code, _, _ = run([f"{path}:a", f"{path}:b", "--out", tmp_path / "out"], capsys)
+    assert code == EXIT_MERGED
+    assert_close(placed(tmp_path / "out", "pair_000000:b"), truth)
+    (tmp_path / "junk.npz").write_bytes(b"PK junk")
+    code, _, err = run([path, tmp_path / "junk.npz", "--out", tmp_path / "out"], capsys)
+    assert code == EXIT_BAD_INPUT and "junk.npz: corrupt or not a map-pair file" in err
