@@ -256,3 +256,21 @@ def test_map_pair_files_give_their_grids(tmp_path, capsys):
     (tmp_path / "junk.npz").write_bytes(b"PK junk")
     code, _, err = run([path, tmp_path / "junk.npz", "--out", tmp_path / "out"], capsys)
     assert code == EXIT_BAD_INPUT and "junk.npz: corrupt or not a map-pair file" in err
+
+
+def test_a_turned_reference_frame_round_trips(tmp_path, capsys):
+    """With the first map's ROS origin turned, transforms and the merged map are in its map
+    frame: the merged map merged again with the first map lands on it (identity)."""
+    a, b, truth = crops(building(7))
+    turned = FloorPlan(a.free, a.occupied, RES, (1.0, 2.0), "a", 0.4)
+    ya, yb = save_ros_map(turned, tmp_path / "a.yaml"), save_ros_map(b, tmp_path / "b.yaml")
+    code, _, _ = run([ya, yb, "--out", tmp_path / "out"], capsys)
+    assert code == EXIT_MERGED
+    frame_a = Rigid2D(0.4, np.asarray(turned.origin)
+                      - Rigid2D(0.4).apply(np.asarray([turned.origin]))[0])
+    assert_close(placed(tmp_path / "out", "b"), frame_a @ Rigid2D(0.0, (1.0, 2.0)) @ truth)
+    assert load_ros_map(tmp_path / "out" / "merged.yaml", allow_yaw=True).yaw == 0.4
+    code, _, _ = run([ya, tmp_path / "out" / "merged.yaml", "--out", tmp_path / "again"], capsys)
+    assert code == EXIT_MERGED
+    assert_close(placed(tmp_path / "again", "merged"), Rigid2D.identity(), tol_m=0.06,
+                 tol_deg=0.3)
