@@ -243,6 +243,8 @@ class Placement:
     why: str | None = None
 
     def row(self) -> dict[str, Any]:
+        """Its JSON-safe row of ``transforms.yaml``/``.json`` (``x``, ``y``, ``yaw`` ``None``
+        when not merged)."""
         t = self.transform
         return {"name": self.name, "source": self.source, "merged": self.merged,
                 "x": None if t is None else float(t.T[0]),
@@ -257,8 +259,10 @@ class Placement:
 class TeamMerge:
     """What :func:`merge_maps_n` found: ``placements`` (one per input, in order), the
     ``reference`` input whose frame the merged map is in, the ``pairs`` ``(i, j) →``
-    :class:`fusion.grid_merge.GridMergeResult` (j's grid frame → i's), and the ``merged`` map
-    (:class:`topo.maps.FloorPlan`, ``None`` when no two maps merged)."""
+    :class:`fusion.grid_merge.GridMergeResult` (j's grid frame → i's), the ``merged`` map
+    (:class:`topo.maps.FloorPlan`, ``None`` when no two maps merged) and ``owner``, the index
+    (among the merged maps, in input order) of the map that decided each of its cells (−1:
+    unknown)."""
 
     placements: list[Placement]
     reference: int
@@ -268,6 +272,7 @@ class TeamMerge:
 
     @property
     def all_merged(self) -> bool:
+        """Whether every input map is in the merged map."""
         return all(p.merged for p in self.placements)
 
 
@@ -479,6 +484,7 @@ def merge_files(specs: Sequence[str], out: str | Path, *, resolution: float | No
 
 
 def parser(prog: str = "python -m fusion merge") -> argparse.ArgumentParser:
+    """The command line's parser (``prog``: the name its messages start with)."""
     p = argparse.ArgumentParser(
         prog=prog, description="Merge two or more robots' occupancy maps (ROS map_server "
         "YAML, plain images, map-pair .npz) into one map in the first map's frame, with every "
@@ -498,7 +504,10 @@ def parser(prog: str = "python -m fusion merge") -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "python -m fusion merge") -> int:
-    """The command line (module docstring); returns the exit code."""
+    """The command line (module docstring): ``argv`` without the program and subcommand
+    names (``None``: ``sys.argv[1:]``); ``prog`` names the command in messages (the
+    ``topomerge merge`` console command passes its own). Returns the exit code (argparse's
+    own usage errors exit 2 by ``SystemExit``)."""
     args = parser(prog).parse_args(argv)
     try:
         team = merge_files(args.maps, args.out, resolution=args.resolution,

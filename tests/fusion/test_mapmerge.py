@@ -205,6 +205,9 @@ def test_plain_images_and_the_module_command(tmp_path, capsys):
     assert code == EXIT_MERGED
     # a plain image's origin is (0, 0): B's frame is its image corner
     assert_close(placed(tmp_path / "out", "b"), truth @ Rigid2D(0.0, b.origin))
+    code, _, err = run([tmp_path / "a.png", tmp_path / "b.png", "--resolution", "-1",
+                        "--out", tmp_path / "out"], capsys)
+    assert code == EXIT_BAD_INPUT and "--resolution must be > 0.0, got -1.0" in err
     assert fusion_main(["split"]) == 2
     assert "unknown command 'split'" in capsys.readouterr().err
 
