@@ -289,7 +289,8 @@ def merge_maps_n(maps: Sequence[InputMap], config: GridMergeConfig | None = None
         a :class:`TeamMerge`.
 
     Raises:
-        ValueError: fewer than two maps, or maps at different resolutions.
+        ValueError: fewer than two maps, maps at different resolutions, or a map too large
+            for the alignment (:data:`fusion.inputs.MAX_POOLED_CELLS`), naming the files.
     """
     if len(maps) < 2:
         raise ValueError(f"maps: need two or more maps to merge, got {len(maps)}")
@@ -302,7 +303,10 @@ def merge_maps_n(maps: Sequence[InputMap], config: GridMergeConfig | None = None
     pairs, edges = {}, []
     for i in range(len(maps)):
         for j in range(i + 1, len(maps)):
-            r = merge_grids(maps[i], maps[j], config)
+            try:
+                r = merge_grids(maps[i], maps[j], config)
+            except ValueError as exc:  # a map beyond fusion.inputs' bounds: name the files
+                raise ValueError(f"{maps[i].source} and {maps[j].source}: {exc}") from exc
             pairs[(i, j)] = r
             if r.accepted:
                 edges.append(Edge(i, j, r.transform, float(r.confidence)))

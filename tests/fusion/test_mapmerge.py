@@ -277,3 +277,17 @@ def test_a_turned_reference_frame_round_trips(tmp_path, capsys):
     assert code == EXIT_MERGED
     assert_close(placed(tmp_path / "again", "merged"), Rigid2D.identity(), tol_m=0.06,
                  tol_deg=0.3)
+
+
+def test_out_resolution_and_maps_too_large_for_the_alignment(tmp_path, capsys, monkeypatch):
+    a, b, _ = crops(building(8))
+    paths = [save_ros_map(p, tmp_path / f"{p.name}.yaml") for p in (a, b)]
+    code, _, _ = run([*paths, "--out", tmp_path / "out", "--out-resolution", "0.2"], capsys)
+    assert code == EXIT_MERGED
+    assert load_ros_map(tmp_path / "out" / "merged.yaml").resolution == 0.2
+    import fusion.inputs
+
+    monkeypatch.setattr(fusion.inputs, "MAX_POOLED_CELLS", 100)
+    code, _, err = run([*paths, "--out", tmp_path / "out2"], capsys)
+    assert code == EXIT_BAD_INPUT
+    assert re.search(r"a\.yaml and \S*b\.yaml: grid_a: .* above MAX_POOLED_CELLS=100", err)
