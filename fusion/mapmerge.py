@@ -439,6 +439,10 @@ def write_outputs(team: TeamMerge, out: Path, *, write_unmerged: bool = False,
     out.mkdir(parents=True, exist_ok=True)
     written = []
     rows = [p.row() for p in team.placements]
+    drawn = ([k for k, p in enumerate(team.placements) if p.merged]
+             or ([team.reference] if write_unmerged else []))
+    for n, k in enumerate(drawn):  # merged.png's colour of each drawn map (picture's order)
+        rows[k]["colour"] = "#{:02x}{:02x}{:02x}".format(*PALETTE[n % len(PALETTE)].astype(int))
     doc = {"reference": team.placements[team.reference].name,
            "frame": "the reference map's frame (its ROS origin frame)",
            "all_merged": team.all_merged, "maps": rows}

@@ -86,6 +86,7 @@ def test_two_ros_maps_merge_and_every_output_is_written(tmp_path, capsys):
     out_dir = tmp_path / "out"
     assert_close(placed(out_dir, "b"), truth)
     assert placed(out_dir, "a")["method"] == "reference"
+    assert placed(out_dir, "a")["colour"] == "#1f77b4" and placed(out_dir, "b")["colour"]
     doc = yaml.safe_load((out_dir / "transforms.yaml").read_text())
     assert doc["reference"] == "a" and doc["all_merged"] is True
     merged = load_ros_map(out_dir / "merged.yaml")  # map_server's format, read back
@@ -131,6 +132,7 @@ def test_maps_with_no_overlap_are_not_merged(tmp_path, capsys):
     assert not any((out_dir / n).exists() for n in ("merged.yaml", "merged.pgm", "merged.png"))
     assert placed(out_dir, "b")["x"] is None
     assert placed(out_dir, "b")["why"].startswith("no pair accepted")
+    assert "colour" not in placed(out_dir, "a")  # no picture drawn
     code, _, _ = run([a, b, "--out", out_dir, "--write-unmerged"], capsys)
     assert code == EXIT_NOT_MERGED
     assert load_ros_map(out_dir / "merged.yaml").free.shape == (160, 240)
