@@ -24,6 +24,15 @@ costs, fair on a busy machine. With ``--reference REV --env STEPS`` it times, ag
 merges the environment makes (``merge_maps`` every 25 steps, ``merge_grids`` every 100 while
 unmerged) on the inputs recorded from an env run of seeds 0-2, and counts the results that are
 not identical (run with ``PYTHONPATH=.`` from the checkout).
+
+With ``--tool MAP`` (a ROS map YAML or a DungeonMaps PNG) it times the map-merge tool
+(:mod:`fusion.mapmerge`) on maps of about ``--cells`` cells a side: the map is enlarged
+(nearest cell) to 0.05 m cells until it is 1.4 ``--cells`` on its shorter side, ``--maps``
+windows of ``--cells`` × ``--cells`` cells are cut from it at random places and turned by
+random angles (each its own frame; occupied cells more than two cells from free space are
+made unknown, as a robot sees walls, not solid rock), and it prints the time of every pair's
+``merge_grids``, of the whole N-map merge (``merge_maps_n``: all pairs, cycle check, drawing
+the merged map) and of writing it, and each placed map's error against the truth.
 """
 
 from __future__ import annotations
@@ -238,6 +247,75 @@ def env_times(rev: str, steps: int, repeats: int = 3) -> None:
               f"{1000 * statistics.median(grid[k]):>16.2f}{per_step:>17.1f}")
 
 
+def tool_times(source: Path, n_maps: int, cells: int, seed: int) -> None:
+    """Print the map-merge tool's times on ``n_maps`` turned windows of ``source`` (module
+    docstring)."""
+    from scipy import ndimage
+
+    from fusion.mapmerge import InputMap, load_input, merge_maps_n, rasterise, write_outputs
+    from fusion.rigid import Rigid2D
+
+    rng = np.random.default_rng(seed)
+    src = load_input(str(source), 0.1, "dungeon")[0]
+    zoom = int(math.ceil(1.4 * cells / min(src.states.shape)))
+    world = ndimage.zoom(src.states, zoom, order=0, grid_mode=True, mode="nearest")
+    # a robot maps walls, not solid rock: occupied cells away from free space are unknown
+    seen = ndimage.binary_dilation(world == 1, iterations=2)
+    world = np.where((world == 2) & ~seen, 0, world).astype(np.int8)
+    res = 0.05
+    h, w = world.shape
+    truth, maps = [], []
+    for k in range(n_maps):
+        r0, c0 = int(rng.integers(0, max(1, h - cells))), int(rng.integers(0, max(1, w - cells)))
+        sub = InputMap(f"w{k}", "", world[r0:r0 + cells, c0:c0 + cells], res,
+                       (c0 * res, r0 * res))
+        to_k = Rigid2D(float(rng.uniform(-math.pi, math.pi)), rng.uniform(-20, 20, size=2))
+        plan, _ = rasterise([sub], [to_k], Rigid2D.identity(), res)
+        states = np.where(plan.occupied, 2, np.where(plan.free, 1, 0)).astype(np.int8)
+        maps.append(InputMap(f"w{k}", "", states, res, plan.origin))
+        truth.append(to_k)
+    shapes = [m.states.shape for m in maps]
+    print(f"{n_maps} maps from {source.name} x{zoom}, windows of {cells} x {cells} cells "
+          f"(arrays {min(shapes)} .. {max(shapes)} after turning), {res} m cells")
+    pair_t, pair_cpu, pair_ok = [], [], 0
+    from fusion.grid_merge import merge_grids
+
+    merge_grids(maps[0], maps[1])  # compiled kernels load on the first call
+    for i in range(n_maps):
+        for j in range(i + 1, n_maps):
+            t0, c0 = time.perf_counter(), time.process_time()
+            r = merge_grids(maps[i], maps[j])
+            pair_t.append(time.perf_counter() - t0)
+            pair_cpu.append(time.process_time() - c0)
+            true = truth[i] @ truth[j].inverse()
+            pair_ok += r.accepted and r.transform.translation_error(
+                true, at=maps[j].centre()) <= 0.3
+    t0, c0 = time.perf_counter(), time.process_time()
+    team = merge_maps_n(maps)
+    t_team, cpu_team = time.perf_counter() - t0, time.process_time() - c0
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        write_outputs(team, Path(tmp))
+        t_write = time.perf_counter() - t0
+    print(f"pairs: {len(pair_t)}, median {1000 * statistics.median(pair_t):.0f} ms, max "
+          f"{1000 * max(pair_t):.0f} ms (CPU median {1000 * statistics.median(pair_cpu):.0f} ms), "
+          f"accepted within 0.3 m: {pair_ok}")
+    print(f"merge_maps_n of {n_maps} maps: {t_team:.2f} s (CPU {cpu_team:.2f} s); writing: "
+          f"{t_write:.2f} s; merged "
+          f"{sum(p.merged for p in team.placements)}/{n_maps}, grid {team.merged.free.shape}"
+          if team.merged is not None else f"merge_maps_n: {t_team:.2f} s, nothing merged")
+    ref = team.reference
+    for k, p in enumerate(team.placements):
+        if p.merged:
+            true = truth[ref] @ truth[k].inverse()
+            err = p.transform.translation_error(true, at=maps[k].centre())
+            print(f"  {p.name}: error {err:.3f} m, "
+                  f"{math.degrees(p.transform.rotation_error(true)):.2f} deg, "
+                  f"confidence {p.confidence:.2f}")
+        else:
+            print(f"  {p.name}: not merged: {p.why}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="10,20,40,60,80,120,200")
@@ -252,7 +330,15 @@ def main() -> None:
     parser.add_argument("--env", type=int, default=0, metavar="STEPS",
                         help="with --reference: time the merges of STEPS env steps per seed "
                              "(seeds 0-2) against REV instead, checking identical results")
+    parser.add_argument("--tool", type=Path, default=None, metavar="MAP",
+                        help="time the map-merge tool on turned windows of this map instead")
+    parser.add_argument("--maps", type=int, default=6, help="with --tool: how many maps")
+    parser.add_argument("--cells", type=int, default=1500,
+                        help="with --tool: the windows' side in cells")
     args = parser.parse_args()
+    if args.tool is not None:
+        tool_times(args.tool, args.maps, args.cells, args.seed)
+        return
     if args.grids is not None:
         grid_times(args.grids, args.reference)
         return

@@ -46,13 +46,17 @@ class MapFileError(ValueError):
 @dataclass(frozen=True, slots=True, eq=False)
 class FloorPlan:
     """A known map: ``free`` and ``occupied`` boolean masks ``(H, W)`` (neither = unknown),
-    ``resolution`` in m/cell, ``origin`` of cell (0, 0)'s lower-left corner, and a ``name``."""
+    ``resolution`` in m/cell, ``origin`` of cell (0, 0)'s lower-left corner, a ``name`` and
+    the origin's ``yaw``."""
 
     free: np.ndarray
     occupied: np.ndarray
     resolution: float
     origin: tuple[float, float]
     name: str
+    yaw: float = 0.0
+    """The ROS origin's yaw (radians): the map's frame turned by this about ``origin``
+    (read only with ``load_ros_map(..., allow_yaw=True)``; the env's worlds need 0)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -116,8 +120,13 @@ def _yaml_number(meta: dict[str, Any], key: str, path: Path, **bounds: Any) -> f
         raise MapFileError(f"{path}: {exc}") from exc
 
 
-def load_ros_map(yaml_path: str | Path) -> FloorPlan:
-    """Load a ROS ``map_server`` map (YAML + image) as a :class:`FloorPlan`."""
+def load_ros_map(yaml_path: str | Path, *, allow_yaw: bool = False) -> FloorPlan:
+    """Load a ROS ``map_server`` map (YAML + image) as a :class:`FloorPlan`.
+
+    A non-zero origin yaw is refused unless ``allow_yaw`` (the env's worlds are axis-aligned;
+    the map-merge tool, :mod:`fusion.mapmerge`, reads it into :attr:`FloorPlan.yaw`). In
+    ``raw`` mode a pixel is the occupancy value itself (0–100) and anything above 100 is
+    unknown (map_server writes such a value as −1)."""
     import yaml
 
     path = Path(yaml_path)
@@ -146,7 +155,7 @@ def load_ros_map(yaml_path: str | Path) -> FloorPlan:
                        and math.isfinite(v) for v in origin)):
         raise MapFileError(f"{path}: 'origin' must be [x, y, yaw] of finite numbers, got "
                            f"{origin!r}")
-    if origin[2] != 0:
+    if origin[2] != 0 and not allow_yaw:
         raise MapFileError(f"{path}: origin yaw must be 0 (rotated map origins are not "
                            f"supported), got {origin[2]}")
     mode = meta.get("mode", "trinary")
@@ -159,14 +168,58 @@ def load_ros_map(yaml_path: str | Path) -> FloorPlan:
     image_path = Path(meta["image"])
     if not image_path.is_absolute():
         image_path = path.parent / image_path
+    if not image_path.is_file():
+        raise MapFileError(f"{path}: names image {image_path}: map image file not found")
     grey = _read_image(image_path, "map image")[::-1]  # row 0 at the bottom
     if mode == "raw":
-        p = grey / 100.0
+        p = np.where(grey <= 100.0, grey / 100.0, np.nan)  # NaN: unknown (neither mask)
     else:
         p = grey / 255.0 if negate else (255.0 - grey) / 255.0
     return FloorPlan(free=np.ascontiguousarray(p < free_t),
                      occupied=np.ascontiguousarray(p > occ_t), resolution=resolution,
-                     origin=(float(origin[0]), float(origin[1])), name=path.stem)
+                     origin=(float(origin[0]), float(origin[1])), name=path.stem,
+                     yaw=float(origin[2]))
+
+
+ROS_FREE_GREY, ROS_UNKNOWN_GREY, ROS_OCCUPIED_GREY = 254, 205, 0
+"""Grey levels ``map_saver`` writes for free, unknown and occupied cells (trinary)."""
+
+
+def save_ros_map(plan: FloorPlan, yaml_path: str | Path) -> Path:
+    """Write ``plan`` as a ROS ``map_server`` map: a trinary PGM (free 254, unknown 205,
+    occupied 0; image row 0 at the top) beside ``yaml_path``, named after it, and the YAML
+    (``mode: trinary``, ``negate: 0``, ``occupied_thresh: 0.65``, ``free_thresh: 0.196``:
+    ``map_saver``'s values, so :func:`load_ros_map` reads back the same masks). Both files are
+    written atomically, the image first. Returns the YAML's path.
+
+    Raises:
+        ValueError: ``plan``'s masks overlap or differ in shape.
+    """
+    import io
+
+    from PIL import Image
+
+    from topo.fileio import atomic_write_bytes
+
+    path = Path(yaml_path)
+    if plan.free.shape != plan.occupied.shape or plan.free.ndim != 2:
+        raise ValueError(f"plan.free {plan.free.shape} and plan.occupied "
+                         f"{plan.occupied.shape} must be 2-D masks of one shape")
+    if (plan.free & plan.occupied).any():
+        raise ValueError("plan.free and plan.occupied overlap: a cell is one or the other")
+    grey = np.full(plan.free.shape, ROS_UNKNOWN_GREY, dtype=np.uint8)
+    grey[plan.free] = ROS_FREE_GREY
+    grey[plan.occupied] = ROS_OCCUPIED_GREY
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(grey[::-1])).save(buf, format="PPM")
+    image = path.with_suffix(".pgm")
+    atomic_write_bytes(image, buf.getvalue())
+    x0, y0 = plan.origin
+    text = (f"image: {image.name}\nmode: trinary\nresolution: {float(plan.resolution)!r}\n"
+            f"origin: [{float(x0)!r}, {float(y0)!r}, {float(plan.yaw)!r}]\nnegate: 0\n"
+            "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    atomic_write_bytes(path, text.encode())
+    return path
 
 
 def load_dungeon_png(png_path: str | Path, resolution: float = 0.1) -> FloorPlan:
@@ -178,6 +231,19 @@ def load_dungeon_png(png_path: str | Path, resolution: float = 0.1) -> FloorPlan
     free = grey > DUNGEON_FREE_ABOVE
     return FloorPlan(free=np.ascontiguousarray(free), occupied=np.ascontiguousarray(~free),
                      resolution=resolution, origin=(0.0, 0.0), name=path.stem)
+
+
+def load_plain_image(path: str | Path, resolution: float, occupied_thresh: float = 0.65,
+                     free_thresh: float = 0.196) -> FloorPlan:
+    """Load an occupancy image without a YAML (a PGM ``map_saver`` wrote, say) at
+    ``resolution`` m/pixel, by ``map_server``'s trinary rule with its default thresholds
+    (``p = (255 − v) / 255``); the origin is the image's lower-left corner at (0, 0)."""
+    resolution = check_real(resolution, "resolution", low=0.0)
+    path = Path(path)
+    p = (255.0 - _read_image(path, "map image")[::-1]) / 255.0
+    return FloorPlan(free=np.ascontiguousarray(p < free_thresh),
+                     occupied=np.ascontiguousarray(p > occupied_thresh), resolution=resolution,
+                     origin=(0.0, 0.0), name=path.stem)
 
 
 def load_floor_plan(path: str | Path, resolution: float | None = None) -> FloorPlan:

@@ -6,15 +6,24 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from topo.maps import MapFileError, load_dungeon_png, load_floor_plan, load_ros_map
+from topo.maps import (
+    FloorPlan,
+    MapFileError,
+    load_dungeon_png,
+    load_floor_plan,
+    load_ros_map,
+    save_ros_map,
+)
 
 MAPS = Path(__file__).resolve().parents[3] / "shared" / "maps"
 ROS = sorted((MAPS / "ros").glob("*.yaml"))
 DUNGEON = sorted((MAPS / "dungeon").glob("*.png"))[:3]
 
-pytestmark = pytest.mark.skipif(not MAPS.is_dir(), reason="shared/maps not beside the repo")
+needs_maps = pytest.mark.skipif(not MAPS.is_dir(), reason="shared/maps not beside the repo")
+"""On the tests that read shared/maps; the others make their maps in ``tmp_path``."""
 
 
+@needs_maps
 @pytest.mark.parametrize("path", ROS, ids=lambda p: p.stem)
 def test_ros_maps_load(path):
     plan = load_ros_map(path)
@@ -24,6 +33,7 @@ def test_ros_maps_load(path):
     assert plan.free_area_m2() > 5.0
 
 
+@needs_maps
 @pytest.mark.parametrize("path", DUNGEON, ids=lambda p: p.stem)
 def test_dungeon_maps_load(path):
     plan = load_floor_plan(path, resolution=0.1)
@@ -83,6 +93,7 @@ def test_missing_and_broken_files_are_named(tmp_path):
         load_floor_plan(yml, resolution=0.1)
 
 
+@needs_maps
 def test_more_broken_files_are_named(tmp_path):
     png = MAPS / "dungeon" / "1.png"
     (tmp_path / "cut.png").write_bytes(png.read_bytes()[:5000])
@@ -141,3 +152,41 @@ def test_image_over_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeyp
         load_dungeon_png(tmp_path / "d.png")
     monkeypatch.setattr(topo.maps, "MAX_MAP_PIXELS", 20)
     assert load_ros_map(yml).shape == (4, 5)
+
+
+def test_save_ros_map_round_trip(tmp_path):
+    """map_saver's trinary PGM + YAML, read back as the same masks, origin and yaw."""
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, 3, size=(7, 9))
+    plan = FloorPlan(codes == 1, codes == 2, 0.05, (-1.25, 3.5), "m", 0.25)
+    yml = save_ros_map(plan, tmp_path / "sub" / "m.yaml")
+    assert (tmp_path / "sub" / "m.pgm").read_bytes().startswith(b"P5")
+    grey = np.asarray(Image.open(tmp_path / "sub" / "m.pgm"))
+    assert set(np.unique(grey).tolist()) <= {0, 205, 254}
+    assert grey[0, 0] == {0: 205, 1: 254, 2: 0}[int(codes[-1, 0])]  # image row 0 = top
+    with pytest.raises(MapFileError, match="origin yaw must be 0"):
+        load_ros_map(yml)
+    back = load_ros_map(yml, allow_yaw=True)
+    assert (back.free == plan.free).all() and (back.occupied == plan.occupied).all()
+    assert back.origin == (-1.25, 3.5) and back.yaw == 0.25 and back.resolution == 0.05
+    assert load_floor_plan(save_ros_map(FloorPlan(plan.free, plan.occupied, 0.05, (0.0, 0.0),
+                                                  "flat"), tmp_path / "flat.yaml")).yaw == 0.0
+    with pytest.raises(ValueError, match="plan.free and plan.occupied overlap"):
+        save_ros_map(FloorPlan(plan.free, plan.free, 0.05, (0.0, 0.0), "x"), tmp_path / "x.yaml")
+
+
+def test_raw_mode_reads_occupancy_values_and_255_as_unknown(tmp_path):
+    img = np.array([[0, 100, 255], [10, 90, 50]])
+    plan = load_ros_map(write_pgm_map(tmp_path, img, mode="raw"))
+    top = 1
+    assert plan.free[top, 0] and plan.occupied[top, 1]
+    assert not plan.free[top, 2] and not plan.occupied[top, 2]  # 255: map_server's -1
+    assert plan.free[0, 0] and plan.occupied[0, 1] and not plan.free[0, 2]
+
+
+def test_missing_image_names_the_yaml(tmp_path):
+    yml = write_pgm_map(tmp_path, np.full((4, 4), 254))
+    (tmp_path / "m.pgm").unlink()
+    with pytest.raises(MapFileError, match=r"m\.yaml: names image \S*m\.pgm: map image file "
+                                           r"not found"):
+        load_ros_map(yml)
