@@ -66,8 +66,12 @@ from topo.maps import (
 )
 from topo.validation import check_real
 
-EXIT_MERGED, EXIT_NOT_MERGED, EXIT_BAD_INPUT = 0, 1, 2
-"""Exit codes of :func:`main` (module docstring)."""
+EXIT_MERGED = 0
+"""Exit code: every map merged."""
+EXIT_NOT_MERGED = 1
+"""Exit code: some map not merged."""
+EXIT_BAD_INPUT = 2
+"""Exit code: a file that is not a usable map, or a bad argument (exit codes of :func:`main`)."""
 
 IMAGE_SUFFIXES = (".pgm", ".png", ".jpg", ".jpeg", ".bmp")
 """Suffixes read as plain images (no YAML: ``--resolution`` gives their scale)."""
