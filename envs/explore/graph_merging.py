@@ -39,9 +39,10 @@ from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.posegraph import PoseGraph
 from fusion.rigid import Rigid2D
 
-LINK_SIGMAS = (0.15, 0.15, math.radians(2.0))
-"""Standard deviations ``(x, y, θ)`` (m, m, rad) of a window alignment: the grid alignment's
-"right" is within 2° and 0.3 m."""
+LINK_SIGMAS = (0.15, 0.15, math.radians(3.0))
+"""Standard deviations ``(x, y, θ)`` (m, m, rad) of a window alignment at the windows' middle
+anchors: the grid alignment's "right" is within 2° and 0.3 m, and a window still bends by a
+few degrees inside."""
 
 NEAR_M = 8.0
 """A window is searched against another (after a pair is joined, or for a loop closure) only

@@ -93,6 +93,7 @@ class RobotSubmaps:
     scans: list[list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=list)
     _base: np.ndarray | None = None  # log-odds when the newest anchor started (float64)
     _var: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    _swing: list[tuple[float, float, float]] = field(default_factory=list)  # (x, y, rot var)
     _last: np.ndarray | None = None  # odometry at the last accumulated increment
 
     def start_anchor(self, odometry: np.ndarray, truth: np.ndarray,
@@ -105,9 +106,15 @@ class RobotSubmaps:
         self._base = lo.copy()
         self.accumulate(odometry)
         first = not self.poses
+        pos_var = self._var[0]
+        if self._swing:  # a heading error at each step swings the rest of the path
+            sw = np.array(self._swing)
+            pos_var += float(np.sum(sw[:, 2] * ((odometry[0] - sw[:, 0]) ** 2
+                                                + (odometry[1] - sw[:, 1]) ** 2)))
         self.sigmas.append((0.0, 0.0, 0.0) if first else (
-            math.sqrt(self._var[0]), math.sqrt(self._var[0]), math.sqrt(self._var[1])))
+            math.sqrt(pos_var), math.sqrt(pos_var), math.sqrt(self._var[1])))
         self._var = [0.0, 0.0]
+        self._swing = []
         self.poses.append(Rigid2D(float(odometry[2]), (float(odometry[0]), float(odometry[1]))))
         self.truths.append(np.array(truth, dtype=np.float64))
         self.scans.append([])
@@ -116,12 +123,15 @@ class RobotSubmaps:
     def accumulate(self, odometry: np.ndarray, noise: tuple[float, float] = (0.0, 0.0),
                    alphas: tuple[float, float, float, float] | None = None) -> None:
         """Add the odometry variance of the increment since the last call
-        (:func:`step_variance`) to the newest anchor's edge."""
+        (:func:`step_variance`) to the newest anchor's edge; the heading variance of each
+        increment also swings the path driven after it, which enters the edge's position
+        variance when the anchor closes."""
         odo = np.array(odometry, dtype=np.float64)
         if self._last is not None and (any(noise) or alphas is not None):
             pos, rot = step_variance(self._last, odo, noise, alphas)
             self._var[0] += pos
             self._var[1] += rot
+            self._swing.append((float(odo[0]), float(odo[1]), rot))
         self._last = odo
 
     def add_scan(self, odometry: np.ndarray, ranges: np.ndarray) -> None:
