@@ -221,6 +221,7 @@ are a ``ValueError``.
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps |
 | ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (Maps) |
 | ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
+| ``mapping.pose_graph`` | bool | False | experimental: maps that bend (docs/env_explore.md) |
 | ``mapping.cycle_check`` | bool | True | cycle consistency (Communication) |
 | ``mapping.team_accept_threshold`` | float | 0.97 | merges no triangle confirms (likewise) |
 | ``mapping.local_map_size`` / ``_resolution`` | int / float | 64 / 0.15 | pixels, m/pixel |
