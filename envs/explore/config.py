@@ -374,6 +374,18 @@ class MappingConfig:
             the same one at ``accept_threshold`` (``fusion.hybrid.hybrid_merge``'s ``vouch``):
             early maps that share no place let a room row fit its twin. ``False`` merges
             sooner in large buildings, with look-alikes (``docs/notes/fusion.md``).
+        pose_graph: experimental (issue 41), ``False`` changes nothing: each robot's map is
+            a chain of anchored submaps in a ``fusion.PoseGraph`` (GTSAM, the ``slam``
+            extra), robots' local windows are aligned into inter-robot links and loop
+            closures, and each fused map (the coverage reward's) is its robots' submaps
+            rendered at their optimised poses (:mod:`envs.explore.graph_merging`). The
+            rigid pair merges (``merge_method``) then do not run.
+        anchor_every: with ``pose_graph``, a robot starts a new anchor (submap) every this
+            many steps: a few metres of travel, short enough that a submap is rigid.
+        window_anchors: with ``pose_graph``, how many consecutive anchors make a local
+            window that is aligned as one rigid grid.
+        window_searches: with ``pose_graph``, window alignments tried per merge step, the
+            whole team together (each is one ``fusion.grid_merge.merge_grids`` call).
     """
 
     grid_resolution: float = 0.1
@@ -392,6 +404,10 @@ class MappingConfig:
     cycle_check: bool = True
     team_accept_threshold: float = TEAM_ACCEPT_THRESHOLD
     first_merge_check: bool = True
+    pose_graph: bool = False
+    anchor_every: int = 100
+    window_anchors: int = 4
+    window_searches: int = 2
 
     def __post_init__(self) -> None:
         _set(self, "grid_resolution", check_real(self.grid_resolution,
@@ -431,6 +447,16 @@ class MappingConfig:
             raise ValueError(f"mapping.max_nodes must be <= 256, got {self.max_nodes}")
         _check_bool(self.cycle_check, "mapping.cycle_check")
         _check_bool(self.first_merge_check, "mapping.first_merge_check")
+        _check_bool(self.pose_graph, "mapping.pose_graph")
+        if self.pose_graph and not self.merge_every:
+            raise ValueError("mapping.pose_graph needs merge steps: mapping.merge_every must be "
+                             "> 0 with it, got 0")
+        _set(self, "anchor_every", check_int(self.anchor_every, "mapping.anchor_every",
+                                             low=10))
+        _set(self, "window_anchors", check_int(self.window_anchors, "mapping.window_anchors",
+                                               low=2))
+        _set(self, "window_searches", check_int(self.window_searches,
+                                                "mapping.window_searches", low=1))
         _set(self, "team_accept_threshold", check_real(
             self.team_accept_threshold, "mapping.team_accept_threshold", low=0.0,
             low_inclusive=True, high=1.0))

@@ -221,6 +221,7 @@ are a ``ValueError``.
 | ``mapping.merge_method`` | str | ``"hybrid"`` | see Maps |
 | ``mapping.accept_threshold`` | float | 0.9 | least merge confidence accepted (Maps) |
 | ``mapping.first_merge_check`` | bool | True | a pair's first merge needs the grids too |
+| ``mapping.pose_graph`` | bool | False | experimental: maps that bend (docs/env_explore.md) |
 | ``mapping.cycle_check`` | bool | True | cycle consistency (Communication) |
 | ``mapping.team_accept_threshold`` | float | 0.97 | merges no triangle confirms (likewise) |
 | ``mapping.local_map_size`` / ``_resolution`` | int / float | 64 / 0.15 | pixels, m/pixel |
@@ -253,6 +254,7 @@ radians) places the robots; other keys are ignored with a warning.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -276,6 +278,7 @@ from envs.explore.global_state import (
     state_scalars,
     state_space,
 )
+from envs.explore.graph_merging import GraphMerging
 from envs.explore.infos import merge_errors, step_infos
 from envs.explore.localize import DriftCorrector
 from envs.explore.mapping import (
@@ -303,6 +306,7 @@ from envs.explore.raycast import RayCaster
 from envs.explore.robot import Robot, build_space, simulate
 from envs.explore.sonar import Sonar
 from envs.explore.starts import check_seed, check_start_poses, parse_reset_options
+from envs.explore.submaps import ScanSettings
 from envs.explore.worlds import World, load_world, procedural_world
 from fusion.rigid import Rigid2D
 
@@ -522,6 +526,12 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
                                m.geometry.shape, m.geometry.origin, m.geometry.resolution)
                 for s, m in zip(self.sonars, self.maps, strict=True)]
         self.views = TeamViews(self.maps, cfg.comm)
+        self._graph = None  # mapping.pose_graph (issue 41): merging as a pose graph
+        self._shared_incremental = True
+        if cfg.mapping.pose_graph:
+            self._graph = GraphMerging(self.maps, cfg.mapping, cfg.robot, ScanSettings(
+                self.sonars[0].angles, self.sonars[0].mount_radius, cfg.sonar.max_range,
+                math.radians(cfg.sonar.cone) / 2.0, model))
         self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0
         self._snapshots = [None] * n
@@ -600,6 +610,9 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         poses = [robot.true_pose() for robot in self.robots]
         for i, pose in enumerate(poses):
             self.caster.discs[i] = pose[:2]
+        if self._graph is not None:  # pose graph: anchors start before the step's scans
+            self._graph.before_scans(self.steps, [r.odometry for r in self.robots], poses,
+                                     self.maps)
         for i, (pose, sonar) in enumerate(zip(poses, self.sonars, strict=True)):
             sonar.measure(self.caster, pose, i, self._rng, travelled[i])
             if self._correctors[i] is not None:
@@ -614,7 +627,12 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
                                    sonar.mount_radius, scfg.max_range, half)
             n_fresh, r0, r1, c0, c1 = fresh[:5].tolist()
             self._own_delta[i] = n_fresh
-            if n_fresh and (i == 0 or self.views.in_contact(0, i)):
+            if self._graph is not None:  # pose graph: the fused map is recomposed instead
+                self._graph.add_scan(i, self.robots[i].odometry, sonar.last)
+                if i == 0 and n_fresh and self._shared_incremental:
+                    self._shared_delta += self.shared.add(0, rmap, (slice(r0, r1),
+                                                                    slice(c0, c1)))
+            elif n_fresh and (i == 0 or self.views.in_contact(0, i)):
                 self._shared_delta += self.shared.add(i, rmap, (slice(r0, r1), slice(c0, c1)))
             self._oracle_delta += self.oracle.add(i, pose, sonar.true_last,
                                                   sonar.angles, sonar.mount_radius,
@@ -636,13 +654,16 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
             [r.odometry for r in self.robots], self.space)
         self._contacts_changed |= changed
         for i, j in gained:
-            if i == 0 and j in self.shared.members:
+            if i == 0 and j in self.shared.members and self._graph is None:
                 self._shared_delta += self.shared.add(j, self.maps[j],
                                                       self.maps[j].known_window())
 
     def _fuse(self) -> None:
         """Merge the pairs due; when what a robot knows changes, its fused map (robot 0's
         is rebuilt)."""
+        if self._graph is not None:
+            self._fuse_graph()
+            return
         changed = self._merging.step(self.steps, self.views)
         if not (changed or self._contacts_changed):
             return
@@ -652,6 +673,28 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
             members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
             known = {j: self.views.view(0, j) for j in (0, *members)}
             self._shared_delta += self.shared.rebuild(known, members)
+
+    def _fuse_graph(self) -> None:
+        """``mapping.pose_graph`` (issue 41): on merge steps, window alignments into the pose
+        graph, every robot's fused frames from it, and robot 0's fused map recomposed from
+        the submaps (its own grid, added to step by step, while it holds only itself)."""
+        if self.steps % self.config.mapping.merge_every:
+            return
+        graph = self._graph
+        graph.step(self.views)
+        for r in range(self.n_robots):
+            self._merging.frames[r] = graph.frames(r)
+        trivial = graph.trivial(0)
+        if trivial and not self._shared_incremental:
+            self._shared_delta += self.shared.rebuild({0: self.maps[0]}, {})
+        elif not trivial:
+            known = graph.fused_known(0, self.maps)
+            count = int(np.count_nonzero(known))
+            self.shared.ever[...] = known
+            self._shared_delta += count - self.shared.count
+            self.shared.count = count
+        self.shared.members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
+        self._shared_incremental = trivial
 
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:
@@ -707,7 +750,7 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
         truth, the largest over its teammates; NaN when it has none; drift-aware with odometry
         noise (:func:`envs.explore.infos.merge_errors`)."""
         return merge_errors(self.shared.members, self.robots, self._truths[0], self._merging,
-                            self.views, self._merging.noise > 0.0)
+                            self.views, self._merging.noise > 0.0 or self._graph is not None)
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         """This step's infos (manual, Infos; :func:`envs.explore.infos.step_infos`)."""
@@ -757,9 +800,14 @@ class MultiRobotExploreEnv(ReplayCopies, ParallelEnv):
     def merge_state(self) -> MergeState:
         """The merge state now (:class:`MergeState`: the robot-1 → robot-0 transform in use,
         what supplied it, the last merge result, counts, the last merge call's wall time; each
-        pair's state, each robot's fused map and frames, the contacts)."""
+        pair's state, each robot's fused map and frames, the contacts; with
+        ``mapping.pose_graph`` its ``bending`` measures against the truth)."""
         self._require_reset()
-        return self._merging.state(self.views, self.shared.transform)
+        state = self._merging.state(self.views, self.shared.transform)
+        if self._graph is not None:
+            state = dataclasses.replace(state, bending=self._graph.bending(
+                self.maps, self._world.segments))
+        return state
 
     def state(self) -> np.ndarray:
         """The global state for centralised critics: a ``(state_scalars(N) + 3 ·

@@ -86,6 +86,8 @@ class MergeState:
             fused map (``frames[i][i]`` is the identity).
         fused: ``fused[i]``: the robots of robot i's fused map (its merged component), sorted.
         contacts: ``contacts[i]``: the teammates robot i is in contact with now.
+        bending: with ``mapping.pose_graph``, robot 0's fused map against the truth
+            (``GraphMerging.bending``: ATE, wall share, links); empty otherwise.
     """
 
     transform: Rigid2D | None
@@ -99,6 +101,7 @@ class MergeState:
     frames: tuple[dict[int, Rigid2D], ...] = ()
     fused: tuple[tuple[int, ...], ...] = ()
     contacts: tuple[tuple[int, ...], ...] = ()
+    bending: dict[str, float] = field(default_factory=dict)
 
 
 def run_merge(map_a: TopoMap, map_b: TopoMap, method: str, grid_a: OccupancyGrid | None = None,

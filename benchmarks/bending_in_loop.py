@@ -1,0 +1,128 @@
+"""Maps that bend (issue 41, first slice): two robots merging through the pose graph
+(``mapping.pose_graph=True``) under drifting odometry, against the rigid merges (off).
+
+    python benchmarks/bending_in_loop.py [--worlds 5] [--first-seed 100] [--size 20]
+        [--steps 3000] [--explorer frontier] [--odometry-alphas pioneer3dx]
+        [--odometry-noise S] [--settings on off]
+
+For each seed (from 100: worlds the method was not developed on) one episode per setting,
+a scripted team (``agents.registry``), ``robot.odometry_model="rot_trans_rot"`` with the
+given alphas (or ``--odometry-noise S``: the ``"increment"`` model at ``(S, S)``; ``0``:
+perfect). Every step with a teammate in robot 0's fused map is checked against the
+drift-aware truth at the robots' current places (``envs.explore.drift.drift_aware_error``);
+**right** is within 5° and 0.5 m (the issue's target), **wrong** more than 5° or 1 m off.
+Per episode: the first merged step, the first right step, merged steps, right and wrong
+shares of them, the mean step time (seconds), and at the end
+``merge_state().bending`` (the fused map's anchor ATE and wall share beside robot 0's own
+uncorrected map, links kept and how many of them are wrong at their own anchors). The summary
+gives, per setting, the episodes merged, the median first right step (never: ``steps + 1``),
+the pooled right share of merged steps, median ATE and wall share, and the mean step time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+from agents.base import run_episode
+from agents.registry import EXPLORERS, make_team
+from envs import two_robot_explore_v0
+from envs.explore.drift import drift_aware_error
+
+RIGHT_DEG, RIGHT_M = 5.0, 0.5
+WRONG_DEG, WRONG_M = 5.0, 1.0
+
+
+def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
+            pose_graph: bool) -> dict:
+    """One episode's row (module docstring)."""
+    env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
+                                            mapping={"pose_graph": pose_graph}, robot=robot)
+    row = {"seed": seed, "graph": pose_graph, "first": None, "first_right": None,
+           "merged": 0, "right": 0, "wrong": 0}
+
+    def watch(k, _obs, _rewards, _infos):
+        t = env.shared.transform
+        if t is None:
+            return
+        row["merged"] += 1
+        row["first"] = row["first"] or k
+        rot, trans = drift_aware_error(t, env.robots[0], env.robots[1])
+        if rot <= RIGHT_DEG and trans <= RIGHT_M:
+            row["right"] += 1
+            row["first_right"] = row["first_right"] or k
+        elif rot > WRONG_DEG or trans > WRONG_M:
+            row["wrong"] += 1
+
+    t0 = time.perf_counter()
+    out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
+    row["steps"] = out["steps"]
+    row["step_s"] = (time.perf_counter() - t0) / max(out["steps"], 1)
+    if pose_graph:
+        row.update(env.unwrapped.merge_state().bending)
+    return row
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return str(v)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--worlds", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=100)
+    parser.add_argument("--size", type=float, default=20.0)
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--explorer", choices=sorted(EXPLORERS), default="frontier")
+    parser.add_argument("--odometry-alphas", default="pioneer3dx")
+    parser.add_argument("--odometry-noise", type=float, default=None,
+                        help="use the increment model at (S, S) instead of the alphas")
+    parser.add_argument("--settings", nargs="+", choices=("on", "off"), default=["on", "off"])
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    if args.odometry_noise is not None:
+        robot = {"odometry_noise": (args.odometry_noise, args.odometry_noise)}
+    else:
+        robot = {"odometry_model": "rot_trans_rot", "odometry_alphas": args.odometry_alphas}
+    rows = []
+    keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
+            "fused_ate_m", "own_ate_m", "fused_wall_share", "own_wall_share", "links_kept",
+            "links_kept_wrong", "loops_kept", "window_searches")
+    print(" | ".join(keys), flush=True)
+    for seed in range(args.first_seed, args.first_seed + args.worlds):
+        for setting in args.settings:
+            row = episode(seed, args.explorer, args.steps, args.size, robot, setting == "on")
+            rows.append(row)
+            print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
+    print()
+    print("setting | merged episodes | median first right | right / merged steps | "
+          "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
+          "step ms")
+    for setting in args.settings:
+        sel = [r for r in rows if r["graph"] == (setting == "on")]
+        merged = sum(r["merged"] > 0 for r in sel)
+        first = statistics.median(r["first_right"] or args.steps + 1 for r in sel)
+        msteps = sum(r["merged"] for r in sel)
+        right = sum(r["right"] for r in sel) / msteps if msteps else float("nan")
+        wrong = sum(r["wrong"] for r in sel) / msteps if msteps else float("nan")
+        ms = 1000 * statistics.mean(r["step_s"] for r in sel)
+        if setting == "on":
+            ate = (f"{statistics.median(r['fused_ate_m'] for r in sel):.2f} "
+                   f"({statistics.median(r['own_ate_m'] for r in sel):.2f})")
+            wall = (f"{statistics.median(r['fused_wall_share'] for r in sel):.2f} "
+                    f"({statistics.median(r['own_wall_share'] for r in sel):.2f})")
+        else:
+            ate = wall = "-"
+        print(f"{setting} | {merged}/{len(sel)} | {first} | {right:.2f} | {wrong:.2f} | {ate} | "
+              f"{wall} | {ms:.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,284 @@
+"""Merging as a pose graph (``mapping.pose_graph``, experimental): links between local
+windows, loop closures, and fused maps rendered from submaps.
+
+Each robot's map is a chain of anchors with their patches (:mod:`envs.explore.submaps`) in a
+team :class:`fusion.PoseGraph`. On every merge step (``mapping.merge_every``) at most
+``mapping.window_searches`` window alignments are tried, the team together: a **window** is
+``mapping.window_anchors`` consecutive closed anchors rebuilt as one grid from their own
+scans, near-rigid even when the whole map is bent. A robot's newest window is aligned with
+``fusion.grid_merge.merge_grids`` (no drift prior: a window has not drifted) against
+
+* the windows of a teammate it is in contact with — an accepted alignment ``T`` (window
+  ``j``'s odometry frame → window ``i``'s) becomes the link ``X_a⁻¹ · T · X_b`` between the
+  windows' middle anchors ``a`` and ``b``; before the pair is joined every window is a
+  candidate (newest first), after it only windows whose estimate lies near;
+* its own older windows that do not overlap it and lie near in the current estimate — a loop
+  closure (``PoseGraph.add_loop``, kept only if the odometry can explain it).
+
+The pose graph keeps each pair's pairwise-consistent links (at least two), optimises each
+component of robots, and a robot's **fused map** is its component's patches composed at
+``corrections(robot, frame=i)``. Its teammates' places in it (``frames``) are the rigid
+transforms right at the robots' newest anchors: ``C_i⁻¹ · C_j`` of the two newest anchors'
+corrections. This slice's simplification: the graph is the team's, whatever the robots'
+contacts (communication limits are not applied to it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.explore.comm import TeamViews
+from envs.explore.config import MappingConfig, RobotConfig
+from envs.explore.mapping import RobotMap
+from envs.explore.submaps import RobotSubmaps, ScanSettings, classify, compose
+from fusion.grid_merge import GridMergeConfig, merge_grids
+from fusion.posegraph import PoseGraph
+from fusion.rigid import Rigid2D
+
+LINK_SIGMAS = (0.15, 0.15, math.radians(3.0))
+"""Standard deviations ``(x, y, θ)`` (m, m, rad) of a window alignment at the windows' middle
+anchors: the grid alignment's "right" is within 2° and 0.3 m, and a window still bends by a
+few degrees inside."""
+
+NEAR_M = 8.0
+"""A window is searched against another (after a pair is joined, or for a loop closure) only
+if their centres lie this close (metres) in the current estimate."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinkRecord:
+    """An accepted window alignment added to the graph: robots and anchors (``i == j``: a
+    loop closure), the relative pose, its confidence and whether the graph took it (loops
+    only; a link's fate is decided with its pair's others)."""
+
+    i: int
+    a: int
+    j: int
+    b: int
+    relative: Rigid2D
+    confidence: float
+    taken: bool
+
+
+def _rigid(pose: np.ndarray) -> Rigid2D:
+    return Rigid2D(float(pose[2]), (float(pose[0]), float(pose[1])))
+
+
+class GraphMerging:
+    """The team's pose-graph merging for one episode (module docstring).
+
+    Args:
+        maps: each robot's :class:`RobotMap` (their geometries).
+        config: the env's mapping settings (``anchor_every``, ``window_anchors``,
+            ``window_searches``, ``merge_every``).
+        robot: the robots' settings (the odometry model and noise weigh odometry edges).
+        scan: how the robots' scans are folded into a grid.
+
+    Attributes:
+        graph: the :class:`fusion.PoseGraph`.
+        submaps: each robot's :class:`RobotSubmaps`.
+        records: every accepted window alignment (:class:`LinkRecord`).
+        searches: window alignments tried.
+    """
+
+    def __init__(self, maps: Sequence[RobotMap], config: MappingConfig, robot: RobotConfig,
+                 scan: ScanSettings) -> None:
+        self.config = config
+        self.scan = scan
+        self.n = len(maps)
+        self.graph = PoseGraph(self.n)
+        self.submaps = [RobotSubmaps(m.geometry) for m in maps]
+        self.records: list[LinkRecord] = []
+        self.searches = 0
+        self._noise = tuple(float(v) for v in robot.odometry_noise)
+        self._alphas = (tuple(robot.odometry_alphas) if robot.odometry_model == "rot_trans_rot"
+                        else None)
+        self._tried: set[tuple[int, int, int, int]] = set()
+        self._windows: dict[tuple[int, int], object] = {}
+        self._grid_cfg = GridMergeConfig()
+
+    # ----------------------------------------------------------------- per step
+    def before_scans(self, steps: int, odometry: Sequence[np.ndarray],
+                     truths: Sequence[np.ndarray], maps: Sequence[RobotMap]) -> None:
+        """This step's odometry into each robot's edge; a new anchor every ``anchor_every``
+        steps (before the step's scans, which then belong to it)."""
+        for i, sub in enumerate(self.submaps):
+            sub.accumulate(odometry[i], self._noise, self._alphas)
+            if steps % self.config.anchor_every == 0:
+                sub.start_anchor(odometry[i], truths[i], maps[i].grid.log_odds)
+                self.graph.add_anchor(i, sub.poses[-1], sub.sigmas[-1])
+
+    def add_scan(self, i: int, odometry: np.ndarray, ranges: np.ndarray) -> None:
+        """Keep robot ``i``'s scan under its newest anchor."""
+        self.submaps[i].add_scan(odometry, ranges)
+
+    def trivial(self, r: int) -> bool:
+        """Robot ``r``'s fused map is its own grid unchanged: no teammate, no loop closure."""
+        return len(self.graph.component(r)) == 1 and not any(
+            rec.taken and rec.i == r == rec.j for rec in self.records)
+
+    # ----------------------------------------------------------------- searching
+    def step(self, views: TeamViews) -> bool:
+        """Try this merge step's window alignments; returns whether the graph gained a link
+        or a loop closure."""
+        changed = False
+        for i, ei, j, ej in self._candidates(views)[: self.config.window_searches]:
+            self._tried.add((i, ei, j, ej))
+            changed |= self._align(i, ei, j, ej)
+        return changed
+
+    def _closed(self, r: int) -> int:
+        return len(self.submaps[r].patches)
+
+    def _centre(self, r: int, end: int, frame: int) -> np.ndarray:
+        poses = self.graph.corrected_poses(r, frame)
+        first = end - self.config.window_anchors + 1
+        return np.mean([p.T for p in poses[first:end + 1]], axis=0)
+
+    def _candidates(self, views: TeamViews) -> list[tuple[int, int, int, int]]:
+        """``(i, newest window end of i, j, window end of j)`` to try, best first: links of
+        pairs not yet joined, then loop closures, then links of joined pairs."""
+        w = self.config.window_anchors
+        stride = max(1, w // 2)
+        joining, loops, joined = [], [], []
+        for i in range(self.n):
+            ei = self._closed(i) - 1
+            if ei < w - 1:
+                continue
+            for j in range(self.n):
+                ej_max = self._closed(j) - 1 if j != i else ei - w
+                ends = [e for e in range(ej_max, w - 2, -stride)
+                        if (i, ei, j, e) not in self._tried]
+                if not ends:
+                    continue
+                if j == i:
+                    near = self._near(i, ei, i, ends)
+                    loops += [(i, ei, i, e) for e in near[:1]]
+                elif views.in_contact(i, j):
+                    if j in self.graph.component(i):
+                        joined += [(i, ei, j, e) for e in self._near(i, ei, j, ends)[:1]]
+                    else:
+                        joining.append((i, ei, j, ends[0]))
+        return joining + loops + joined
+
+    def _near(self, i: int, ei: int, j: int, ends: list[int]) -> list[int]:
+        """``ends`` of ``j``'s windows whose centre lies within :data:`NEAR_M` of ``i``'s
+        window ``ei`` in ``i``'s frame, nearest first."""
+        c = self._centre(i, ei, i)
+        dist = [(float(np.linalg.norm(self._centre(j, e, i) - c)), e) for e in ends]
+        return [e for d, e in sorted(dist) if d <= NEAR_M]
+
+    def _window(self, r: int, end: int):
+        key = (r, end)
+        if key not in self._windows:
+            first = end - self.config.window_anchors + 1
+            self._windows[key] = self.submaps[r].window_grid(
+                first, end, self.submaps[r].geometry.resolution, self.scan)
+        return self._windows[key]
+
+    def _align(self, i: int, ei: int, j: int, ej: int) -> bool:
+        grid_a, grid_b = self._window(i, ei), self._window(j, ej)
+        if grid_a is None or grid_b is None:
+            return False
+        self.searches += 1
+        result = merge_grids(grid_a, grid_b, self._grid_cfg)
+        if not result.accepted:
+            return False
+        half = self.config.window_anchors // 2
+        a, b = ei - half, ej - half
+        xa, xb = self.submaps[i].poses[a], self.submaps[j].poses[b]
+        relative = xa.inverse() @ result.transform @ xb
+        confidence = float(result.confidence)
+        if i == j:
+            taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, confidence)
+        else:
+            self.graph.add_link((i, a), (j, b), relative, LINK_SIGMAS, confidence)
+            taken = True
+        self.records.append(LinkRecord(i, a, j, b, relative, confidence, taken))
+        return taken
+
+    # ----------------------------------------------------------------- fused maps
+    def fused_log_odds(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
+        """Robot ``r``'s fused map: its component's patches composed at their corrections
+        into ``r``'s frame, float64 log-odds of ``r``'s grid geometry."""
+        dst = maps[r].geometry
+        acc = np.zeros(dst.shape, dtype=np.float64)
+        for m in sorted(self.graph.component(r)):
+            patches = self.submaps[m].all_patches(maps[m].grid.log_odds)
+            compose(patches, self.graph.corrections(m, frame=r), maps[m].geometry, dst, acc)
+        return acc
+
+    def fused_known(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
+        """``(H, W)`` bool known cells of robot ``r``'s fused map."""
+        return classify(self.fused_log_odds(r, maps), maps[r].grid.model) != 0
+
+    def frames(self, r: int) -> dict[int, tuple[Rigid2D, Rigid2D]]:
+        """``{j: (to_r, from_r)}`` for each robot ``j`` of ``r``'s component: robot ``j``'s
+        odometry frame → robot ``r``'s, right at the two robots' newest anchors."""
+        own = self.graph.corrections(r, frame=r)[-1].inverse()
+        out = {}
+        for j in sorted(self.graph.component(r)):
+            to_r = own @ self.graph.corrections(j, frame=r)[-1]
+            out[j] = (to_r, to_r.inverse())
+        return out
+
+    def link_errors(self) -> list[tuple[float, float]]:
+        """Each accepted window alignment's error at its own anchors against the truth:
+        rotation (degrees) and translation (metres)."""
+        return [self._error((rec.i, rec.a), (rec.j, rec.b), rec.relative)
+                for rec in self.records]
+
+    def _error(self, a: tuple[int, int], b: tuple[int, int], relative: Rigid2D
+               ) -> tuple[float, float]:
+        """Rotation (degrees) and translation (metres) error of ``relative`` (anchor ``b``
+        in anchor ``a``'s frame) against the anchors' true poses."""
+        ta = _rigid(self.submaps[a[0]].truths[a[1]])
+        tb = _rigid(self.submaps[b[0]].truths[b[1]])
+        err = (ta.inverse() @ tb).inverse() @ relative
+        return abs(math.degrees(err.theta)), float(np.hypot(*err.T))
+
+    # ----------------------------------------------------------------- truth
+    def bending(self, maps: Sequence[RobotMap], segments: np.ndarray) -> dict[str, float]:
+        """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
+        its own uncorrected map: ATE of the anchors (m), the share of occupied cells within
+        0.2 m of a true wall; and the links the graph keeps, with how many of them are more
+        than 5° or 1 m off at their own anchors. For metrics only."""
+        from fusion.evaluation.bending import wall_share, world_alignment
+        from fusion.posegraph import ate_rms
+
+        comp = sorted(self.graph.component(0))
+        est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])
+        truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
+        odo = np.array([[p.T[0], p.T[1]] for p in self.submaps[0].poses])
+        own_truth = np.array(self.submaps[0].truths)
+        fused = classify(self.fused_log_odds(0, maps), maps[0].grid.model) == 2
+        kept = [m for i in range(self.n) for j in range(i + 1, self.n)
+                for m in self.graph.links(i, j)[0]]
+        errors = [self._error(m.a, m.b, m.relative) for m in kept]
+        wrong = sum(rot > 5.0 or trans > 1.0 for rot, trans in errors)
+        return {
+            "fused_robots": float(len(comp)),
+            "fused_ate_m": ate_rms(est, truth),
+            "own_ate_m": ate_rms(odo, own_truth),
+            "fused_wall_share": wall_share(_centres(fused, maps[0]),
+                                           world_alignment(est, truth), segments),
+            "own_wall_share": wall_share(_centres(maps[0].grid.occupied_mask(), maps[0]),
+                                         world_alignment(odo, own_truth), segments),
+            "links_kept": float(len(kept)),
+            "links_kept_wrong": float(wrong),
+            "links_accepted": float(sum(r.i != r.j for r in self.records)),
+            "loops_kept": float(sum(r.taken and r.i == r.j for r in self.records)),
+            "window_searches": float(self.searches),
+        }
+
+
+def _centres(mask: np.ndarray, robot_map: RobotMap) -> np.ndarray:
+    """Map-frame centres of the true cells of ``mask`` (``robot_map``'s geometry)."""
+    g = robot_map.geometry
+    rows, cols = np.nonzero(mask)
+    return np.stack([g.origin[0] + (cols + 0.5) * g.resolution,
+                     g.origin[1] + (rows + 0.5) * g.resolution], axis=1)

@@ -1,0 +1,70 @@
+"""Truth under bending maps: judge a fused map itself, not one rigid transform.
+
+A map built on drifting odometry bends, so no single transform to the world is right
+everywhere. Two measures that read the map's shape instead: the absolute trajectory error of
+its anchors (``fusion.posegraph.ate_rms``: RMS after the one best rigid alignment to the true
+poses) and the share of its occupied cells that lie near a true wall once the map is put in
+the world by that same alignment. Why: a fused map that folds or smears shows in both, where a
+merge's error at one place does not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fusion.icp import rigid_fit
+from fusion.rigid import Rigid2D
+
+WALL_TOLERANCE_M = 0.2
+"""An occupied cell within this distance (metres) of a true wall counts as on a wall."""
+
+
+def _xy(poses: np.ndarray, name: str) -> np.ndarray:
+    p = np.asarray(poses, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] < 2:
+        raise ValueError(f"{name} must be (K, 2) or (K, 3) rows, got shape {p.shape}")
+    return p[:, :2]
+
+
+def world_alignment(estimated: np.ndarray, truth: np.ndarray) -> Rigid2D:
+    """The rigid motion (map frame → world) best aligning ``estimated`` anchor positions with
+    their ``truth`` (``(K, 2|3)`` rows, least squares; ``K ≥ 1``).
+
+    Raises:
+        ValueError: the two differ in length, or are empty or malformed."""
+    p, q = _xy(estimated, "estimated"), _xy(truth, "truth")
+    if p.shape != q.shape or not len(p):
+        raise ValueError(f"estimated and truth must have the same number (>= 1) of rows, got "
+                         f"{len(p)} and {len(q)}")
+    theta, t = rigid_fit(p, q)
+    return Rigid2D(theta, t)
+
+
+def wall_share(occupied_xy: np.ndarray, to_world: Rigid2D, segments: np.ndarray,
+               tolerance: float = WALL_TOLERANCE_M) -> float:
+    """The share of ``occupied_xy`` (``(N, 2)`` map-frame centres of occupied cells) that lie
+    within ``tolerance`` metres of a true wall (``segments``: ``(M, 4)`` rows
+    ``x0, y0, x1, y1``, world frame) once moved by ``to_world``; NaN without occupied cells.
+
+    Raises:
+        ValueError: ``segments`` is not ``(M, 4)`` with ``M ≥ 1``, or ``tolerance <= 0``."""
+    seg = np.asarray(segments, dtype=np.float64)
+    if seg.ndim != 2 or seg.shape[1] != 4 or not len(seg):
+        raise ValueError(f"segments must be (M, 4) rows x0, y0, x1, y1 with M >= 1, got shape "
+                         f"{seg.shape}")
+    if not tolerance > 0:
+        raise ValueError(f"tolerance must be > 0, got {tolerance}")
+    pts = np.asarray(occupied_xy, dtype=np.float64).reshape(-1, 2)
+    if not len(pts):
+        return float("nan")
+    # points along every wall, spaced well below the tolerance
+    step = tolerance / 4
+    samples = []
+    for x0, y0, x1, y1 in seg:
+        n = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / step)) + 1)
+        s = np.linspace(0.0, 1.0, n)[:, None]
+        samples.append(np.array([x0, y0]) * (1 - s) + np.array([x1, y1]) * s)
+    dist, _ = cKDTree(np.vstack(samples)).query(to_world.apply(pts),
+                                                distance_upper_bound=tolerance + step)
+    return float(np.mean(dist <= tolerance))
