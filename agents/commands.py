@@ -182,7 +182,7 @@ def _fusion_summary(out: Path, log: str) -> list[str]:
     table = [] if start is None else lines[start:start + 5]
     found = _rows(r"^== (\w+): success against wrong accepts[\s\S]*?^\s*([\d.]+)\*\s+([\d.]+)"
                   r"\s+([\d.]+)", log)
-    table += [f"{m[1]} at its default threshold {m[2]}: {m[3]} % right (overlap >= 40 %), "
+    table += [f"{m[1]} at the env's accept_threshold {m[2]}: {m[3]} % right (overlap >= 40 %), "
               f"{m[4]} % wrong accepts" for m in found]
     return table + [f"full tables: {out / 'logs' / 'fusion.log'}; figures and results.json: "
                     f"{folder}/"]
