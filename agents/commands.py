@@ -60,19 +60,9 @@ def _calibrate(argv: list[str]) -> int:
 
 
 def _merge(argv: list[str]) -> int:
-    try:
-        from fusion.mapmerge import main
-    except ModuleNotFoundError as err:
-        if err.name != "fusion.mapmerge":
-            raise
-        print("topomerge merge: error: the map-merge tool (module fusion.mapmerge) is not "
-              "in this installation", file=sys.stderr)
-        return 2
-    import inspect
+    from fusion.mapmerge import main
 
-    named = "prog" in inspect.signature(main).parameters  # names this command in its messages
-    result = main(argv, prog="topomerge merge") if named else main(argv)
-    return result if isinstance(result, int) else 0
+    return main(argv, prog="topomerge merge")
 
 
 def _train(argv: list[str]) -> int:
