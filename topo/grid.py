@@ -94,6 +94,16 @@ class SensorModel:
         """:attr:`usable_range`, ``inf`` for ``None`` (the kernel's argument)."""
         return math.inf if self.usable_range is None else float(self.usable_range)
 
+    def classify(self, log_odds: np.ndarray) -> np.ndarray:
+        """``(H, W)`` int8 :class:`CellState` codes of ``log_odds``: free below
+        ``-threshold``, occupied above ``+threshold``, unknown between (the one rule every grid
+        of this model is read by, composed ones included)."""
+        t = self.threshold
+        out = np.zeros(np.shape(log_odds), dtype=np.int8)
+        out[log_odds < -t] = CellState.FREE
+        out[log_odds > t] = CellState.OCCUPIED
+        return out
+
 
 class OccupancyGrid:
     """Log-odds occupancy grid over a fixed extent (module docstring).
@@ -228,11 +238,7 @@ class OccupancyGrid:
         return p, r, a
 
     def _classify(self, log_odds: np.ndarray) -> np.ndarray:
-        t = self.model.threshold
-        out = np.zeros(log_odds.shape, dtype=np.int8)
-        out[log_odds < -t] = CellState.FREE
-        out[log_odds > t] = CellState.OCCUPIED
-        return out
+        return self.model.classify(log_odds)
 
     # ------------------------------------------------------------------ views
     def states(self) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 from envs.explore.comm import TeamViews
 from envs.explore.config import MappingConfig, RobotConfig
 from envs.explore.mapping import RobotMap
-from envs.explore.submaps import RobotSubmaps, ScanSettings, classify, compose
+from envs.explore.submaps import RobotSubmaps, ScanSettings, compose
 from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.posegraph import PoseGraph
 from fusion.rigid import Rigid2D
@@ -214,7 +214,7 @@ class GraphMerging:
 
     def fused_known(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
         """``(H, W)`` bool known cells of robot ``r``'s fused map."""
-        return classify(self.fused_log_odds(r, maps), maps[r].grid.model) != 0
+        return maps[r].grid.model.classify(self.fused_log_odds(r, maps)) != 0
 
     def frames(self, r: int) -> dict[int, tuple[Rigid2D, Rigid2D]]:
         """``{j: (to_r, from_r)}`` for each robot ``j`` of ``r``'s component: robot ``j``'s
@@ -255,7 +255,7 @@ class GraphMerging:
         truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
         odo = np.array([[p.T[0], p.T[1]] for p in self.submaps[0].poses])
         own_truth = np.array(self.submaps[0].truths)
-        fused = classify(self.fused_log_odds(0, maps), maps[0].grid.model) == 2
+        fused = maps[0].grid.model.classify(self.fused_log_odds(0, maps)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
         errors = [self._error(m.a, m.b, m.relative) for m in kept]

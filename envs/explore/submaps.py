@@ -24,7 +24,7 @@ from scipy import ndimage
 
 from envs.explore.mapping import Geometry
 from fusion.rigid import Rigid2D
-from topo.grid import CellState, OccupancyGrid, SensorModel
+from topo.grid import OccupancyGrid, SensorModel
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,7 +181,7 @@ def compose(patches: list[Patch], corrections: list[Rigid2D], src: Geometry, dst
     each moved by its correction (that frame → the target frame, a grid of geometry ``dst``),
     nearest-cell resampled with ``scipy.ndimage.affine_transform``; into ``out`` (float64
     log-odds of ``dst``'s shape, added to) or a fresh zero grid. Returns the log-odds
-    (:func:`classify` turns them into states).
+    (``topo.SensorModel.classify`` turns them into states).
 
     Raises:
         ValueError: ``patches`` and ``corrections`` differ in length, or the two geometries'
@@ -230,14 +230,3 @@ def compose(patches: list[Patch], corrections: list[Rigid2D], src: Geometry, dst
             patch.delta, matrix, offset=offset, output_shape=(r1 - r0, c1 - c0), order=0,
             mode="grid-constant", cval=0.0)
     return acc
-
-
-def classify(log_odds: np.ndarray, model: SensorModel) -> np.ndarray:
-    """``(H, W)`` int8 cell states (``topo.grid.CellState``) of composed ``log_odds``, with
-    ``model``'s threshold, as ``topo.OccupancyGrid`` classifies its own (clamping to
-    ``±model.clamp`` first would not change a state: the threshold is below the clamp)."""
-    t = model.threshold
-    out = np.zeros(log_odds.shape, dtype=np.int8)
-    out[log_odds < -t] = CellState.FREE
-    out[log_odds > t] = CellState.OCCUPIED
-    return out

@@ -14,7 +14,6 @@ from envs.explore.submaps import (
     Patch,
     RobotSubmaps,
     ScanSettings,
-    classify,
     compose,
     step_variance,
 )
@@ -51,7 +50,7 @@ def test_identity_corrections_give_the_robot_its_own_grid():
     assert len(patches) == len(sub.poses) == 5
     lo = compose(patches, [Rigid2D.identity()] * len(patches), rmap.geometry, rmap.geometry)
     np.testing.assert_allclose(lo, rmap.grid.log_odds, atol=1e-5)
-    np.testing.assert_array_equal(classify(lo, rmap.grid.model), rmap.states)
+    np.testing.assert_array_equal(rmap.grid.model.classify(lo), rmap.states)
 
 
 def test_a_known_rigid_correction_moves_walls_where_it_should():
@@ -61,12 +60,12 @@ def test_a_known_rigid_correction_moves_walls_where_it_should():
     patch = Patch(49, 69, delta)
     turn = Rigid2D(math.pi / 2, (0.0, 0.0))  # (2.05, 0.05) -> (-0.05, 2.05): row 70, col 49
     lo = compose([patch], [turn], g, g)
-    states = classify(lo, SensorModel())
+    states = SensorModel().classify(lo)
     assert np.argwhere(states == CellState.OCCUPIED).tolist() == [[70, 49]]
     shift = Rigid2D(0.0, (1.0, -0.5))  # 10 columns right, 5 rows down
     lo = compose([patch], [shift], g, Geometry((-4.0, -5.0), 0.1, (100, 100)))
     # into a grid whose origin is 1 m further right: the same column, 5 rows down
-    assert np.argwhere(classify(lo, SensorModel()) == CellState.OCCUPIED).tolist() == [[45, 70]]
+    assert np.argwhere(SensorModel().classify(lo) == CellState.OCCUPIED).tolist() == [[45, 70]]
 
 
 def test_a_rigid_correction_moves_a_whole_map():
@@ -77,7 +76,7 @@ def test_a_rigid_correction_moves_a_whole_map():
     # the same nearest-cell resampling as OccupancyGrid.transformed, patch by patch
     expected = rmap.grid.transformed(moved)
     np.testing.assert_allclose(lo, expected.log_odds, atol=1e-5)
-    np.testing.assert_array_equal(classify(lo, rmap.grid.model), expected.states())
+    np.testing.assert_array_equal(rmap.grid.model.classify(lo), expected.states())
 
 
 def test_window_grid_rebuilds_the_scans():
