@@ -458,19 +458,3 @@ def _pose2(gtsam, t: Rigid2D):
 
 def _rigid(p) -> Rigid2D:
     return Rigid2D(p.theta(), (p.x(), p.y()))
-
-
-def ate_rms(estimated: np.ndarray, truth: np.ndarray) -> float:
-    """Absolute trajectory error: the RMS distance between ``estimated`` and ``truth``
-    positions (``(K, 2)`` or ``(K, 3)`` rows, metres) after the one rigid motion that best
-    aligns them (least squares) — a map in its own frame is judged for its shape."""
-    from fusion.icp import rigid_fit
-
-    p = np.asarray(estimated, dtype=np.float64)[:, :2]
-    q = np.asarray(truth, dtype=np.float64)[:, :2]
-    if p.shape != q.shape or len(p) == 0:
-        raise ValueError(f"estimated and truth must have the same number (≥ 1) of rows, got "
-                         f"{len(p)} and {len(q)}")
-    theta, t = rigid_fit(p, q)
-    moved = Rigid2D(theta, t).apply(p)
-    return float(np.sqrt(np.mean(np.sum((moved - q) ** 2, axis=1))))

@@ -247,8 +247,7 @@ class GraphMerging:
         its own uncorrected map: ATE of the anchors (m), the share of occupied cells within
         0.2 m of a true wall; and the links the graph keeps, with how many of them are more
         than 5° or 1 m off at their own anchors. For metrics only."""
-        from fusion.evaluation.bending import wall_share, world_alignment
-        from fusion.posegraph import ate_rms
+        from fusion.evaluation.bending import ate_rms, wall_share, world_alignment
 
         comp = sorted(self.graph.component(0))
         est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])

@@ -2,10 +2,10 @@
 
 A map built on drifting odometry bends, so no single transform to the world is right
 everywhere. Two measures that read the map's shape instead: the absolute trajectory error of
-its anchors (``fusion.posegraph.ate_rms``: RMS after the one best rigid alignment to the true
-poses) and the share of its occupied cells that lie near a true wall once the map is put in
-the world by that same alignment. Why: a fused map that folds or smears shows in both, where a
-merge's error at one place does not.
+its anchors (:func:`ate_rms`: RMS after the one best rigid alignment to the true poses,
+:func:`world_alignment`) and the share of its occupied cells that lie near a true wall once
+the map is put in the world by that same alignment. Why: a fused map that folds or smears
+shows in both, where a merge's error at one place does not.
 """
 
 from __future__ import annotations
@@ -35,10 +35,21 @@ def world_alignment(estimated: np.ndarray, truth: np.ndarray) -> Rigid2D:
         ValueError: the two differ in length, or are empty or malformed."""
     p, q = _xy(estimated, "estimated"), _xy(truth, "truth")
     if p.shape != q.shape or not len(p):
-        raise ValueError(f"estimated and truth must have the same number (>= 1) of rows, got "
+        raise ValueError(f"estimated and truth must have the same number (≥ 1) of rows, got "
                          f"{len(p)} and {len(q)}")
     theta, t = rigid_fit(p, q)
     return Rigid2D(theta, t)
+
+
+def ate_rms(estimated: np.ndarray, truth: np.ndarray) -> float:
+    """Absolute trajectory error: the RMS distance (metres) between ``estimated`` and ``truth``
+    positions (``(K, 2|3)`` rows) after :func:`world_alignment` — a map in its own frame is
+    judged for its shape.
+
+    Raises:
+        ValueError: as :func:`world_alignment`."""
+    moved = world_alignment(estimated, truth).apply(_xy(estimated, "estimated"))
+    return float(np.sqrt(np.mean(np.sum((moved - _xy(truth, "truth")) ** 2, axis=1))))
 
 
 def wall_share(occupied_xy: np.ndarray, to_world: Rigid2D, segments: np.ndarray,

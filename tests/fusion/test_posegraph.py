@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion import Rigid2D
-from fusion.posegraph import PoseGraph, PoseGraphConfig, ate_rms
+from fusion.evaluation.bending import ate_rms
+from fusion.posegraph import PoseGraph, PoseGraphConfig
 
 pytest.importorskip("gtsam")
 
