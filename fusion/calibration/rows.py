@@ -33,7 +33,7 @@ import fusion.structural as fm
 from fusion.decision import DEFAULT_RULE
 from fusion.evaluation.evaluate import synthetic_pairs
 from fusion.evaluation.pairs import load_pairs
-from fusion.evaluation.results import ROTATION_OK_DEG, TRANSLATION_OK_M
+from fusion.evaluation.results import is_success
 from fusion.rigid import Rigid2D
 from topo.extract import extract_topomap
 
@@ -66,10 +66,6 @@ def _errors(transform: Rigid2D, truth: Rigid2D, centre: np.ndarray) -> tuple[flo
             transform.translation_error(truth, at=centre))
 
 
-def _right(rot: float, trans: float) -> bool:
-    return bool(rot < ROTATION_OK_DEG and trans < TRANSLATION_OK_M)
-
-
 def pair_config(pair: Any, config: gm.GridMergeConfig | None = None) -> gm.GridMergeConfig:
     """``config`` with the pair's :attr:`fusion.grid_merge.GridMergeConfig.drift_prior`: its
     odometry noise (``extra["odometry_noise"]`` of a drift-aware pair, else 0) over its
@@ -100,7 +96,7 @@ def alignment_rows(dirs: Iterable[Path], config: gm.GridMergeConfig | None = Non
                 rows.append({"set": d.name,
                              "pair": p.pair_id, "world": f"{d.name}:{p.world_id}", "way": way,
                              "overlap": p.overlap, "features": r.features(),
-                             "right": bool(p.overlap > 0 and _right(rot, trans)),
+                             "right": bool(p.overlap > 0 and is_success((rot, trans))),
                              "rotation_error_deg": rot if math.isfinite(rot) else None,
                              "translation_error_m": trans if math.isfinite(trans) else None,
                              "overlap_m2": r.overlap_m2, "time_s": r.time_s, "step": p.step})
@@ -135,7 +131,7 @@ def structural_rows(dirs: Iterable[Path], n_synthetic: int) -> list[dict]:
             r.transform, truth, map_b.xy.mean(axis=0))
         rows.append({"set": name, "world": world, "pair": f"{world}:{overlap}", "way": "ab",
                      "overlap": overlap, "features": r.evidence.calibration_features(),
-                     "right": _right(rot, trans),
+                     "right": is_success((rot, trans)),
                      "gated": bool(r.evidence.inliers < DEFAULT_RULE.min_inliers
                                    or r.evidence.collinear
                                    or r.evidence.margin < DEFAULT_RULE.min_margin)})
@@ -156,7 +152,7 @@ def ranking_rows(dirs: Iterable[Path], n_synthetic: int) -> list[dict]:
             label = 0
             if truth is not None:
                 rot, trans = _errors(t, truth, centre)
-                label = 1 if _right(rot, trans) else (
+                label = 1 if is_success((rot, trans)) else (
                     -1 if rot < NEAR_MISS[0] and trans < NEAR_MISS[1] else 0)
             rows.append({"set": name, "world": world, "pair": f"{world}:{overlap}",
                          "label": label, "x": x})
