@@ -76,10 +76,6 @@ EXIT_BAD_INPUT = 2
 IMAGE_SUFFIXES = (".pgm", ".png", ".jpg", ".jpeg", ".bmp")
 """Suffixes read as plain images (no YAML: ``--resolution`` gives their scale)."""
 
-ROS_DEFAULT_THRESHOLDS = (0.65, 0.196)
-"""``occupied_thresh``, ``free_thresh`` of plain images read with ``--plain ros``
-(``map_saver``'s defaults)."""
-
 MERGED_FILES = ("merged.yaml", "merged.pgm", "merged.png")
 """The merged map's files in the output folder."""
 
@@ -138,7 +134,7 @@ def _plain_image(path: Path, resolution: float | None, plain: str) -> FloorPlan:
                            "per pixel)")
     if plain == "dungeon":
         return load_dungeon_png(path, resolution)
-    return load_plain_image(path, resolution, *ROS_DEFAULT_THRESHOLDS)
+    return load_plain_image(path, resolution)  # map_saver's default thresholds
 
 
 def _pair_grids(spec: str) -> list[InputMap]:

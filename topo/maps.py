@@ -175,10 +175,17 @@ def load_ros_map(yaml_path: str | Path, *, allow_yaw: bool = False) -> FloorPlan
         p = np.where(grey <= 100.0, grey / 100.0, np.nan)  # NaN: unknown (neither mask)
     else:
         p = grey / 255.0 if negate else (255.0 - grey) / 255.0
-    return FloorPlan(free=np.ascontiguousarray(p < free_t),
-                     occupied=np.ascontiguousarray(p > occ_t), resolution=resolution,
-                     origin=(float(origin[0]), float(origin[1])), name=path.stem,
-                     yaw=float(origin[2]))
+    return _trinary(p, free_t, occ_t, resolution, (float(origin[0]), float(origin[1])),
+                    path.stem, float(origin[2]))
+
+
+def _trinary(p: np.ndarray, free_thresh: float, occupied_thresh: float, resolution: float,
+             origin: tuple[float, float], name: str, yaw: float = 0.0) -> FloorPlan:
+    """``map_server``'s trinary rule on occupancy probabilities ``p`` (rows bottom-up): free
+    below ``free_thresh``, occupied above ``occupied_thresh``, unknown between (or NaN)."""
+    return FloorPlan(free=np.ascontiguousarray(p < free_thresh),
+                     occupied=np.ascontiguousarray(p > occupied_thresh), resolution=resolution,
+                     origin=origin, name=name, yaw=yaw)
 
 
 ROS_FREE_GREY, ROS_UNKNOWN_GREY, ROS_OCCUPIED_GREY = 254, 205, 0
@@ -241,9 +248,7 @@ def load_plain_image(path: str | Path, resolution: float, occupied_thresh: float
     resolution = check_real(resolution, "resolution", low=0.0)
     path = Path(path)
     p = (255.0 - _read_image(path, "map image")[::-1]) / 255.0
-    return FloorPlan(free=np.ascontiguousarray(p < free_thresh),
-                     occupied=np.ascontiguousarray(p > occupied_thresh), resolution=resolution,
-                     origin=(0.0, 0.0), name=path.stem)
+    return _trinary(p, free_thresh, occupied_thresh, resolution, (0.0, 0.0), path.stem)
 
 
 def load_floor_plan(path: str | Path, resolution: float | None = None) -> FloorPlan:
