@@ -251,6 +251,7 @@ class Checkpointer(_Periodic):
         self.folder = folder
 
     def fire(self, steps: int) -> None:
+        """Save the model as it is at ``steps`` agent-steps."""
         save_model_atomic(self.model, self.folder / f"step_{steps:09d}.zip")
 
 
@@ -264,6 +265,7 @@ class Evaluator(_Periodic):
         self.args, self.run_dir = args, run_dir
 
     def fire(self, steps: int) -> None:
+        """Evaluate the policy as it is at ``steps`` agent-steps and keep it if best."""
         report = evaluate_policy(self.model, self.args, self.run_dir, steps)
         log_eval(self.logger.record, report)
         keep_best(report, self.run_dir,

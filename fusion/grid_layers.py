@@ -26,6 +26,8 @@ if TYPE_CHECKING:
 
 
 def cell_states(grid: Any) -> np.ndarray:
+    """``grid``'s ``(H, W)`` cell-state codes, whether it offers them as ``states()`` (a
+    ``topo.OccupancyGrid``) or as an array attribute ``states`` (a snapshot)."""
     s = grid.states() if callable(getattr(grid, "states", None)) else grid.states
     return np.asarray(s)
 
@@ -55,6 +57,8 @@ def pooled_layers(grid: Any, res: float | tuple[float, ...]
 
 
 def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
+    """``(N, 2)`` centres (metres) of ``mask``'s true cells, for a grid whose cell ``(0, 0)``
+    has its lower-left corner at ``origin`` and cells ``res`` metres wide."""
     rows, cols = np.nonzero(mask)
     return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
 

@@ -97,10 +97,12 @@ class Measurement:
 
     @property
     def pos_var(self) -> float:
+        """Position variance (m²), the mean of the x and y variances."""
         return (self.sigmas[0] ** 2 + self.sigmas[1] ** 2) / 2
 
     @property
     def rot_var(self) -> float:
+        """Heading variance (rad²)."""
         return self.sigmas[2] ** 2
 
 
