@@ -6,8 +6,10 @@ call does without whole-array temporaries:
 - :func:`pool`: the grid merge's block pooling with blocks of a fractional number of cells,
   over the known box of a large, mostly unknown grid.
 - :func:`raster_rotated`: the rotated points scattered into one FFT kernel per rotation.
+- :func:`box_correlation`: the correlation of a sparse kernel at a small box of translations
+  (an FFT scores every translation; a local search needs a few hundred of them).
 
-Tests check the last two against the numpy forms. No kernel here calls one of another
+Tests check the last three against the numpy forms. No kernel here calls one of another
 module, so numba's per-file cache stays valid.
 """
 
@@ -113,3 +115,22 @@ def raster_rotated(k, pts, centre_x, centre_y, cos_t, sin_t, res, half):
             ix = int(math.floor((c * dx - s * dy) / res)) + half
             iy = int(math.floor((s * dx + c * dy) / res)) + half
             k[layer, side - 1 - iy, side - 1 - ix] = 1.0
+
+
+@njit(cache=True, nogil=True)
+def box_correlation(layer, rows, cols, out):
+    """Add ``layer[rows[j] + dr, cols[j] + dc]`` over every ``j`` into ``out[dr, dc]`` (cells
+    outside ``layer`` count 0): the correlation score of a kernel whose set cells are ``j`` at
+    the ``out.shape`` box of translations, without the whole-array FFT."""
+    h, w = out.shape
+    n_rows, n_cols = layer.shape
+    for j in range(rows.shape[0]):
+        for dr in range(h):
+            r = rows[j] + dr
+            if r < 0 or r >= n_rows:
+                continue
+            c0 = cols[j]
+            for dc in range(w):
+                c = c0 + dc
+                if 0 <= c < n_cols:
+                    out[dr, dc] += layer[r, c]

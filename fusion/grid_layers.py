@@ -117,9 +117,12 @@ class Correlator:
     """Score of every translation of B's wall and free points, rotated about ``centre``,
     against A's layers at one resolution: ``+1`` per B wall on an A wall (within one cell),
     ``−conflict`` per B wall on A free space and per B free cell on an A wall, ``+free_weight``
-    per B free cell on A free space (module doc, step 2). A's layers are transformed once;
-    each rotation costs two forward FFTs and one inverse, batched over rotations; only the best
-    translation of each rotation is kept (and the score maps when asked for)."""
+    per B free cell on A free space (module doc, step 2). :meth:`best` scores every
+    translation by FFT: A's layers are transformed once (on first use), each rotation costs
+    two forward FFTs and one inverse, batched over rotations, and only the best translation of
+    each rotation is kept (and the best rotation's score map when asked for).
+    :meth:`window_best` scores only the translations near a given one, directly: what a local
+    search needs, without the FFTs' cost, which grows with the whole map."""
 
     def __init__(self, wall_a: np.ndarray, free_a: np.ndarray, origin_a: np.ndarray,
                  res: float, pts_wall: np.ndarray, pts_free: np.ndarray, centre: np.ndarray,
@@ -135,8 +138,16 @@ class Correlator:
         self.shape = (wall_a.shape[0] + self.side, wall_a.shape[1] + self.side)
         self.fshape = tuple(sfft.next_fast_len(n, real=True) for n in self.shape)
         # single precision: scores are sums of a few thousand small terms
-        self.fa_walls = sfft.rfft2(for_walls.astype(np.float32), self.fshape, workers=1)
-        self.fa_free = sfft.rfft2(for_free.astype(np.float32), self.fshape, workers=1)
+        self.layers = (for_walls.astype(np.float32), for_free.astype(np.float32))
+        self._spectra: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def spectra(self) -> tuple[np.ndarray, np.ndarray]:
+        """The FFTs of A's two layers (wall term, free term), computed on first use."""
+        if self._spectra is None:
+            self._spectra = tuple(sfft.rfft2(layer, self.fshape, workers=1)
+                                  for layer in self.layers)
+        return self._spectra
 
     def _kernels(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
         """``(len(thetas), side, side)`` rasters of ``pts`` rotated about the centre, flipped
@@ -147,32 +158,68 @@ class Correlator:
                               np.cos(thetas), np.sin(thetas), self.res, self.half)
         return k
 
-    def best(self, thetas: np.ndarray, keep_maps: bool = False
+    def best(self, thetas: np.ndarray, keep_best: bool = False
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Per rotation: the best score, the flat index of its translation in the score map
-        (:meth:`translation`), and with ``keep_maps`` the ``(len(thetas), H, W)`` score maps
-        of every translation (A-cell offsets)."""
+        """Per rotation: the best score and the flat index of its translation in the score
+        map (:meth:`translation`); with ``keep_best``, the ``(H, W)`` score map of every
+        translation (A-cell offsets) at the rotation of the highest score (the first of
+        equals), else ``None``."""
         n = len(thetas)
         scores = np.empty(n)
         at = np.empty(n, dtype=np.int64)
-        out = np.empty((n,) + self.shape, dtype=np.float32) if keep_maps else None
+        kept, kept_score = None, -np.inf
+        fa_walls, fa_free = self.spectra
         rows = np.arange(16)
         for i in range(0, n, 16):  # bounded memory
             th = thetas[i: i + 16]
-            spec = self.fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
-                                              workers=1)
+            spec = fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
+                                         workers=1)
             if len(self.pts_free):
-                spec += self.fa_free * sfft.rfft2(self._kernels(self.pts_free, th),
-                                                  self.fshape, workers=1)
+                spec += fa_free * sfft.rfft2(self._kernels(self.pts_free, th), self.fshape,
+                                             workers=1)
             smaps = sfft.irfft2(spec, self.fshape, workers=1)[:, : self.shape[0],
                                                                : self.shape[1]]
             flat = smaps.reshape(len(th), -1)
             k = np.argmax(flat, axis=1)
             scores[i: i + 16] = flat[rows[: len(th)], k]
             at[i: i + 16] = k
-            if out is not None:
-                out[i: i + 16] = smaps
-        return scores, at, out
+            if keep_best:
+                j = int(np.argmax(scores[i: i + 16]))
+                if scores[i + j] > kept_score:
+                    kept, kept_score = np.array(smaps[j]), scores[i + j]
+        return scores, at, kept
+
+    def box_scores(self, theta: float, r0: int, c0: int, h: int, w: int) -> np.ndarray:
+        """The ``(h, w)`` block of the score map at rotation ``theta`` (:meth:`best`'s, but
+        for the ``h × w`` translations from row ``r0``, column ``c0`` only), summed directly
+        over B's cells (double precision: equal to the FFT's up to its rounding)."""
+        out = np.zeros((h, w))
+        th = np.array([theta])
+        for pts, layer in zip((self.pts_wall, self.pts_free), self.layers, strict=True):
+            if len(pts):
+                a, b = np.nonzero(self._kernels(pts, th)[0])
+                # score[r, c] = Σ layer[r - a, c - b] over the flipped kernel's cells (a, b)
+                GK.box_correlation(layer, r0 - a, c0 - b, out)
+        return out
+
+    def window_best(self, theta: float, T: np.ndarray, reach: float) -> tuple[float, int]:
+        """The best score at rotation ``theta`` among the translations within ``reach`` cells
+        of ``T`` (:meth:`index`), and its flat index in the score map (:meth:`translation`);
+        ``(-inf, -1)`` if none is in the score map."""
+        r_at, c_at = self.index(T, theta)
+        r0, c0 = max(0, math.ceil(r_at - reach)), max(0, math.ceil(c_at - reach))
+        r1 = min(self.shape[0] - 1, math.floor(r_at + reach))
+        c1 = min(self.shape[1] - 1, math.floor(c_at + reach))
+        if r1 < r0 or c1 < c0:
+            return -math.inf, -1
+        rr, cc = np.ogrid[r0: r1 + 1, c0: c1 + 1]
+        inside = (rr - r_at) ** 2 + (cc - c_at) ** 2 <= reach ** 2
+        if not inside.any():
+            return -math.inf, -1
+        box = np.where(inside, self.box_scores(theta, r0, c0, r1 - r0 + 1, c1 - c0 + 1),
+                       -np.inf)
+        dr, dc = divmod(int(np.argmax(box)), box.shape[1])
+        return float(box[dr, dc]), (r0 + dr) * self.shape[1] + c0 + dc
 
     def index(self, T: np.ndarray, theta: float) -> tuple[float, float]:
         """(row, column) of the score map where translation ``T`` at rotation ``theta`` lies

@@ -381,7 +381,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     offsets = np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 7))
     cand = np.concatenate([thetas[picked[0]] + offsets]
                           + [thetas[i] + offsets[1:6:2] for i in picked[1:]])
-    f_scores, f_at, f_maps = fine.best(cand, keep_maps=True)
+    f_scores, f_at, smap = fine.best(cand, keep_best=True)
     f_ts = [fine.translation(kk, th, fine.shape[1]) for kk, th in zip(f_at, cand, strict=True)]
     k = int(np.argmax(f_scores))
     theta, score, t = float(cand[k]), float(f_scores[k]), f_ts[k]
@@ -389,7 +389,6 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
 
     # the best clearly different alignment: the other refined rotations, or far-away peaks at
     # this rotation (buildings repeat rooms: a shifted copy can score almost as well)
-    smap = f_maps[k]
     r_best, c_best = divmod(int(np.argmax(smap)), smap.shape[1])
     rr, cc = np.ogrid[: smap.shape[0], : smap.shape[1]]
     far = (rr - r_best) ** 2 + (cc - c_best) ** 2 > (cfg.distinct_m / fine_res) ** 2

@@ -58,7 +58,8 @@ LOCAL_REACH = 1.0
 def local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,
                   radius: float, cfg: GridMergeConfig) -> Rigid2D:
     """The best alignment within :data:`LOCAL_REACH` and ``step_deg / 3`` of ``estimate`` by
-    the correlation score on layers pooled to :data:`LOCAL_CELL` (finer than ``resolution``):
+    the correlation score on layers pooled to :data:`LOCAL_CELL` (finer than ``resolution``;
+    only the translations within reach are scored, :meth:`Correlator.window_best`):
     on maps of fine cells it fixes a rotation the ICP refinement alone can leave degrees off
     (``docs/notes/fusion.md``, fine maps). ``estimate`` itself if the grids' cells are not
     finer than :data:`LOCAL_CELL`."""
@@ -74,18 +75,11 @@ def local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray
         pts_free = pts_free[:: int(math.ceil(len(pts_free) / 8000))]
     corr = Correlator(la[0], la[1], la[2], cell, pts_wall, pts_free, centre, radius + cell, cfg)
     thetas = estimate.theta + np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 5) / 3)
-    _, _, maps = corr.best(thetas, keep_maps=True)
-    reach = LOCAL_REACH / cell
-    rr, cc = np.ogrid[: corr.shape[0], : corr.shape[1]]
     best, out = -np.inf, estimate
-    for th, smap in zip(thetas, maps, strict=True):
-        r0, c0 = corr.index(estimate.T, float(th))
-        window = (rr - r0) ** 2 + (cc - c0) ** 2 <= reach ** 2
-        if not window.any():
-            continue
-        k = int(np.argmax(np.where(window, smap, -np.inf)))
-        if smap.flat[k] > best:
-            best = float(smap.flat[k])
+    for th in thetas:  # only the translations within reach are scored (not the whole map)
+        score, k = corr.window_best(float(th), estimate.T, LOCAL_REACH / cell)
+        if score > best:
+            best = score
             out = Rigid2D(float(th), corr.translation(k, float(th), corr.shape[1]))
     return out
 

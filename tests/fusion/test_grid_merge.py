@@ -309,6 +309,44 @@ def test_rotated_raster_kernel_is_the_numpy_form(seed):
     np.testing.assert_array_equal(got, want)
 
 
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), theta=st.floats(-math.pi, math.pi))
+def test_window_scores_are_the_fft_score_map(seed, theta):
+    """Correlator.box_scores (fusion._kernels.box_correlation) gives the FFT score map's
+    block, at its edges too, up to single-precision rounding; window_best its best cell
+    within reach."""
+    from fusion.grid_layers import Correlator, cell_centres, pooled_layers
+
+    cfg = GridMergeConfig()
+    states = plan(seed % 7)
+    grid_a = GridSnapshot(states[:200, :220], RES, (0.0, 0.0))
+    grid_b = GridSnapshot(states[60:, 40:], RES, (4.0, 6.0))
+    la, lb = pooled_layers(grid_a, 0.2), pooled_layers(grid_b, 0.2)
+    pw, pf = cell_centres(lb[0], lb[2], 0.2), cell_centres(lb[1], lb[2], 0.2)
+    centre = pw.mean(axis=0)
+    radius = float(np.max(np.linalg.norm(np.vstack([pw, pf]) - centre, axis=1)))
+    corr = Correlator(la[0], la[1], la[2], 0.2, pw, pf, centre, radius, cfg)
+    _, at, smap = corr.best(np.array([theta]), keep_best=True)
+    rng = np.random.default_rng(seed)
+    h, w = smap.shape
+    for r0, c0 in ((-3, -2), (h - 5, w - 4), tuple(rng.integers(0, (h - 9, w - 9)))):
+        got = corr.box_scores(theta, int(r0), int(c0), 9, 9)
+        want = np.zeros((9, 9))
+        rows, cols = slice(max(r0, 0), r0 + 9), slice(max(c0, 0), c0 + 9)
+        block = smap[rows, cols]
+        want[rows.start - r0: rows.start - r0 + block.shape[0],
+             cols.start - c0: cols.start - c0 + block.shape[1]] = block
+        inside = np.zeros((9, 9), bool)
+        inside[rows.start - r0: rows.start - r0 + block.shape[0],
+               cols.start - c0: cols.start - c0 + block.shape[1]] = True
+        np.testing.assert_allclose(got[inside], want[inside], atol=1e-3)
+    r_best, c_best = divmod(int(at[0]), w)
+    T = corr.translation(int(at[0]), theta, w)
+    score, k = corr.window_best(theta, T, 3.0)
+    assert score == pytest.approx(float(smap[r_best, c_best]), abs=1e-3)
+    assert abs(k // w - r_best) <= 3 and abs(k % w - c_best) <= 3
+
+
 def test_acceptance_is_the_confidence_against_the_threshold():
     a, b, truth = overlapping_views(37.0)
     res = merge_grids(a, b)
