@@ -32,7 +32,9 @@ windows of ``--cells`` × ``--cells`` cells are cut from it at random places and
 random angles (each its own frame; occupied cells more than two cells from free space are
 made unknown, as a robot sees walls, not solid rock), and it prints the time of every pair's
 ``merge_grids``, of the whole N-map merge (``merge_maps_n``: all pairs, cycle check, drawing
-the merged map) and of writing it, and each placed map's error against the truth.
+the merged map) and of writing it, and each placed map's error against the truth; with
+``--reference REV`` also those of that revision, interleaved pair by pair, and the median
+ratio of the pairs' CPU times.
 """
 
 from __future__ import annotations
@@ -247,12 +249,12 @@ def env_times(rev: str, steps: int, repeats: int = 3) -> None:
               f"{1000 * statistics.median(grid[k]):>16.2f}{per_step:>17.1f}")
 
 
-def tool_times(source: Path, n_maps: int, cells: int, seed: int) -> None:
-    """Print the map-merge tool's times on ``n_maps`` turned windows of ``source`` (module
-    docstring)."""
+def tool_maps(source: Path, n_maps: int, cells: int, seed: int) -> tuple[list, list, str]:
+    """``n_maps`` turned windows of ``source`` (module docstring), their true frames and a
+    line saying what they are."""
     from scipy import ndimage
 
-    from fusion.mapmerge import InputMap, load_input, merge_maps_n, rasterise, write_outputs
+    from fusion.mapmerge import InputMap, load_input, rasterise
     from fusion.rigid import Rigid2D
 
     rng = np.random.default_rng(seed)
@@ -275,45 +277,79 @@ def tool_times(source: Path, n_maps: int, cells: int, seed: int) -> None:
         maps.append(InputMap(f"w{k}", "", states, res, plan.origin))
         truth.append(to_k)
     shapes = [m.states.shape for m in maps]
-    print(f"{n_maps} maps from {source.name} x{zoom}, windows of {cells} x {cells} cells "
-          f"(arrays {min(shapes)} .. {max(shapes)} after turning), {res} m cells")
-    pair_t, pair_cpu, pair_ok = [], [], 0
-    from fusion.grid_merge import merge_grids
+    return maps, truth, (f"{n_maps} maps from {source.name} x{zoom}, windows of {cells} x "
+                         f"{cells} cells (arrays {min(shapes)} .. {max(shapes)} after turning), "
+                         f"{res} m cells")
 
-    merge_grids(maps[0], maps[1])  # compiled kernels load on the first call
-    for i in range(n_maps):
-        for j in range(i + 1, n_maps):
-            t0, c0 = time.perf_counter(), time.process_time()
-            r = merge_grids(maps[i], maps[j])
-            pair_t.append(time.perf_counter() - t0)
-            pair_cpu.append(time.process_time() - c0)
-            true = truth[i] @ truth[j].inverse()
-            pair_ok += r.accepted and r.transform.translation_error(
-                true, at=maps[j].centre()) <= 0.3
-    t0, c0 = time.perf_counter(), time.process_time()
-    team = merge_maps_n(maps)
-    t_team, cpu_team = time.perf_counter() - t0, time.process_time() - c0
+
+def tool_times(source: Path, n_maps: int, cells: int, seed: int, rev: str | None = None
+               ) -> None:
+    """Print the map-merge tool's times on ``n_maps`` turned windows of ``source`` (module
+    docstring); with ``rev``, also those of the ``fusion`` package at that git revision,
+    interleaved pair by pair, and the ratios of the CPU times."""
+    import fusion.grid_merge
+    import fusion.mapmerge
+
+    maps, truth, what = tool_maps(source, n_maps, cells, seed)
+    print(what)
+    versions = {"now": (fusion.grid_merge, fusion.mapmerge)}
     with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        write_outputs(team, Path(tmp))
-        t_write = time.perf_counter() - t0
-    print(f"pairs: {len(pair_t)}, median {1000 * statistics.median(pair_t):.0f} ms, max "
-          f"{1000 * max(pair_t):.0f} ms (CPU median {1000 * statistics.median(pair_cpu):.0f} ms), "
-          f"accepted within 0.3 m: {pair_ok}")
-    print(f"merge_maps_n of {n_maps} maps: {t_team:.2f} s (CPU {cpu_team:.2f} s); writing: "
-          f"{t_write:.2f} s; merged "
-          f"{sum(p.merged for p in team.placements)}/{n_maps}, grid {team.merged.free.shape}"
-          if team.merged is not None else f"merge_maps_n: {t_team:.2f} s, nothing merged")
-    ref = team.reference
-    for k, p in enumerate(team.placements):
-        if p.merged:
-            true = truth[ref] @ truth[k].inverse()
-            err = p.transform.translation_error(true, at=maps[k].centre())
-            print(f"  {p.name}: error {err:.3f} m, "
-                  f"{math.degrees(p.transform.rotation_error(true)):.2f} deg, "
-                  f"confidence {p.confidence:.2f}")
-        else:
-            print(f"  {p.name}: not merged: {p.why}")
+        if rev is not None:
+            _reference_merge(rev, Path(tmp))
+            versions[rev] = (importlib.import_module("fusion_ref.grid_merge"),
+                             importlib.import_module("fusion_ref.mapmerge"))
+        for grid_merge, _ in versions.values():  # compiled kernels load on the first call
+            grid_merge.merge_grids(maps[0], maps[1])
+        pair_t = {k: [] for k in versions}
+        pair_cpu = {k: [] for k in versions}
+        pair_ok = dict.fromkeys(versions, 0)
+        for i in range(n_maps):
+            for j in range(i + 1, n_maps):
+                true = truth[i] @ truth[j].inverse()
+                for k, (grid_merge, _) in versions.items():
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    r = grid_merge.merge_grids(maps[i], maps[j])
+                    pair_t[k].append(time.perf_counter() - t0)
+                    pair_cpu[k].append(time.process_time() - c0)
+                    pair_ok[k] += r.accepted and r.transform.translation_error(
+                        true, at=maps[j].centre()) <= 0.3
+        for k, (grid_merge, mapmerge) in versions.items():
+            # the revision's own classes (its Rigid2D composes only with its own)
+            rigid = importlib.import_module(grid_merge.__name__.replace("grid_merge", "rigid"))
+            its_maps = [mapmerge.InputMap(m.name, m.source, m.states, m.resolution, m.origin)
+                        for m in maps]
+            its_truth = [rigid.Rigid2D(t.theta, t.T) for t in truth]
+            t0, c0 = time.perf_counter(), time.process_time()
+            team = mapmerge.merge_maps_n(its_maps)
+            t_team, cpu_team = time.perf_counter() - t0, time.process_time() - c0
+            with tempfile.TemporaryDirectory() as out:
+                t0 = time.perf_counter()
+                mapmerge.write_outputs(team, Path(out))
+                t_write = time.perf_counter() - t0
+            print(f"[{k}] pairs: {len(pair_t[k])}, median "
+                  f"{1000 * statistics.median(pair_t[k]):.0f} ms, max "
+                  f"{1000 * max(pair_t[k]):.0f} ms (CPU median "
+                  f"{1000 * statistics.median(pair_cpu[k]):.0f} ms, max "
+                  f"{1000 * max(pair_cpu[k]):.0f} ms), accepted within 0.3 m: {pair_ok[k]}")
+            print(f"[{k}] merge_maps_n of {n_maps} maps: {t_team:.2f} s (CPU {cpu_team:.2f} s); "
+                  f"writing: {t_write:.2f} s; merged "
+                  f"{sum(p.merged for p in team.placements)}/{n_maps}, grid "
+                  f"{team.merged.free.shape}"
+                  if team.merged is not None else f"merge_maps_n: {t_team:.2f} s, nothing merged")
+            ref = team.reference
+            for m, p in enumerate(team.placements):
+                if p.merged:
+                    true = its_truth[ref] @ its_truth[m].inverse()
+                    err = p.transform.translation_error(true, at=maps[m].centre())
+                    print(f"  {p.name}: error {err:.3f} m, "
+                          f"{math.degrees(p.transform.rotation_error(true)):.2f} deg, "
+                          f"confidence {p.confidence:.2f}")
+                else:
+                    print(f"  {p.name}: not merged: {p.why}")
+    if rev is not None:
+        ratio = statistics.median(a / b for a, b in zip(pair_cpu["now"], pair_cpu[rev],
+                                                        strict=True))
+        print(f"merge_grids: median per-pair CPU time ratio now / {rev}: {ratio:.2f}")
 
 
 def main() -> None:
@@ -337,7 +373,7 @@ def main() -> None:
                         help="with --tool: the windows' side in cells")
     args = parser.parse_args()
     if args.tool is not None:
-        tool_times(args.tool, args.maps, args.cells, args.seed)
+        tool_times(args.tool, args.maps, args.cells, args.seed, args.reference)
         return
     if args.grids is not None:
         grid_times(args.grids, args.reference)

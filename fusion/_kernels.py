@@ -118,19 +118,28 @@ def raster_rotated(k, pts, centre_x, centre_y, cos_t, sin_t, res, half):
 
 
 @njit(cache=True, nogil=True)
-def box_correlation(layer, rows, cols, out):
-    """Add ``layer[rows[j] + dr, cols[j] + dc]`` over every ``j`` into ``out[dr, dc]`` (cells
-    outside ``layer`` count 0): the correlation score of a kernel whose set cells are ``j`` at
-    the ``out.shape`` box of translations, without the whole-array FFT."""
+def box_correlation(layer, pts, centre_x, centre_y, cos_t, sin_t, res, side, r0, c0, out):
+    """Add ``layer[r0 + iy + dr, c0 + ix + dc]`` into ``out[dr, dc]`` for each kernel cell
+    ``(iy, ix)`` that :func:`raster_rotated` sets for the rotation ``(cos_t, sin_t)`` (each
+    cell once, unflipped; ``side`` the kernel's side; cells outside ``layer`` count 0): the
+    correlation score of that kernel at the ``out.shape`` box of translations, without the
+    whole-array FFT."""
+    half = side // 2
     h, w = out.shape
     n_rows, n_cols = layer.shape
-    for j in range(rows.shape[0]):
+    seen = np.zeros((side, side), dtype=np.bool_)
+    for p in range(pts.shape[0]):
+        dx, dy = pts[p, 0] - centre_x, pts[p, 1] - centre_y
+        ix = int(math.floor((cos_t * dx - sin_t * dy) / res)) + half
+        iy = int(math.floor((sin_t * dx + cos_t * dy) / res)) + half
+        if seen[iy, ix]:
+            continue
+        seen[iy, ix] = True
         for dr in range(h):
-            r = rows[j] + dr
+            r = r0 + iy + dr
             if r < 0 or r >= n_rows:
                 continue
-            c0 = cols[j]
             for dc in range(w):
-                c = c0 + dc
+                c = c0 + ix + dc
                 if 0 <= c < n_cols:
                     out[dr, dc] += layer[r, c]

@@ -194,12 +194,13 @@ class Correlator:
         for the ``h × w`` translations from row ``r0``, column ``c0`` only), summed directly
         over B's cells (double precision: equal to the FFT's up to its rounding)."""
         out = np.zeros((h, w))
-        th = np.array([theta])
         for pts, layer in zip((self.pts_wall, self.pts_free), self.layers, strict=True):
             if len(pts):
-                a, b = np.nonzero(self._kernels(pts, th)[0])
-                # score[r, c] = Σ layer[r - a, c - b] over the flipped kernel's cells (a, b)
-                GK.box_correlation(layer, r0 - a, c0 - b, out)
+                # score[r, c] = Σ layer[r - side + 1 + iy, c - side + 1 + ix] over the
+                # kernel's cells (iy, ix) (:meth:`_kernels`' raster, unflipped)
+                GK.box_correlation(layer, pts, float(self.centre[0]), float(self.centre[1]),
+                                   math.cos(theta), math.sin(theta), self.res, self.side,
+                                   r0 - self.side + 1, c0 - self.side + 1, out)
         return out
 
     def window_best(self, theta: float, T: np.ndarray, reach: float) -> tuple[float, int]:

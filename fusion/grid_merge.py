@@ -14,7 +14,8 @@ more evidence — every wall cell — so this method aligns them directly:
    ``+1`` per B wall on an A wall (within one cell), ``−conflict`` per B wall on A free space
    and per B free cell on an A wall, ``+free_weight`` per B free cell on A free space. This
    sweep runs on layers pooled ``coarse_factor`` times coarser (a quarter of the cells at 2), in
-   single precision, batched over rotations;
+   single precision, batched over rotations (on large maps after a sweep coarser still:
+   :func:`merge_grids`);
 3. the ``refine_top`` best clearly different coarse alignments are scored again at
    ``resolution`` — the best on a ``step_deg / 3`` angle grid around it, the others (its
    rivals) on a ``2·step_deg / 3`` one — and the best is refined by gated ICP-SVD on wall
@@ -316,6 +317,37 @@ def distinct(a: Rigid2D, b: Rigid2D, centre: np.ndarray, cfg: GridMergeConfig) -
     return clearly_different(a, b, centre, cfg.distinct_deg, cfg.distinct_m)
 
 
+LARGE_POOLED_CELLS = 80_000
+"""Grids with more cells than this at :attr:`GridMergeConfig.resolution` (either grid, cropped
+to its known cells) take :func:`merge_grids`' large-map path; smaller ones — the environment's
+grids, of worlds a few tens of metres wide (56 m × 56 m at 0.2 m cells is 80 000) — the full
+sweep, unchanged."""
+PYRAMID_TOP = 12
+"""On the large-map path, how many rotations of the sweep at twice the coarse cell are swept
+again at the coarse cell."""
+PYRAMID_REACH = 2.0
+"""On the large-map path, the translations scored at ``resolution`` lie within this many
+coarse cells of a coarse alignment."""
+
+
+def _pyramid_sweep(grid_a: Any, grid_b: Any, coarse: Correlator, thetas: np.ndarray,
+                   centre: np.ndarray, radius: float, cfg: GridMergeConfig
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse sweep of large grids (:func:`merge_grids`): every rotation on layers pooled
+    to twice ``coarse``'s cell, then the :data:`PYRAMID_TOP` best rotations by ``coarse``.
+    Returns, per rotation, ``coarse``'s best score and the flat index of its translation
+    (``-inf`` and ``-1`` for the rotations not swept again). The sweep's FFTs cost a quarter of
+    ``coarse``'s, which dominate on large maps."""
+    top_res = 2 * coarse.res
+    la, lb = pooled_layers(grid_a, top_res), pooled_layers(grid_b, top_res)
+    top = Correlator(la[0], la[1], la[2], top_res, cell_centres(lb[0], lb[2], top_res),
+                     cell_centres(lb[1], lb[2], top_res), centre, radius + top_res, cfg)
+    again = np.sort(np.argsort(-top.best(thetas)[0], kind="stable")[:PYRAMID_TOP])
+    scores, at = np.full(len(thetas), -np.inf), np.full(len(thetas), -1, dtype=np.int64)
+    scores[again], at[again], _ = coarse.best(thetas[again])
+    return scores, at
+
+
 def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                 ) -> GridMergeResult:
     """Align occupancy grid B onto grid A (module docstring): the best alignment, its
@@ -327,7 +359,17 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     The rotation search runs coarse to fine: every ``step_deg`` rotation is scored at
     ``coarse_factor × resolution``; the ``refine_top`` best clearly different rotations are
     scored again at ``resolution`` on a ``step_deg / 3`` grid around each (the best is the
-    estimate, the others its rivals, with far-away peaks at the estimate's rotation)."""
+    estimate, the others its rivals, with far-away peaks at the estimate's rotation).
+
+    Large grids (either with more than :data:`LARGE_POOLED_CELLS` known-box cells at
+    ``resolution``, when ``coarse_factor > 1``) take a coarse-to-fine path, since the FFTs of
+    every rotation over the whole map dominate their cost: every rotation is first scored at
+    twice the coarse cell and only the :data:`PYRAMID_TOP` best are swept at the coarse cell;
+    at ``resolution``, the picked rotations are scored on the whole map as above, the others
+    of the angle grids only within :data:`PYRAMID_REACH` coarse cells of a picked alignment
+    (turned about B's centre). Contract: smaller grids (every grid of the environment) give
+    exactly the full sweep's result; on large grids, a rotation's best alignment can be missed
+    where the coarser sweep ranks it below the rest."""
     check_grid_inputs(grid_a, grid_b, config)
     t0 = time.perf_counter()
     cfg = config or GridMergeConfig()
@@ -362,7 +404,11 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     fine = Correlator(wall_a, free_a, origin_a, fine_res, pts_wall, pts_free, centre, radius,
                        cfg)
     sweep = coarse or fine
-    c_scores, c_at, _ = sweep.best(thetas)
+    large = coarse is not None and max(wall_a.size, wall_b.size) > LARGE_POOLED_CELLS
+    if large:
+        c_scores, c_at = _pyramid_sweep(grid_a, grid_b, coarse, thetas, centre, radius, cfg)
+    else:
+        c_scores, c_at, _ = sweep.best(thetas)
     c_alignments: dict[int, Rigid2D] = {}  # of the rotations looked at
 
     def c_alignment(i: int) -> Rigid2D:
@@ -373,6 +419,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
 
     picked: list[int] = []  # the best clearly different coarse alignments
     for i in np.argsort(-c_scores, kind="stable"):
+        if c_scores[i] == -np.inf:  # not scored (the large-map path)
+            break
         if all(distinct(c_alignment(i), c_alignment(j), centre, cfg) for j in picked):
             picked.append(int(i))
             if len(picked) == cfg.refine_top:
@@ -381,15 +429,31 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     offsets = np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 7))
     cand = np.concatenate([thetas[picked[0]] + offsets]
                           + [thetas[i] + offsets[1:6:2] for i in picked[1:]])
-    f_scores, f_at, smap = fine.best(cand, keep_best=True)
+    if large:  # near each coarse alignment only; the score map of the best rotation whole
+        reach = PYRAMID_REACH * cfg.coarse_factor
+        # every coarse alignment turned to each rotation about B's centre (the full sweep's
+        # best at a rotation may be another alignment's peak)
+        lands = [c_alignment(i).apply(centre) for i in picked]
+        found = [max(fine.window_best(float(th), at - Rigid2D(float(th)).apply(centre), reach)
+                     for at in lands) for th in cand]
+        f_scores = np.array([sc for sc, _ in found])
+        f_at = np.array([kk for _, kk in found], dtype=np.int64)
+        # the picked rotations themselves on the whole score map, as the full sweep
+        whole = [3] + [7 + 3 * m + 1 for m in range(len(picked) - 1)]
+        f_scores[whole], f_at[whole], smap = fine.best(cand[whole], keep_best=True)
+        k = int(np.argmax(f_scores))
+        if k != whole[int(np.argmax(f_scores[whole]))]:  # smap is that rotation's
+            smap = fine.best(cand[k: k + 1], keep_best=True)[2]
+    else:
+        f_scores, f_at, smap = fine.best(cand, keep_best=True)
+        k = int(np.argmax(f_scores))
     f_ts = [fine.translation(kk, th, fine.shape[1]) for kk, th in zip(f_at, cand, strict=True)]
-    k = int(np.argmax(f_scores))
     theta, score, t = float(cand[k]), float(f_scores[k]), f_ts[k]
     estimate = Rigid2D(theta, t)
 
     # the best clearly different alignment: the other refined rotations, or far-away peaks at
     # this rotation (buildings repeat rooms: a shifted copy can score almost as well)
-    r_best, c_best = divmod(int(np.argmax(smap)), smap.shape[1])
+    r_best, c_best = divmod(int(f_at[k]), smap.shape[1])
     rr, cc = np.ogrid[: smap.shape[0], : smap.shape[1]]
     far = (rr - r_best) ** 2 + (cc - c_best) ** 2 > (cfg.distinct_m / fine_res) ** 2
     rival, rival_t = 0.0, None
