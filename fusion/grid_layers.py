@@ -39,21 +39,77 @@ def pooled_layers(grid: Any, res: float | tuple[float, ...]
     free and none is occupied; a pooled cell may cover a fractional number of fine cells, e.g.
     6.7 of 0.03 m: rounding to whole cells would stretch the map); for a tuple of
     resolutions, a list of them (the grid is read once); ``None`` if nothing is known. Grids
-    coarser than ``res`` give pooled layers with gaps."""
+    coarser than ``res`` give pooled layers with gaps. A :class:`LayerCache` pools each
+    resolution once (its arrays are read-only)."""
+    if isinstance(grid, LayerCache):
+        out = [grid.pooled(r) for r in (res if isinstance(res, tuple) else (res,))]
+        return None if out[0] is None else out if isinstance(res, tuple) else out[0]
     states = cell_states(grid)
+    box = known_box(states)
+    if box is None:
+        return None
+    out = [_pooled(states, box, float(grid.resolution), grid.origin, r)
+           for r in (res if isinstance(res, tuple) else (res,))]
+    return out if isinstance(res, tuple) else out[0]
+
+
+def known_box(states: np.ndarray) -> tuple[int, int, int, int] | None:
+    """First and last row, first and last column of ``states``' known cells (``None`` if
+    none is known)."""
     known = states != UNKNOWN
     rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
     if not len(rows):
         return None
-    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
-    fine = float(grid.resolution)
-    origin = np.asarray(grid.origin, dtype=np.float64) + np.array([c0, r0]) * fine
-    out = []
-    for r in (res if isinstance(res, tuple) else (res,)):
-        ratio = fine / r
-        h, w = int((r1 - r0 + 0.5) * ratio) + 1, int((c1 - c0 + 0.5) * ratio) + 1
-        out.append((*GK.pool(states, r0, c0, h, w, ratio, FREE, OCCUPIED), origin))
-    return out if isinstance(res, tuple) else out[0]
+    return int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+
+
+def _pooled(states: np.ndarray, box: tuple[int, int, int, int], fine: float, origin: Any,
+            res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pooled_layers` at one resolution, of the known ``box``."""
+    r0, r1, c0, c1 = box
+    corner = np.asarray(origin, dtype=np.float64) + np.array([c0, r0]) * fine
+    ratio = fine / res
+    h, w = int((r1 - r0 + 0.5) * ratio) + 1, int((c1 - c0 + 0.5) * ratio) + 1
+    return (*GK.pool(states, r0, c0, h, w, ratio, FREE, OCCUPIED), corner)
+
+
+class LayerCache:
+    """A grid whose cell states, known box, pooled layers (:func:`pooled_layers`) and
+    occupied cells (:func:`fusion.grid_refine.native_walls`) are each computed once, on first
+    use: what one map merged with several others (:func:`fusion.mapmerge.merge_maps_n`), or
+    read at several resolutions in one :func:`fusion.grid_merge.merge_grids`, would otherwise
+    recompute. A snapshot: ``grid`` must not change while the cache is in use.
+
+    Attributes:
+        states: ``grid``'s ``(H, W)`` cell-state codes (read-only).
+        resolution: its cell size (m).
+        origin: the lower-left corner of its cell ``(0, 0)``.
+    """
+
+    def __init__(self, grid: Any) -> None:
+        self.states = cell_states(grid)
+        self.resolution = float(grid.resolution)
+        self.origin = np.asarray(grid.origin, dtype=np.float64)
+        self._box: tuple | None = None
+        self._pooled: dict[float, tuple | None] = {}
+        self.memo: dict[str, Any] = {}  # results of other modules' functions of the grid
+
+    @classmethod
+    def of(cls, grid: Any) -> LayerCache:
+        """``grid`` itself if it is a :class:`LayerCache`, else a new one of it."""
+        return grid if isinstance(grid, LayerCache) else cls(grid)
+
+    def pooled(self, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """:func:`pooled_layers` at ``res`` (one resolution), computed once."""
+        if res not in self._pooled:
+            if self._box is None:
+                self._box = known_box(self.states) or ()
+            layers = (_pooled(self.states, self._box, self.resolution, self.origin, res)
+                      if self._box else None)
+            for a in layers or ():
+                a.flags.writeable = False
+            self._pooled[res] = layers
+        return self._pooled[res]
 
 
 def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:

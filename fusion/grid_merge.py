@@ -57,6 +57,7 @@ from fusion.decision import DEFAULT_ACCEPT_THRESHOLD, DEFAULT_RULE, MergeRule, c
 from fusion.grid_layers import (
     Correlator,
     GridAgreement,
+    LayerCache,
     cell_centres,
     landing,
     pooled_layers,
@@ -297,6 +298,7 @@ def refine_with_grids(grid_a: Any, grid_b: Any, transform: Rigid2D,
     if not isinstance(transform, Rigid2D):
         raise TypeError(f"transform must be a fusion.Rigid2D, got {type(transform).__name__}")
     cfg = config or GridMergeConfig()
+    grid_a, grid_b = LayerCache.of(grid_a), LayerCache.of(grid_b)  # their walls found once
     walls_b, _ = native_walls(grid_b)
     if not cfg.native_refine or len(walls_b) < 3:
         return transform
@@ -372,6 +374,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     where the coarser sweep ranks it below the rest."""
     check_grid_inputs(grid_a, grid_b, config)
     t0 = time.perf_counter()
+    # each grid read once however many resolutions the search looks at
+    grid_a, grid_b = LayerCache.of(grid_a), LayerCache.of(grid_b)
     cfg = config or GridMergeConfig()
     res = cfg.resolution
     # each grid read once: its layers at full and (if the sweep is coarser) coarse resolution

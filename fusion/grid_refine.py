@@ -19,6 +19,7 @@ from fusion.grid_layers import (
     OCCUPIED,
     UNKNOWN,
     Correlator,
+    LayerCache,
     cell_centres,
     cell_states,
     pooled_layers,
@@ -98,13 +99,22 @@ MAX_NATIVE_ICP_POINTS = 1200
 
 
 def native_walls(grid: Any) -> tuple[np.ndarray, float]:
-    """Centres of ``grid``'s occupied cells (its own frame) and its cell size."""
-    states = cell_states(grid)
+    """Centres of ``grid``'s occupied cells (its own frame) and its cell size (computed once
+    for a :class:`fusion.grid_layers.LayerCache`, then read-only)."""
+    if not isinstance(grid, LayerCache):
+        return _walls(cell_states(grid), float(grid.resolution), grid.origin), float(
+            grid.resolution)
+    if "native_walls" not in grid.memo:
+        walls = _walls(grid.states, grid.resolution, grid.origin)
+        walls.flags.writeable = False
+        grid.memo["native_walls"] = walls, grid.resolution
+    return grid.memo["native_walls"]
+
+
+def _walls(states: np.ndarray, fine: float, origin: Any) -> np.ndarray:
     rows, cols = np.nonzero(states == OCCUPIED)
-    fine = float(grid.resolution)
-    origin = np.asarray(grid.origin, dtype=np.float64)
-    return np.stack([origin[0] + (cols + 0.5) * fine, origin[1] + (rows + 0.5) * fine],
-                    axis=1), fine
+    origin = np.asarray(origin, dtype=np.float64)
+    return np.stack([origin[0] + (cols + 0.5) * fine, origin[1] + (rows + 0.5) * fine], axis=1)
 
 
 def native_evidence(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray,

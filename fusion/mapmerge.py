@@ -50,7 +50,7 @@ import numpy as np
 from scipy import ndimage
 
 from fusion.decision import MergeRule
-from fusion.grid_layers import pooled_layers
+from fusion.grid_layers import LayerCache, pooled_layers
 from fusion.grid_merge import GridMergeConfig, GridMergeResult, merge_grids
 from fusion.rigid import Rigid2D
 from fusion.team import Edge, consistent_edges, frames_from
@@ -301,10 +301,11 @@ def merge_maps_n(maps: Sequence[InputMap], config: GridMergeConfig | None = None
                              "resample it first (fusion.mapmerge.resampled)")
     rule = rule or MergeRule()
     pairs, edges = {}, []
+    grids = [LayerCache(m) for m in maps]  # each map pooled once for all its pairs
     for i in range(len(maps)):
         for j in range(i + 1, len(maps)):
             try:
-                r = merge_grids(maps[i], maps[j], config)
+                r = merge_grids(grids[i], grids[j], config)
             except ValueError as exc:  # a map beyond fusion.inputs' bounds: name the files
                 raise ValueError(f"{maps[i].source} and {maps[j].source}: {exc}") from exc
             pairs[(i, j)] = r
@@ -401,19 +402,25 @@ def rasterise(maps: Sequence[InputMap], to_ref: Sequence[Rigid2D], ref_from_map:
     occ = np.zeros(shape, dtype=bool)
     free = np.zeros(shape, dtype=bool)
     owner = np.full(shape, -1, dtype=np.int16)
-    for k, (m, g) in enumerate(zip(maps, into, strict=True)):
+    for k, (m, g, c) in enumerate(zip(maps, into, corners, strict=True)):
         inv = g.inverse()  # output (world) → map k's grid frame
+        # only the output cells within map k's box (and a cell more) can see it
+        c0, r0 = np.maximum(np.floor((c.min(axis=0) - lo) / resolution).astype(int) - 1, 0)
+        c1, r1 = np.minimum(np.ceil((c.max(axis=0) - lo) / resolution).astype(int) + 1,
+                            shape[::-1])
         # output index (row, col) → world centre → k's cell index (row, col)
         a = inv.R[::-1, ::-1] * (resolution / m.resolution)
-        centre0 = lo + 0.5 * resolution
+        centre0 = lo + (np.array([c0, r0]) + 0.5) * resolution
         off_xy = (inv.apply(centre0[None])[0] - np.asarray(m.origin)) / m.resolution - 0.5
-        st = ndimage.affine_transform(m.states, a, offset=off_xy[::-1], output_shape=shape,
-                                      order=0, mode="constant", cval=_UNKNOWN)
+        st = ndimage.affine_transform(m.states, a, offset=off_xy[::-1],
+                                      output_shape=(r1 - r0, c1 - c0), order=0,
+                                      mode="constant", cval=_UNKNOWN)
+        box = np.s_[r0:r1, c0:c1]
         is_occ, is_free = st == _OCC, st == _FREE
-        owner[is_occ & ~occ] = k
-        owner[is_free & ~occ & ~free & (owner < 0)] = k
-        occ |= is_occ
-        free |= is_free
+        owner[box][is_occ & ~occ[box]] = k
+        owner[box][is_free & ~occ[box] & ~free[box] & (owner[box] < 0)] = k
+        occ[box] |= is_occ
+        free[box] |= is_free
     free &= ~occ
     plan = FloorPlan(free, occ, resolution, (float(lo[0]), float(lo[1])), "merged")
     return plan, owner

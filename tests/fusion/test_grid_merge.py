@@ -571,3 +571,33 @@ def test_drift_prior_is_the_noise_over_the_steps_and_a_feature():
     a, b, _ = overlapping_views(37.0)
     res = merge_grids(a, b, GridMergeConfig(drift_prior=0.07))
     assert res.drift_prior == 0.07 and res.features()["drift_prior"] == 0.07
+
+
+def test_layer_cache_gives_the_grids_own_layers_and_merge():
+    """A LayerCache pools each resolution once, read-only, to the grid's own layers, and
+    merge_grids / refine_with_grids give the same results on it as on the grid."""
+    from fusion.grid_layers import LayerCache, pooled_layers
+    from fusion.grid_refine import native_walls
+
+    states = plan(3)
+    grid_a = GridSnapshot(states[:220, :240], RES, (0.0, 0.0))
+    grid_b = GridSnapshot(np.ascontiguousarray(np.rot90(states[70:, 50:])), RES, (2.0, -1.0))
+    cache_a, cache_b = LayerCache(grid_a), LayerCache(grid_b)
+    assert LayerCache.of(cache_a) is cache_a
+    for res in (0.2, (0.2, 0.4)):
+        want, got = pooled_layers(grid_a, res), pooled_layers(cache_a, res)
+        for w, g in zip(want if isinstance(res, tuple) else [want],
+                        got if isinstance(res, tuple) else [got], strict=True):
+            for a, b in zip(w, g, strict=True):
+                np.testing.assert_array_equal(a, b)
+    assert pooled_layers(cache_a, 0.2)[0] is pooled_layers(cache_a, 0.2)[0]
+    assert not pooled_layers(cache_a, 0.2)[0].flags.writeable
+    np.testing.assert_array_equal(native_walls(cache_b)[0], native_walls(grid_b)[0])
+    assert pooled_layers(LayerCache(GridSnapshot(np.zeros((5, 5), np.int8), RES, (0, 0))),
+                         (0.2, 0.4)) is None
+    r, rc = merge_grids(grid_a, grid_b), merge_grids(cache_a, cache_b)
+    assert (r.transform.theta, tuple(r.transform.T), r.score, r.confidence, r.margin) == (
+        rc.transform.theta, tuple(rc.transform.T), rc.score, rc.confidence, rc.margin)
+    t, tc = refine_with_grids(grid_a, grid_b, r.transform), refine_with_grids(cache_a, cache_b,
+                                                                             r.transform)
+    assert t.theta == tc.theta and np.array_equal(t.T, tc.T)
