@@ -325,29 +325,47 @@ to its known cells) take :func:`merge_grids`' large-map path; smaller ones — t
 grids, of worlds a few tens of metres wide (56 m × 56 m at 0.2 m cells is 80 000) — the full
 sweep, unchanged."""
 PYRAMID_TOP = 12
-"""On the large-map path, how many rotations of the sweep at twice the coarse cell are swept
-again at the coarse cell."""
+"""On the large-map path, how many rotations (those of the sweep at twice the coarse cell that
+score best) are swept again at the coarse cell."""
 PYRAMID_REACH = 2.0
 """On the large-map path, the translations scored at ``resolution`` lie within this many
 coarse cells of a coarse alignment."""
+MAX_LARGE_ICP_POINTS = 1500
+"""On the large-map path, the refinement at ``resolution`` moves at most this many of B's wall
+cells (a regular subsample), as the refinement on the grids' own cells does."""
 
 
-def _pyramid_sweep(grid_a: Any, grid_b: Any, coarse: Correlator, thetas: np.ndarray,
+def _pyramid_sweep(coarse_a: tuple, coarse_b: tuple, coarse: Correlator, thetas: np.ndarray,
                    centre: np.ndarray, radius: float, cfg: GridMergeConfig
                    ) -> tuple[np.ndarray, np.ndarray]:
-    """The coarse sweep of large grids (:func:`merge_grids`): every rotation on layers pooled
-    to twice ``coarse``'s cell, then the :data:`PYRAMID_TOP` best rotations by ``coarse``.
-    Returns, per rotation, ``coarse``'s best score and the flat index of its translation
-    (``-inf`` and ``-1`` for the rotations not swept again). The sweep's FFTs cost a quarter of
-    ``coarse``'s, which dominate on large maps."""
-    top_res = 2 * coarse.res
-    la, lb = pooled_layers(grid_a, top_res), pooled_layers(grid_b, top_res)
-    top = Correlator(la[0], la[1], la[2], top_res, cell_centres(lb[0], lb[2], top_res),
-                     cell_centres(lb[1], lb[2], top_res), centre, radius + top_res, cfg)
-    again = np.sort(np.argsort(-top.best(thetas)[0], kind="stable")[:PYRAMID_TOP])
+    """The coarse sweep of large grids (:func:`merge_grids`): every rotation on the coarse
+    layers ``coarse_a``, ``coarse_b`` (wall, free, origin) merged by blocks of 2 × 2 cells
+    (:func:`blocks`), then the :data:`PYRAMID_TOP` best of them by ``coarse``. Returns, per
+    rotation, ``coarse``'s best score and the flat index of its translation (``-inf`` and
+    ``-1`` for the rotations not swept by ``coarse``). The blocks' FFTs cost a quarter of
+    ``coarse``'s, whose sweep of every rotation is what dominates on large maps."""
+    r = 2 * coarse.res
+    (wa, fa, oa), (wb, fb, ob) = blocks(*coarse_a, 2), blocks(*coarse_b, 2)
+    level = Correlator(wa, fa, oa, r, cell_centres(wb, ob, r), cell_centres(fb, ob, r), centre,
+                       radius + r, cfg)
+    keep = np.sort(np.argsort(-level.best(thetas)[0], kind="stable")[:PYRAMID_TOP])
     scores, at = np.full(len(thetas), -np.inf), np.full(len(thetas), -1, dtype=np.int64)
-    scores[again], at[again], _ = coarse.best(thetas[again])
+    scores[keep], at[keep], _ = coarse.best(thetas[keep])
     return scores, at
+
+
+def blocks(wall: np.ndarray, free: np.ndarray, origin: np.ndarray, k: int
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pooled layers (wall, free, origin) merged by blocks of ``k × k`` cells: a wall where
+    any cell is, free where more than half are and none is a wall (the layers' own rule, on
+    cells rather than the grid's: a cheap ranking level, not evidence)."""
+    h, w = -(-wall.shape[0] // k) * k, -(-wall.shape[1] // k) * k
+    out = []
+    for layer in (wall, free):
+        padded = np.zeros((h, w), dtype=np.int32)
+        padded[: layer.shape[0], : layer.shape[1]] = layer
+        out.append(padded.reshape(h // k, k, w // k, k).sum(axis=(1, 3)))
+    return out[0] > 0, (2 * out[1] > k * k) & (out[0] == 0), origin
 
 
 def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
@@ -365,13 +383,14 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
 
     Large grids (either with more than :data:`LARGE_POOLED_CELLS` known-box cells at
     ``resolution``, when ``coarse_factor > 1``) take a coarse-to-fine path, since the FFTs of
-    every rotation over the whole map dominate their cost: every rotation is first scored at
-    twice the coarse cell and only the :data:`PYRAMID_TOP` best are swept at the coarse cell;
-    at ``resolution``, the picked rotations are scored on the whole map as above, the others
-    of the angle grids only within :data:`PYRAMID_REACH` coarse cells of a picked alignment
-    (turned about B's centre). Contract: smaller grids (every grid of the environment) give
-    exactly the full sweep's result; on large grids, a rotation's best alignment can be missed
-    where the coarser sweep ranks it below the rest."""
+    every rotation over the whole map dominate their cost: every rotation is first scored on
+    the coarse layers merged by 2 × 2 blocks, and only the :data:`PYRAMID_TOP` best are swept
+    at the coarse cell; at ``resolution``, the picked
+    rotations are scored on the whole map as above, the others of the angle grids only within
+    :data:`PYRAMID_REACH` coarse cells of a picked alignment (turned about B's centre), and the
+    refinement moves at most :data:`MAX_LARGE_ICP_POINTS` wall cells. Contract: smaller grids
+    (every grid of the environment) give exactly the full sweep's result; on large grids, a
+    rotation's best alignment can be missed where the coarser sweeps rank it below the rest."""
     check_grid_inputs(grid_a, grid_b, config)
     t0 = time.perf_counter()
     # each grid read once however many resolutions the search looks at
@@ -410,7 +429,8 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     sweep = coarse or fine
     large = coarse is not None and max(wall_a.size, wall_b.size) > LARGE_POOLED_CELLS
     if large:
-        c_scores, c_at = _pyramid_sweep(grid_a, grid_b, coarse, thetas, centre, radius, cfg)
+        c_scores, c_at = _pyramid_sweep(coarse_a, coarse_b, coarse, thetas, centre, radius,
+                                        cfg)
     else:
         c_scores, c_at, _ = sweep.best(thetas)
     c_alignments: dict[int, Rigid2D] = {}  # of the rotations looked at
@@ -471,7 +491,10 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
             rival, rival_t = float(sc), other
 
     # sub-cell refinement on wall points, gated to the wall band; then on the grids' own cells
-    estimate = icp_refined(cell_centres(wall_a, origin_a, res), pts_wall, estimate, res, 1.5 * res,
+    moved = pts_wall  # on large maps, a regular subsample
+    if large and len(pts_wall) > MAX_LARGE_ICP_POINTS:
+        moved = pts_wall[:: int(math.ceil(len(pts_wall) / MAX_LARGE_ICP_POINTS))]
+    estimate = icp_refined(cell_centres(wall_a, origin_a, res), moved, estimate, res, 1.5 * res,
                         centre, cfg)
     if cfg.native_refine:
         estimate = local_search(grid_a, grid_b, estimate, centre, radius, cfg)

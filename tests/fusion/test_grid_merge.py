@@ -601,3 +601,43 @@ def test_layer_cache_gives_the_grids_own_layers_and_merge():
     t, tc = refine_with_grids(grid_a, grid_b, r.transform), refine_with_grids(cache_a, cache_b,
                                                                              r.transform)
     assert t.theta == tc.theta and np.array_equal(t.T, tc.T)
+
+
+@pytest.mark.parametrize("deg", [37.0, 251.0])
+def test_the_large_map_path_recovers_the_transform(deg, monkeypatch):
+    """Grids above LARGE_POOLED_CELLS (lowered here) take the pyramid sweep and windowed
+    refinement: the same alignment as the full sweep, accepted; the symmetric room stays a
+    tie."""
+    import fusion.grid_merge as GM
+
+    a, b, truth = overlapping_views(deg, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
+    full = merge_grids(a, b)
+    monkeypatch.setattr(GM, "LARGE_POOLED_CELLS", 1000)
+    res = merge_grids(a, b)
+    assert res.accepted, res.reason
+    assert math.degrees(res.transform.rotation_error(truth)) < 1.0
+    assert res.transform.translation_error(truth, at=np.zeros(2)) < 0.15
+    assert math.degrees(res.transform.rotation_error(full.transform)) < 0.2
+    s = np.zeros((120, 120), np.int8)
+    s[18:102, 28:92] = 2
+    s[20:100, 30:90] = 1
+    g = GridSnapshot(s, RES, (0.0, 0.0))
+    tie = merge_grids(g, g)
+    assert tie.margin == pytest.approx(1.0, abs=0.01) and not tie.accepted
+
+
+def test_blocks_merge_pooled_cells_by_the_layers_rule():
+    """fusion.grid_merge.blocks: a wall where any cell of the block is, free where most are
+    and none is a wall, the partial blocks at the far edges padded with unknown cells."""
+    from fusion.grid_merge import blocks
+
+    wall = np.zeros((5, 3), bool)
+    free = np.zeros((5, 3), bool)
+    wall[0, 0] = True
+    free[0:2, 1] = True
+    free[2:4, 0:2] = True
+    free[4, 2] = True
+    wb, fb, origin = blocks(wall, free, np.array([1.0, 2.0]), 2)
+    np.testing.assert_array_equal(wb, [[True, False], [False, False], [False, False]])
+    np.testing.assert_array_equal(fb, [[False, False], [True, False], [False, False]])
+    np.testing.assert_array_equal(origin, [1.0, 2.0])
