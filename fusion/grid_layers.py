@@ -81,9 +81,11 @@ class LayerCache:
     recompute. A snapshot: ``grid`` must not change while the cache is in use.
 
     Attributes:
-        states: ``grid``'s ``(H, W)`` cell-state codes (read-only).
+        states: ``grid``'s ``(H, W)`` cell-state codes (read once: ``states()`` called, or
+            the ``states`` array itself, not copied).
         resolution: its cell size (m).
         origin: the lower-left corner of its cell ``(0, 0)``.
+        memo: other modules' results of the grid, by name (e.g. ``"native_walls"``).
     """
 
     def __init__(self, grid: Any) -> None:
@@ -92,7 +94,7 @@ class LayerCache:
         self.origin = np.asarray(grid.origin, dtype=np.float64)
         self._box: tuple | None = None
         self._pooled: dict[float, tuple | None] = {}
-        self.memo: dict[str, Any] = {}  # results of other modules' functions of the grid
+        self.memo: dict[str, Any] = {}
 
     @classmethod
     def of(cls, grid: Any) -> LayerCache:
