@@ -46,11 +46,11 @@ from fusion.rigid import Rigid2D
 from topo.grid import CellState
 from topo.validation import check_int, check_real
 
-STATE_TO_PIXEL = np.zeros(max(int(s) for s in CellState) + 1, dtype=np.uint8)
-"""Pixel value of each :class:`topo.CellState` code: m-explore's view of a ROS grid."""
-STATE_TO_PIXEL[int(CellState.UNKNOWN)] = 255
-STATE_TO_PIXEL[int(CellState.FREE)] = 0
-STATE_TO_PIXEL[int(CellState.OCCUPIED)] = 100
+_ROS_VALUE = {CellState.UNKNOWN: 255, CellState.FREE: 0, CellState.OCCUPIED: 100}
+STATE_TO_PIXEL = np.array([_ROS_VALUE[s] for s in sorted(CellState)], dtype=np.uint8)
+"""Pixel value of each :class:`topo.CellState` code (read-only): a ROS grid's ``int8`` value
+(unknown −1, free 0, occupied 100) read as ``uint8``, m-explore's view of the grid."""
+STATE_TO_PIXEL.setflags(write=False)
 
 MATCH_CONF = 0.3
 """``AffineBestOf2NearestMatcher``'s ``match_conf``: the ratio test keeps ``d1 < (1 − 0.3) d2``."""

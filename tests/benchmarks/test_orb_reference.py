@@ -102,6 +102,14 @@ def test_a_lower_threshold_accepts_what_the_default_refuses(depot):
     assert low.accepted and low.confidence == r.confidence
 
 
+def test_grid_images_are_ros_values_read_as_uint8():
+    """Unknown −1 → 255, free 0 → 0, occupied 100 → 100; row 0 stays the bottom row."""
+    states = np.array([[0, 1, 2], [2, 2, 0]], dtype=np.int8)
+    image = _orb.grid_image(InputMap("m", "", states, 0.05, (0.0, 0.0)))
+    assert image.dtype == np.uint8
+    assert image.tolist() == [[255, 0, 100], [100, 100, 255]]
+
+
 def test_blank_images_give_no_transform():
     blank = np.full((64, 64), 255, dtype=np.uint8)
     r = _orb.orb_merge(blank, blank)
