@@ -104,6 +104,8 @@ class OrbRigid:
         confidence: m-explore's confidence (:class:`OrbResult`).
         accepted: whether m-explore would merge the maps.
         scale: scale of the pixel transform (1 for a perfect estimate; ``nan`` without one).
+            m-explore does not look at it: a RANSAC model that shrinks many matches of one
+            map onto a few pixels of the other can pass its confidence rule.
         pixel: the :class:`OrbResult` on the maps' images.
         seconds: wall time of the call (images, resampling and :func:`orb_merge`).
     """
