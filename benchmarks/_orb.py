@@ -15,8 +15,9 @@ here (:func:`orb_merge`):
 3. pairwise matching (``AffineBestOf2NearestMatcher(false, false, 0.3, 6)``, its ``CpuMatcher``):
    2-nearest neighbours both ways, a match kept when its distance is below ``1 − 0.3`` times the
    second's, the B→A matches not already found A→B appended. OpenCV searches with a FLANN LSH
-   index (approximate, seeded from the C library's ``rand``: its matches change from call to
-   call); here a brute-force Hamming search finds the exact neighbours, so runs repeat.
+   index (approximate, with random hash tables: ``cv2.detail``'s matcher gives different
+   matches from call to call on one pair); here a brute-force Hamming search finds the exact
+   neighbours, so runs repeat.
 4. fewer than 6 matches: no transform, confidence 0. Otherwise ``estimateAffinePartial2D`` (A's
    points → B's, RANSAC with OpenCV's defaults: 3 px, 2000 iterations, 0.99, 10 refinement
    iterations) and the confidence ``inliers / (8 + 0.3 · matches)`` (Brown and Lowe's rule).
