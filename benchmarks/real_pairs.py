@@ -38,9 +38,9 @@ How (every step deterministic in ``--seed``):
   ``[x, y, theta]`` maps B's map frame into A's (``p_A = R(theta) p_B + (x, y)``, i.e.
   ``T_A ∘ T_B⁻¹``) and the overlap is the share of B's known cells that land on known cells of A
   under it. Kept: up to ``--per-building`` pairs with overlap ≥ ``MIN_OVERLAP``, spread over
-  their overlap range, up to ``--disjoint`` pairs with overlap < ``MAX_DISJOINT`` (what a merge
-  must reject), and ``--cross`` pairs per split of segments from two different buildings (truth
-  ``null``, overlap 0, ``building`` ``"<a>+<b>"``).
+  their overlap range, up to ``--disjoint`` pairs with overlap < ``MAX_DISJOINT`` and
+  ``MAX_DISJOINT_M2`` (what a merge must reject), and ``--cross`` pairs per split of segments
+  from two different buildings (truth ``null``, overlap 0, ``building`` ``"<a>+<b>"``).
 
 Splits by building, fixed here: :data:`TEST_BUILDINGS` are ``test`` (held out), the others
 ``dev``. Output: ``<out>/<building>/seg_NN.yaml`` + ``.pgm`` and ``<out>/manifest.json``
@@ -94,6 +94,8 @@ OCCUPIED_SHARE = 0.25
 grazed by the beams that pass beside it stays a wall, a person walking by does not."""
 MIN_OVERLAP = 0.10
 MAX_DISJOINT = 0.01
+MAX_DISJOINT_M2 = 1.0
+"""A pair is disjoint (a merge must reject it) below both: less than 1 % and 1 m² shared."""
 MIN_RANGE = 0.05
 """Shorter readings are the sensor's error codes (0): dropped."""
 
@@ -329,7 +331,7 @@ def _building(name: str, args: argparse.Namespace, index: int) -> tuple[list, li
                "overlap": round(share, 4), "overlap_m2": round(area, 2)}
         if share >= MIN_OVERLAP:
             overlapping.append(row)
-        elif share < MAX_DISJOINT:
+        elif share < MAX_DISJOINT and area < MAX_DISJOINT_M2:
             disjoint.append(row)
     kept = list(_spread(overlapping, lambda r: r["overlap"], args.per_building))
     if disjoint:
@@ -344,14 +346,21 @@ def _building(name: str, args: argparse.Namespace, index: int) -> tuple[list, li
 
 def _cross(files: dict[str, list[str]], split: str, count: int,
            rng: np.random.Generator) -> list[dict]:
-    """``count`` pairs of segments of two different buildings of ``split``."""
+    """``count`` pairs (each once) of segments of two different buildings of ``split``."""
     names = sorted(n for n in files if ("test" if n in TEST_BUILDINGS else "dev") == split)
-    rows = []
-    for k in range(count if len(names) > 1 else 0):
+    rows: list[dict] = []
+    seen: set[frozenset[str]] = set()
+    for _ in range(100 * count if len(names) > 1 else 0):
+        if len(rows) == count:
+            break
         na, nb = (names[i] for i in rng.choice(len(names), size=2, replace=False))
         fa, fb = files[na][rng.integers(len(files[na]))], files[nb][rng.integers(len(files[nb]))]
-        rows.append({"id": f"cross_{split}_{k:02d}", "building": f"{na}+{nb}", "split": split,
-                     "a": fa, "b": fb, "truth": None, "overlap": 0.0, "overlap_m2": 0.0})
+        if frozenset((fa, fb)) in seen:
+            continue
+        seen.add(frozenset((fa, fb)))
+        rows.append({"id": f"cross_{split}_{len(rows):02d}", "building": f"{na}+{nb}",
+                     "split": split, "a": fa, "b": fb, "truth": None, "overlap": 0.0,
+                     "overlap_m2": 0.0})
     return rows
 
 

@@ -176,3 +176,19 @@ def test_main_writes_the_manifest(tmp_path):
     rp.main(["--logs", str(logs), "--out", str(again), "--buildings", "intel", "aces",
              "--segment-m", "4.5", "--cross", "2"])
     assert (again / "manifest.json").read_text() == (out / "manifest.json").read_text()
+
+
+def test_show_draws_a_pair_and_bad_options_are_named(tmp_path, capsys):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "seattle-corrected.log").write_text(_log())
+    out = tmp_path / "set"
+    rp.main(["--logs", str(logs), "--out", str(out), "--buildings", "seattle",
+             "--segment-m", "4.5"])
+    rp.main(["--out", str(out), "--show", "seattle_00_01"])
+    assert (out / "seattle_00_01.png").stat().st_size > 0
+    for argv, message in ((["--out", str(out), "--show", "nope"], "--show nope: no such pair"),
+                          (["--logs", str(logs), "--segment-m", "0"], "--segment-m 0.0: must be")):
+        with pytest.raises(SystemExit):
+            rp.main(argv)
+        assert message in capsys.readouterr().err
