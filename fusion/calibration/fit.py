@@ -44,7 +44,13 @@ MODEL_FEATURES = BASE_FEATURES + DRIFT_FEATURES
 """The evidence the ``"grid"`` model weighs. How the features were chosen (the cross-validated
 scores of the candidates tried): ``docs/notes/fusion.md`` and ``docs/notes/drift.md``."""
 
-MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES}
+REAL_FEATURES = BASE_FEATURES
+"""The evidence the ``"grid_real"`` model weighs (:data:`fusion.decision.REAL_MAP_MODEL`: the
+grid alignment's confidence on real sensor maps, fitted on the rows of
+``benchmarks/real_maps.py``); no drift terms, a real map's drift is in its cells already."""
+
+MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES,
+          "grid_real": REAL_FEATURES}
 """The features of each calibrated model."""
 
 THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
@@ -199,7 +205,7 @@ class Fit:
 def fit_model(name: str, rows: Sequence[dict], *, l2: float = L2,
               extend: Calibrator | None = None, min_overlap_m2: float = 0.0,
               script: str = "python -m fusion.calibration fit") -> Fit:
-    """Fit the calibrated model ``name`` (``"grid"`` or ``"structural"``) on ``rows``: repeats
+    """Fit the calibrated model ``name`` (a key of :data:`MODELS`) on ``rows``: repeats
     left out, cross-validated, the threshold chosen, then fitted on all rows — or, with
     ``extend`` (``"grid"`` only: the stored model's :func:`noise_free_base`), only the drift
     terms fitted on top of it.
@@ -213,7 +219,7 @@ def fit_model(name: str, rows: Sequence[dict], *, l2: float = L2,
     if extend is not None and name != "grid":
         raise ValueError(f"extend extends the grid model only, got name={name!r}")
     names = MODELS[name]
-    unique = unique_rows(rows, "log_score" if name == "grid" else "score")
+    unique = unique_rows(rows, "log_score" if name.startswith("grid") else "score")
     p = (cross_validated_extension(unique, extend, l2) if extend is not None
          else cross_validated(unique, l2, names))
     X, y = matrix(unique, names)
