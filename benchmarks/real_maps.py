@@ -3,7 +3,7 @@ often it is accepted, how often it is accepted wrongly, on a ``topomerge.real_pa
 (``benchmarks/real_pairs.py`` makes one from public laser logs).
 
     python benchmarks/real_maps.py --pairs data/real_pairs/manifest.json [--methods grid,orb]
-        [--split dev|test|all] [--out results/real_maps]
+        [--split dev|test|all] [--out data/real_maps]
 
 Methods:
 
@@ -147,7 +147,7 @@ def run_grid(pair: dict, a: InputMap, b: InputMap) -> dict:
     row = judged(pair, b, map_frames(a, b, r.transform))
     row.update(accepted=bool(r.accepted), confidence=float(r.confidence), seconds=r.time_s,
                features=r.features(), margin=float(min(r.margin, 1e9)),
-               overlap_est_m2=float(r.overlap_m2), reason=r.reason)
+               overlap_m2=float(r.overlap_m2), reason=r.reason)
     return row
 
 
@@ -215,7 +215,7 @@ def evaluate(pairs: Sequence[dict], methods: Sequence[str], out: Path) -> dict[s
             row = runners[m](pair, a, b)
             rows[m].append({"id": pair["id"], "building": pair["building"],
                             "split": pair["split"], "method": m, "overlap": pair["overlap"],
-                            "overlap_m2": pair["overlap_m2"],
+                            "true_overlap_m2": pair["overlap_m2"],
                             "no_truth": pair["truth"] is None,
                             # the calibration's row keys (fusion.calibration.rows)
                             "set": f"real_pairs_{pair['split']}", "pair": pair["id"],
@@ -237,7 +237,7 @@ def rejudged(rows: Sequence[dict], model: str, threshold: float) -> list[dict]:
     out = []
     for r in rows:
         conf = rule.tie_capped(calibrator(r["features"]), r["margin"])
-        ok = r["estimate"] is not None and rule.grid(conf, r["overlap_est_m2"], r["margin"],
+        ok = r["estimate"] is not None and rule.grid(conf, r["overlap_m2"], r["margin"],
                                                      0.0, 0.0) is None
         out.append({**r, "confidence": conf, "accepted": ok})
     return out
@@ -249,10 +249,11 @@ def summary(rows: Sequence[dict], gate_m2: float = 0.0) -> dict[str, float]:
     n = len(rows)
     right = np.array([r["right"] for r in rows], dtype=bool)
     acc = np.array([r["accepted"] for r in rows], dtype=bool)
-    should = np.array([not r["no_truth"] and r["overlap_m2"] >= SHOULD_MERGE_M2 for r in rows])
+    should = np.array([not r["no_truth"] and r["true_overlap_m2"] >= SHOULD_MERGE_M2
+                       for r in rows])
     none = np.array([r["no_truth"] or r["overlap"] == 0 for r in rows], dtype=bool)
     conf = np.array([r["confidence"] for r in rows])
-    gated = np.array([r.get("overlap_est_m2", math.inf) >= gate_m2 for r in rows])
+    gated = np.array([r.get("overlap_m2", math.inf) >= gate_m2 for r in rows])
     best = 0.0
     for th in np.unique(conf):
         a = (conf >= th) & gated
@@ -304,7 +305,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--methods", default="grid",
                         help=f"comma-separated, of {', '.join(METHODS)}")
     parser.add_argument("--split", choices=("dev", "test", "all"), default="dev")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "real_maps",
+    parser.add_argument("--out", type=Path, default=ROOT / "data" / "real_maps",
                         help="folder of the rows (<method>.jsonl) and table.md")
     args = parser.parse_args(argv)
     methods = [m for m in args.methods.split(",") if m]
