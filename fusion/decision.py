@@ -23,7 +23,9 @@ structural merge it runs first) and the env. The structural merge called alone, 
 to check it, has its own default, :data:`STRUCTURAL_ACCEPT_THRESHOLD`: its calibrated
 confidence is a different model, fitted and thresholded on its own (``python -m
 fusion.calibration fit --model structural`` prints the threshold rule's choice), and the
-fusion evaluation's results for ``merge_maps`` are made at it.
+fusion evaluation's results for ``merge_maps`` are made at it. The map-merge tool on real sensor
+maps uses its own grid model, :data:`REAL_MAP_MODEL`, at the threshold stored with it
+(:func:`model_threshold`); the env keeps ``"grid"`` at :data:`DEFAULT_ACCEPT_THRESHOLD`.
 """
 
 from __future__ import annotations

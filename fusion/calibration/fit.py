@@ -142,10 +142,10 @@ def recalibrated(base: Calibrator, X: np.ndarray, y: np.ndarray, *, l2: float = 
                  meta: Mapping[str, Any] | None = None) -> Calibrator:
     """``base`` with its log-odds ``z`` replaced by ``a·z + c``, ``a`` and ``c`` fitted to the
     0/1 labels ``y`` of the rows of ``X`` (columns ``base.names``) by a logistic fit of ``z``
-    (Platt scaling). Why: a few hundred real map pairs of a dozen buildings do not refit every
-    evidence weight (held out by building, such a fit ranks worse than the grid model's
-    weights, fitted on thousands of env pairs); the weights carry over, the confidence's scale
-    does not. The result is a :class:`fusion.calibration.Calibrator` of ``base``'s features,
+    (Platt scaling). Why: a small set of real map pairs from a few buildings does not pin down
+    every evidence weight, while the grid model's weights, fitted on many env pairs, may carry
+    over to real maps when the confidence's scale does not (``benchmarks/RESULTS.md`` compares
+    the two). The result is a :class:`fusion.calibration.Calibrator` of ``base``'s features,
     standardisation and clipping, its weights scaled by ``a`` (a monotone map of ``base``'s
     confidence while ``a > 0``), ``meta`` with ``scale`` ``a`` and ``shift`` ``c``.
 
