@@ -23,7 +23,9 @@ structural merge it runs first) and the env. The structural merge called alone, 
 to check it, has its own default, :data:`STRUCTURAL_ACCEPT_THRESHOLD`: its calibrated
 confidence is a different model, fitted and thresholded on its own (``python -m
 fusion.calibration fit --model structural`` prints the threshold rule's choice), and the
-fusion evaluation's results for ``merge_maps`` are made at it.
+fusion evaluation's results for ``merge_maps`` are made at it. The map-merge tool on real sensor
+maps uses its own grid model, :data:`REAL_MAP_MODEL`, at the threshold stored with it
+(:func:`model_threshold`); the env keeps ``"grid"`` at :data:`DEFAULT_ACCEPT_THRESHOLD`.
 """
 
 from __future__ import annotations
@@ -48,6 +50,30 @@ STRUCTURAL_ACCEPT_THRESHOLD = 0.8
 (:func:`fusion.merge_maps`), whose confidence model is fitted and thresholded on its own
 (``--model structural``); kept above the threshold rule's choice when that one sits at the
 limit, for pairs unlike the tuning ones (``docs/notes/fusion.md``)."""
+
+REAL_MAP_MODEL = "grid_real"
+"""The grid alignment's confidence model for real sensor maps (separate scans of a building:
+the map-merge tool's default, :mod:`fusion.mapmerge`), fitted on real laser-log map pairs
+(``python -m fusion.calibration fit --model grid_real``) apart from the env's ``"grid"``,
+whose model and :data:`DEFAULT_ACCEPT_THRESHOLD` the env keeps. Its threshold is the one the
+threshold rule chose when it was fitted, stored with it (:func:`model_threshold`)."""
+
+
+def model_threshold(name: str) -> float:
+    """The accept threshold stored with the calibrated model ``name`` (its ``meta``'s
+    ``accept_threshold``: the threshold rule's choice when it was fitted). Why stored: a fitted
+    number is data, and the model and its threshold are refitted together.
+
+    Raises:
+        ValueError: no such model (the table's models are named), or it stores no threshold.
+    """
+    from fusion.calibration import load_model
+
+    model = load_model(name)
+    if "accept_threshold" not in model.meta:
+        raise ValueError(f"calibration model {name!r} stores no accept_threshold in its meta")
+    return float(model.meta["accept_threshold"])
+
 
 TEAM_ACCEPT_THRESHOLD = 0.97
 """Default :attr:`MergeRule.team_accept_threshold` (the env's
@@ -318,5 +344,5 @@ def pair_verdict(accepted: bool, transform: Rigid2D, confidence: float,
 
 
 __all__ = ["CYCLE_TOLERANCE_DEG", "CYCLE_TOLERANCE_M", "DEFAULT_ACCEPT_THRESHOLD", "DEFAULT_RULE",
-           "STRUCTURAL_ACCEPT_THRESHOLD", "TEAM_ACCEPT_THRESHOLD", "MergeRule",
-           "clearly_different", "pair_verdict"]
+           "REAL_MAP_MODEL", "STRUCTURAL_ACCEPT_THRESHOLD", "TEAM_ACCEPT_THRESHOLD", "MergeRule",
+           "clearly_different", "model_threshold", "pair_verdict"]

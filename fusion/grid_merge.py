@@ -124,7 +124,12 @@ class GridMergeConfig:
     perfect odometry) — evidence of the confidence model, which the grids alone cannot give:
     drift bends both maps, and how far an alignment of bent maps is from the robots' current
     frames depends on the drift, not on how well the walls fit (``docs/notes/drift.md``);
-    above 0, :func:`fusion.hybrid.hybrid_merge` also asks the grids about a structural merge."""
+    above 0, :func:`fusion.hybrid.hybrid_merge` also asks the grids about a structural merge.
+    ``confidence_model``: the calibrated model of :mod:`fusion.calibration` the confidence is
+    computed by (``"grid"``: fitted on the env's maps, with the default ``accept_threshold``;
+    :data:`fusion.decision.REAL_MAP_MODEL` for real sensor maps, with its own threshold,
+    :func:`fusion.decision.model_threshold`); a name the table lacks is a ``ValueError``
+    naming those it has."""
 
     resolution: float = 0.2
     step_deg: float = 3.0
@@ -141,10 +146,15 @@ class GridMergeConfig:
     native_refine: bool = True
     drop_margin: float = DEFAULT_DROP_MARGIN
     drift_prior: float = 0.0
+    confidence_model: str = "grid"
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            if f.name == "native_refine":
+            if f.name == "confidence_model":
+                if not isinstance(self.confidence_model, str) or not self.confidence_model:
+                    raise TypeError(f"GridMergeConfig.confidence_model must be a model name "
+                                    f"(str), got {self.confidence_model!r}")
+            elif f.name == "native_refine":
                 if not isinstance(self.native_refine, bool):
                     raise TypeError(f"GridMergeConfig.native_refine must be a bool, got "
                                     f"{type(self.native_refine).__name__}")
@@ -513,7 +523,7 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                              ev.free_conflict, ev.wall_hits, rival_agreement,
                              native_agreement, native_conflict, cfg.drift_prior)
     rule = MergeRule.of(cfg)
-    confidence = rule.tie_capped(grid_calibrator()(features), margin)
+    confidence = rule.tie_capped(grid_calibrator(cfg.confidence_model)(features), margin)
     why = rule.grid(confidence, ev.overlap_m2, margin, ev.wall_agreement, ev.conflict)
     return GridMergeResult(estimate, why is None, score, ev.overlap_m2, ev.wall_agreement,
                            ev.conflict, margin, time.perf_counter() - t0, why,
@@ -522,11 +532,12 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
                            native_agreement, native_conflict, cfg.drift_prior)
 
 
-def grid_calibrator() -> Any:
-    """The stored ``"grid"`` model of :mod:`fusion.calibration` (features :data:`FEATURES`)."""
+def grid_calibrator(name: str = "grid") -> Any:
+    """The stored model ``name`` of :mod:`fusion.calibration` (``"grid"`` unless
+    :attr:`GridMergeConfig.confidence_model` names another; features of :data:`FEATURES`)."""
     from fusion.calibration import load_model
 
-    return load_model("grid")
+    return load_model(name)
 
 
 __all__ = ["FEATURES", "GridAgreement", "GridMergeConfig", "GridMergeResult", "check_with_grids",

@@ -17,7 +17,9 @@ Inputs (:func:`load_input`):
 
 Every map is cropped to its known cells and resampled to the merge resolution (the first
 map's, or ``--out-resolution``). Every pair is aligned by :func:`fusion.grid_merge.merge_grids`
-(its calibrated confidence and accept rule); the accepted pairs are assembled by
+(its calibrated confidence and accept rule: by default the confidence model fitted on real
+sensor maps and its threshold, ``--confidence-model real``, :data:`CONFIDENCE_MODELS`; ``sim``
+is the env's); the accepted pairs are assembled by
 :func:`fusion.team.consistent_edges` (look-alike merges broken by the cycle check left out) and
 :func:`fusion.team.frames_from`; the largest consistent group is merged into the frame of its
 first map and every other map is listed as not merged, with why.
@@ -49,7 +51,7 @@ import networkx as nx
 import numpy as np
 from scipy import ndimage
 
-from fusion.decision import MergeRule
+from fusion.decision import REAL_MAP_MODEL, MergeRule, model_threshold
 from fusion.grid_layers import LayerCache, pooled_layers
 from fusion.grid_merge import GridMergeConfig, GridMergeResult, merge_grids
 from fusion.rigid import Rigid2D
@@ -83,6 +85,11 @@ PALETTE = np.array([(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40)
                     (148, 103, 189), (140, 86, 75), (227, 119, 194), (127, 127, 127),
                     (188, 189, 34), (23, 190, 207)], dtype=np.float64)
 """Colour of each input map's walls in ``merged.png`` (repeats after ten maps)."""
+
+CONFIDENCE_MODELS = {"real": REAL_MAP_MODEL, "sim": "grid"}
+"""``--confidence-model`` → the calibrated model the pairs' confidence is computed by: ``real``
+(the default) fitted on real sensor-map pairs, ``sim`` the env's (fitted on its simulated
+maps); each with its own accept threshold (:func:`tool_config`)."""
 
 _UNKNOWN, _FREE, _OCC = int(CellState.UNKNOWN), int(CellState.FREE), int(CellState.OCCUPIED)
 
@@ -473,18 +480,39 @@ def write_outputs(team: TeamMerge, out: Path, *, write_unmerged: bool = False,
     return written
 
 
+def tool_config(confidence_model: str = "real") -> GridMergeConfig:
+    """The pairwise alignment's settings of the tool: the defaults, with the confidence model
+    ``confidence_model`` names (:data:`CONFIDENCE_MODELS`) and its threshold
+    (:func:`fusion.decision.model_threshold`; the env's own default for ``sim``).
+
+    Raises:
+        ValueError: ``confidence_model`` not a key of :data:`CONFIDENCE_MODELS`.
+    """
+    if confidence_model not in CONFIDENCE_MODELS:
+        raise ValueError(f"confidence_model must be one of {sorted(CONFIDENCE_MODELS)}, got "
+                         f"{confidence_model!r}")
+    if confidence_model == "sim":
+        return GridMergeConfig()
+    name = CONFIDENCE_MODELS[confidence_model]
+    return GridMergeConfig(confidence_model=name, accept_threshold=model_threshold(name))
+
+
 def merge_files(specs: Sequence[str], out: str | Path, *, resolution: float | None = None,
                 out_resolution: float | None = None, plain: str = "ros",
                 write_unmerged: bool = False,
-                config: GridMergeConfig | None = None) -> TeamMerge:
+                config: GridMergeConfig | None = None,
+                confidence_model: str = "real") -> TeamMerge:
     """Load the maps of ``specs`` (:func:`load_input`), resample them to ``out_resolution``
-    (default: the first map's), merge them (:func:`merge_maps_n`) and write the outputs into
-    ``out`` (:func:`write_outputs`).
+    (default: the first map's), merge them (:func:`merge_maps_n`; with ``config``, else
+    :func:`tool_config` of ``confidence_model``) and write the outputs into ``out``
+    (:func:`write_outputs`).
 
     Raises:
         MapFileError: a file that is not a usable map (named).
-        ValueError: fewer than two maps, or a bad ``resolution``/``out_resolution``.
+        ValueError: fewer than two maps, a bad ``resolution``/``out_resolution`` or
+            ``confidence_model``.
     """
+    config = config or tool_config(confidence_model)
     if resolution is not None:
         check_real(resolution, "--resolution", low=0.0)
     maps = [m for s in specs for m in load_input(s, resolution, plain)]
@@ -513,6 +541,9 @@ def parser(prog: str = "python -m fusion merge") -> argparse.ArgumentParser:
     p.add_argument("--plain", choices=("ros", "dungeon"), default="ros",
                    help="how plain images are read: map_server's default thresholds (ros) "
                    "or grey > 150 free, darker occupied (dungeon)")
+    p.add_argument("--confidence-model", choices=sorted(CONFIDENCE_MODELS), default="real",
+                   help="the pairs' calibrated confidence and its accept threshold: fitted on "
+                   "real sensor maps (real, the default) or on the simulator's (sim)")
     p.add_argument("--write-unmerged", action="store_true",
                    help="write merged.yaml/.pgm/.png even when no two maps merged")
     return p
@@ -527,7 +558,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m fusion merge"
     try:
         team = merge_files(args.maps, args.out, resolution=args.resolution,
                            out_resolution=args.out_resolution, plain=args.plain,
-                           write_unmerged=args.write_unmerged)
+                           write_unmerged=args.write_unmerged,
+                           confidence_model=args.confidence_model)
     except (MapFileError, ValueError, TypeError, OSError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -541,6 +573,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m fusion merge"
     return EXIT_MERGED if team.all_merged else EXIT_NOT_MERGED
 
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_MERGED", "EXIT_NOT_MERGED", "InputMap", "Placement",
-           "TeamMerge", "load_input", "main", "merge_files", "merge_maps_n", "merged_plan",
-           "parser", "picture", "rasterise", "resampled", "write_outputs"]
+__all__ = ["CONFIDENCE_MODELS", "EXIT_BAD_INPUT", "EXIT_MERGED", "EXIT_NOT_MERGED", "InputMap",
+           "Placement", "TeamMerge", "load_input", "main", "merge_files", "merge_maps_n",
+           "merged_plan", "parser", "picture", "rasterise", "resampled", "tool_config",
+           "write_outputs"]

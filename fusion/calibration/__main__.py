@@ -3,6 +3,8 @@
     python -m fusion.calibration fit --model grid|structural|ranking [--pairs DIR ...]
         [--data data/env_pairs] [--drift] [--extend] [--synthetic N] [--cache FILE]
         [--write] [--table FILE] [--plot PNG] [--held-out DIR ...]
+    python -m fusion.calibration fit --model grid_real --rows FILE [FILE ...] [--split dev]
+        [--free] [--write]
 
 Run it from the repository root after ``benchmarks/env_pairs.py`` has made the tuning pairs
 (``make calibrate`` chains both), whenever what the models read changes: the topological map
@@ -13,6 +15,12 @@ extraction, the occupancy grids, the structural search or the grid alignment's e
 ``--model structural`` the structural merge's confidence (it reads the score: refit it after
 the ranking); ``--model grid`` the grid alignment's confidence (``--extend``: keep the stored
 noise-free weights and fit only the drift terms, with ``--drift`` adding the drift-aware sets).
+``--model grid_real`` the grid alignment's confidence on real sensor maps
+(:data:`fusion.decision.REAL_MAP_MODEL`: the stored grid model recalibrated,
+:func:`fusion.calibration.fit.recalibrated`) from the rows ``benchmarks/real_maps.py`` wrote
+(``--rows``: JSON lines or a JSON list, any rows of the ``"grid"`` features; ``--split``
+keeps those of one split; env rows from ``--cache`` may be added to fit both together),
+cross-validated leaving one building out (``--free``: its weights fitted freely instead).
 Each prints the cross-validated calibration, the threshold table and the threshold rule's
 choice; ``--write`` stores the model (with the date, commit and data) in
 ``fusion/calibration.json`` (or ``--table``). ``--cache`` keeps the rows (a JSON file, read
@@ -63,6 +71,14 @@ def parser() -> argparse.ArgumentParser:
                      help="synthetic tuning pairs per noise level (structural, ranking)")
     fit.add_argument("--cache", type=Path, default=None,
                      help="JSON file of the rows (read if it exists, else written)")
+    fit.add_argument("--rows", type=Path, nargs="*", default=(),
+                     help="rows files (JSON lines or a JSON list) to fit on, besides --cache "
+                          "(grid_real: benchmarks/real_maps.py's OUT/grid.jsonl)")
+    fit.add_argument("--split", default=None,
+                     help="keep only the --rows whose 'split' is this (e.g. dev)")
+    fit.add_argument("--free", action="store_true",
+                     help="grid_real: fit its weights freely on the rows (a comparison: by "
+                          "default the grid model is recalibrated)")
     fit.add_argument("--l2", type=float, default=L2, help="ridge penalty")
     fit.add_argument("--extend", action="store_true",
                      help="grid: keep the stored model's noise-free weights and fit only the "
@@ -80,6 +96,20 @@ def parser() -> argparse.ArgumentParser:
     return out
 
 
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a JSON list or JSON-lines file.
+
+    Raises:
+        ValueError: a missing file (named).
+    """
+    if not path.is_file():
+        raise ValueError(f"--rows: {path} not found")
+    text = path.read_text()
+    if text.lstrip().startswith("["):
+        return json.loads(text)
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     cli = parser()
@@ -88,10 +118,21 @@ def main(argv: list[str] | None = None) -> int:
         cli.error("--extend extends the grid model only")
     if args.held_out and args.model != "grid":
         cli.error("--held-out reports the grid model only")
+    if args.free and args.model != "grid_real":
+        cli.error("--free refits grid_real only")
+    if args.model == "grid_real" and not args.rows:
+        cli.error("--model grid_real fits on --rows (benchmarks/real_maps.py's grid.jsonl)")
     dirs = list(args.pairs or default_dirs(args.data))
     if args.drift:
         dirs += default_dirs(args.data / "drift")
-    if args.cache is not None and args.cache.exists():
+    try:
+        extra = [r for path in args.rows for r in read_rows(path)
+                 if args.split is None or r.get("split") == args.split]
+    except ValueError as exc:
+        cli.error(str(exc))
+    if args.model == "grid_real":
+        rows = json.loads(args.cache.read_text()) if args.cache is not None else []
+    elif args.cache is not None and args.cache.exists():
         rows = json.loads(args.cache.read_text())
     else:
         if not dirs and (args.model == "grid" or not args.synthetic):
@@ -102,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(rows)} rows in {time.perf_counter() - t0:.0f} s")
         if args.cache is not None:
             atomic_write_json(args.cache, rows)
+    rows = rows + extra
     if args.model == "ranking":
         from fusion.structural import CONFIDENCE_WEIGHTS
 
@@ -114,9 +156,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {write_weights('ranking', weights, args.table, meta)}")
         return 0
     base = noise_free_base(load_model("grid")) if args.extend else None
-    min_overlap = DEFAULT_RULE.min_overlap_m2 if args.model == "grid" else 0.0
+    # grid_real rescales the grid model the table holds now (fit.recalibrated)
+    scaled = load_model("grid") if args.model == "grid_real" and not args.free else None
+    min_overlap = DEFAULT_RULE.min_overlap_m2 if args.model.startswith("grid") else 0.0
+    script = f"{SCRIPT} --model {args.model}" + "".join(f" --rows {p}" for p in args.rows) + (
+        f" --split {args.split}" if args.split else "") + (" --free" if args.free else "")
     fit = fit_model(args.model, rows, l2=args.l2, extend=base, min_overlap_m2=min_overlap,
-                    script=f"{SCRIPT} --model {args.model}")
+                    script=script, recalibrate=scaled)
     print_fit(args.model, fit)
     if args.plot is not None:
         _, y = matrix(fit.rows, fit.model.names)

@@ -44,8 +44,13 @@ MODEL_FEATURES = BASE_FEATURES + DRIFT_FEATURES
 """The evidence the ``"grid"`` model weighs. How the features were chosen (the cross-validated
 scores of the candidates tried): ``docs/notes/fusion.md`` and ``docs/notes/drift.md``."""
 
-MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES}
-"""The features of each calibrated model."""
+MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES,
+          "grid_real": MODEL_FEATURES}
+"""The features of each calibrated model. ``"grid_real"`` (:data:`fusion.decision.
+REAL_MAP_MODEL`, the grid alignment's confidence on real sensor maps) is the ``"grid"`` model
+recalibrated on real map pairs (:func:`recalibrated`, :func:`fit_model`): its features and
+their weighting are the grid model's, at most the scale and shift of its log-odds are fitted
+on the real rows, and its accept threshold is chosen on them."""
 
 THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 """The accept thresholds the rule chooses from."""
@@ -133,6 +138,46 @@ def cross_validated_extension(rows: Sequence[dict], base: Calibrator,
     return p
 
 
+def recalibrated(base: Calibrator, X: np.ndarray, y: np.ndarray, *, l2: float = L2,
+                 meta: Mapping[str, Any] | None = None) -> Calibrator:
+    """``base`` with its log-odds ``z`` replaced by ``a·z + c``, ``a`` and ``c`` fitted to the
+    0/1 labels ``y`` of the rows of ``X`` (columns ``base.names``) by a logistic fit of ``z``
+    (Platt scaling). Why: a small set of real map pairs from a few buildings does not pin down
+    every evidence weight, while the grid model's weights, fitted on many env pairs, may carry
+    over to real maps when the confidence's scale does not (``benchmarks/RESULTS.md`` compares
+    the two). The result is a :class:`fusion.calibration.Calibrator` of ``base``'s features,
+    standardisation and clipping, its weights scaled by ``a`` (a monotone map of ``base``'s
+    confidence while ``a > 0``), ``meta`` with ``scale`` ``a`` and ``shift`` ``c``.
+
+    Raises:
+        ValueError: as :func:`fusion.calibration.fit_logistic` (one class only, bad shapes).
+    """
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != len(base.names):
+        raise ValueError(f"X must have shape (N, {len(base.names)}) (base.names), got {X.shape}")
+    z = np.array([[base.log_odds(dict(zip(base.names, row, strict=True)))]
+                  for row in X.tolist()])
+    platt = fit_logistic(z, y, ("log_odds",), l2=l2)
+    a = platt.coef[0] / platt.scale[0]
+    c = platt.intercept - a * platt.mean[0]
+    return Calibrator(base.names, base.mean, base.scale, base.low, base.high,
+                      tuple(a * w for w in base.coef), a * base.intercept + c,
+                      {**(meta or {}), "scale": round(a, 6), "shift": round(c, 6)})
+
+
+def cross_validated_recalibration(rows: Sequence[dict], base: Calibrator,
+                                  l2: float = L2) -> np.ndarray:
+    """Leave-one-world-out predictions of ``base`` :func:`recalibrated` (real map rows: one
+    building held out at a time)."""
+    X, y = matrix(rows, base.names)
+    groups = np.array([world_group(r) for r in rows])
+    p = np.zeros(len(rows))
+    for g in np.unique(groups):
+        test = groups == g
+        p[test] = recalibrated(base, X[~test], y[~test], l2=l2).predict(X[test])
+    return p
+
+
 def accepted_mask(rows: Sequence[dict], p: np.ndarray, threshold: float,
                   min_overlap_m2: float) -> np.ndarray:
     """Which alignments the merge accepts at ``threshold`` given confidences ``p``: past its
@@ -198,24 +243,47 @@ class Fit:
 
 def fit_model(name: str, rows: Sequence[dict], *, l2: float = L2,
               extend: Calibrator | None = None, min_overlap_m2: float = 0.0,
-              script: str = "python -m fusion.calibration fit") -> Fit:
-    """Fit the calibrated model ``name`` (``"grid"`` or ``"structural"``) on ``rows``: repeats
+              script: str = "python -m fusion.calibration fit",
+              recalibrate: Calibrator | None = None) -> Fit:
+    """Fit the calibrated model ``name`` (a key of :data:`MODELS`) on ``rows``: repeats
     left out, cross-validated, the threshold chosen, then fitted on all rows — or, with
     ``extend`` (``"grid"`` only: the stored model's :func:`noise_free_base`), only the drift
-    terms fitted on top of it.
+    terms fitted on top of it; with ``recalibrate`` (``"grid_real"``: the stored ``"grid"``
+    model), that model :func:`recalibrated` — or kept as it is (scale 1, shift 0; the
+    threshold still chosen on ``rows``) when its own predictions score a Brier score no worse
+    than the rescaled model's held-out ones (both in ``meta``): a rescale that does not
+    predict held-out buildings better is fitting their differences.
 
     Raises:
-        ValueError: an unknown ``name``; ``extend`` for a model other than ``"grid"``; rows
-            of one class only (as :func:`fusion.calibration.fit_logistic`).
+        ValueError: an unknown ``name``; ``extend`` for a model other than ``"grid"``,
+            ``recalibrate`` for one other than ``"grid_real"`` or of other features; rows of
+            one class only (as :func:`fusion.calibration.fit_logistic`).
     """
     if name not in MODELS:
         raise ValueError(f"name must be one of {list(MODELS)}, got {name!r}")
     if extend is not None and name != "grid":
         raise ValueError(f"extend extends the grid model only, got name={name!r}")
+    if recalibrate is not None and (name != "grid_real"
+                                    or tuple(recalibrate.names) != MODELS[name]):
+        raise ValueError(f"recalibrate rescales the grid model for grid_real only, got "
+                         f"name={name!r}, features {list(recalibrate.names)}")
     names = MODELS[name]
-    unique = unique_rows(rows, "log_score" if name == "grid" else "score")
-    p = (cross_validated_extension(unique, extend, l2) if extend is not None
-         else cross_validated(unique, l2, names))
+    unique = unique_rows(rows, "log_score" if name.startswith("grid") else "score")
+    kept = False
+    if recalibrate is not None:
+        p = cross_validated_recalibration(unique, recalibrate, l2)
+        Xb, yb = matrix(unique, names)
+        unscaled = recalibrate.predict(Xb)
+        scores = {"held_out_brier_rescaled": round(brier_score(p, yb), 4),
+                  "brier_unchanged": round(brier_score(unscaled, yb), 4)}
+        # rescale only where it predicts held-out buildings better than the model as it is
+        kept = scores["brier_unchanged"] <= scores["held_out_brier_rescaled"]
+        if kept:
+            p = unscaled
+    elif extend is not None:
+        p = cross_validated_extension(unique, extend, l2)
+    else:
+        p = cross_validated(unique, l2, names)
     X, y = matrix(unique, names)
     table = threshold_table(unique, p, min_overlap_m2)
     chosen = choose_threshold(table)
@@ -223,7 +291,18 @@ def fit_model(name: str, rows: Sequence[dict], *, l2: float = L2,
             "data": sorted({r["set"] for r in unique}), "alignments": len(unique),
             "right": int(y.sum()), "l2": l2, "cv_brier": round(brier_score(p, y), 4),
             "accept_threshold": chosen, "script": script}
-    if extend is not None:
+    if recalibrate is not None:
+        meta.update(scores, recalibrates={k: recalibrate.meta.get(k)
+                                          for k in ("fitted", "commit", "data")},
+                    note=("the grid model as it is (scale 1, shift 0): rescaling its log-odds "
+                          "did not predict held-out buildings better" if kept else
+                          "the grid model's log-odds z rescaled to scale * z + shift on real "
+                          "map pairs (Platt scaling); its evidence weights kept"))
+        model = (Calibrator(recalibrate.names, recalibrate.mean, recalibrate.scale,
+                            recalibrate.low, recalibrate.high, recalibrate.coef,
+                            recalibrate.intercept, {**meta, "scale": 1.0, "shift": 0.0})
+                 if kept else recalibrated(recalibrate, X, y, l2=l2, meta=meta))
+    elif extend is not None:
         meta.update(extends={k: extend.meta.get(k) for k in ("fitted", "commit", "data")},
                     note="noise-free weights kept; the drift terms fitted on top")
         model = extend_logistic(extend, X, y, DRIFT_FEATURES, l2=l2, meta=meta)

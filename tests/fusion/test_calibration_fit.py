@@ -175,7 +175,8 @@ def test_fit_refuses_what_it_cannot_do(tmp_path):
         main(["fit", "--model", "structural", "--extend"])
     with pytest.raises(SystemExit):
         main(["fit", "--model", "grid", "--data", str(tmp_path)])  # no pairs there
-    with pytest.raises(ValueError, match=r"name must be one of \['grid', 'structural'\], got "
+    with pytest.raises(ValueError, match=r"name must be one of \['grid', 'structural', "
+                                         r"'grid_real'\], got "
                                          r"'ranking'"):
         cf.fit_model("ranking", [])
     with pytest.raises(ValueError, match=r"weights must be finite"):
