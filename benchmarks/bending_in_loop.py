@@ -1,9 +1,10 @@
-"""Maps that bend (issue 41, first slice): two robots merging through the pose graph
+"""Maps that bend (issue 41): two robots merging through the pose graph
 (``mapping.pose_graph=True``) under drifting odometry, against the rigid merges (off).
 
     python benchmarks/bending_in_loop.py [--worlds 5] [--first-seed 100] [--size 20]
         [--steps 3000] [--explorer frontier] [--odometry-alphas pioneer3dx]
-        [--odometry-noise S] [--settings on off]
+        [--odometry-noise S] [--settings on off] [--oracle [--oracle-at-last]]
+        [--anchor-every N] [--window-anchors W] [--window-searches K]
 
 For each seed (from 100: worlds the method was not developed on) one episode per setting,
 a scripted team (``agents.registry``), ``robot.odometry_model="rot_trans_rot"`` with the
@@ -14,7 +15,11 @@ drift-aware truth at the robots' current places (``envs.explore.drift.drift_awar
 Per episode: the first merged step, the first right step, merged steps, right and wrong
 shares of them, the mean step time (seconds), and at the end
 ``merge_state().bending`` (the fused map's anchor ATE and wall share beside robot 0's own
-uncorrected map, links kept and how many of them are wrong at their own anchors). The summary
+uncorrected map, links kept and how many of them are wrong at their own anchors). With
+``--oracle`` every window alignment is replaced by the truth wherever the two windows' true
+anchor positions come within ``ORACLE_MEET_M`` (and nothing elsewhere): the ceiling of any
+window aligner with these anchors, windows and searches (``--oracle-at-last``: the links at
+the windows' newest anchors instead of their middle ones). The summary
 gives, per setting, the episodes merged, the median first right step (never: ``steps + 1``),
 the pooled right share of merged steps, median ATE and wall share, and the mean step time.
 """
@@ -25,22 +30,52 @@ import argparse
 import statistics
 import time
 
+import numpy as np
 import torch
 
 from agents.base import run_episode
 from agents.registry import EXPLORERS, make_team
 from envs import two_robot_explore_v0
 from envs.explore.drift import drift_aware_error
+from envs.explore.graph_merging import LINK_SIGMAS, GraphMerging, LinkRecord
+from fusion import Rigid2D
 
 RIGHT_DEG, RIGHT_M = 5.0, 0.5
 WRONG_DEG, WRONG_M = 5.0, 1.0
+ORACLE_MEET_M = 3.0
+ORACLE_AT_LAST = False
+
+
+def oracle_align(self, i: int, ei: int, j: int, ej: int) -> bool:
+    """``GraphMerging._align`` with the truth for an aligner (``--oracle``): the windows'
+    middle anchors' true relative pose, whenever the two windows' true anchor positions come
+    within :data:`ORACLE_MEET_M`; no link otherwise."""
+    w = self.config.window_anchors
+    ti = np.array(self.submaps[i].truths[ei - w + 1:ei + 1])[:, :2]
+    tj = np.array(self.submaps[j].truths[ej - w + 1:ej + 1])[:, :2]
+    self.searches += 1
+    if np.min(np.linalg.norm(ti[:, None] - tj[None], axis=2)) > ORACLE_MEET_M:
+        return False
+    half = 0 if ORACLE_AT_LAST else w // 2
+    a, b = ei - half, ej - half
+    ta, tb = (Rigid2D(float(p[2]), (float(p[0]), float(p[1])))
+              for p in (self.submaps[i].truths[a], self.submaps[j].truths[b]))
+    relative = ta.inverse() @ tb
+    if i == j:
+        taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, 1.0)
+    else:
+        self.graph.add_link((i, a), (j, b), relative, LINK_SIGMAS, 1.0)
+        taken = True
+    self.records.append(LinkRecord(i, a, j, b, relative, 1.0, taken))
+    return taken
 
 
 def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
-            pose_graph: bool) -> dict:
+            pose_graph: bool, mapping: dict | None = None) -> dict:
     """One episode's row (module docstring)."""
     env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
-                                            mapping={"pose_graph": pose_graph}, robot=robot)
+                                            mapping={"pose_graph": pose_graph, **(mapping or {})},
+                                            robot=robot)
     row = {"seed": seed, "graph": pose_graph, "first": None, "first_right": None,
            "merged": 0, "right": 0, "wrong": 0}
 
@@ -85,7 +120,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--odometry-noise", type=float, default=None,
                         help="use the increment model at (S, S) instead of the alphas")
     parser.add_argument("--settings", nargs="+", choices=("on", "off"), default=["on", "off"])
+    parser.add_argument("--oracle", action="store_true",
+                        help="window alignments from the truth (the ceiling of any aligner)")
+    parser.add_argument("--oracle-at-last", action="store_true",
+                        help="oracle links at the windows' newest anchors, not their middle")
+    parser.add_argument("--window-searches", type=int, default=None)
+    parser.add_argument("--window-anchors", type=int, default=None)
+    parser.add_argument("--anchor-every", type=int, default=None)
     args = parser.parse_args(argv)
+    if args.oracle:
+        GraphMerging._align = oracle_align
+    if args.oracle_at_last:
+        global ORACLE_AT_LAST
+        ORACLE_AT_LAST = True
+    mapping = {k: v for k, v in (("window_searches", args.window_searches),
+                                 ("window_anchors", args.window_anchors),
+                                 ("anchor_every", args.anchor_every)) if v is not None}
     torch.set_num_threads(1)
     if args.odometry_noise is not None:
         robot = {"odometry_noise": (args.odometry_noise, args.odometry_noise)}
@@ -98,7 +148,8 @@ def main(argv: list[str] | None = None) -> None:
     print(" | ".join(keys), flush=True)
     for seed in range(args.first_seed, args.first_seed + args.worlds):
         for setting in args.settings:
-            row = episode(seed, args.explorer, args.steps, args.size, robot, setting == "on")
+            row = episode(seed, args.explorer, args.steps, args.size, robot, setting == "on",
+                          mapping)
             rows.append(row)
             print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
     print()

@@ -5,15 +5,19 @@ Each robot's map is a chain of anchors with their patches (:mod:`envs.explore.su
 team :class:`fusion.PoseGraph`. On every merge step (``mapping.merge_every``) at most
 ``mapping.window_searches`` window alignments are tried, the team together: a **window** is
 ``mapping.window_anchors`` consecutive closed anchors rebuilt as one grid from their own
-scans, near-rigid even when the whole map is bent. A robot's newest window is aligned with
-``fusion.grid_merge.merge_grids`` (no drift prior: a window has not drifted) against
+scans, near-rigid even when the whole map is bent. A robot's newest window is aligned against
 
 * the windows of a teammate it is in contact with — an accepted alignment ``T`` (window
   ``j``'s odometry frame → window ``i``'s) becomes the link ``X_a⁻¹ · T · X_b`` between the
-  windows' middle anchors ``a`` and ``b``; before the pair is joined every window is a
-  candidate (newest first), after it only windows whose estimate lies near;
+  windows' middle anchors ``a`` and ``b``. Before the pair is joined every window is a
+  candidate (newest first), searched globally by ``fusion.grid_merge.merge_grids`` (no drift
+  prior: a window has not drifted); after it, only windows whose estimate lies near, searched
+  only near that estimate (``fusion.local_align.align_near``, :data:`NEAR_DEG`,
+  :data:`NEAR_REACH_M`): a global search is drawn to look-alikes the estimate already rules
+  out;
 * its own older windows that do not overlap it and lie near in the current estimate — a loop
-  closure (``PoseGraph.add_loop``, kept only if the odometry can explain it).
+  closure, searched near the estimate too (``PoseGraph.add_loop``: kept only if the odometry
+  can explain it).
 
 The pose graph keeps each pair's pairwise-consistent links (at least two), optimises each
 component of robots, and a robot's **fused map** is its component's patches composed at
@@ -36,6 +40,7 @@ from envs.explore.config import MappingConfig, RobotConfig
 from envs.explore.mapping import RobotMap
 from envs.explore.submaps import RobotSubmaps, ScanSettings, compose
 from fusion.grid_merge import GridMergeConfig, merge_grids
+from fusion.local_align import align_near
 from fusion.posegraph import PoseGraph
 from fusion.rigid import Rigid2D
 
@@ -43,6 +48,10 @@ LINK_SIGMAS = (0.15, 0.15, math.radians(3.0))
 """Standard deviations ``(x, y, θ)`` (m, m, rad) of a window alignment at the windows' middle
 anchors: the grid alignment's "right" is within 2° and 0.3 m, and a window still bends by a
 few degrees inside."""
+
+NEAR_DEG, NEAR_REACH_M = 3.0, 0.5
+"""A known pair's window alignment (a joined pair, a loop closure) is searched only this close
+(degrees, metres) to the graph's estimate (``fusion.local_align.align_near``)."""
 
 NEAR_M = 8.0
 """A window is searched against another (after a pair is joined, or for a loop closure) only
@@ -180,19 +189,33 @@ class GraphMerging:
                 first, end, self.submaps[r].geometry.resolution, self.scan)
         return self._windows[key]
 
+    def _predicted(self, i: int, a: int, j: int, b: int) -> Rigid2D:
+        """The current estimate of robot ``j``'s odometry frame at anchor ``b`` → robot
+        ``i``'s at anchor ``a`` (the transform between their windows' grids)."""
+        ci = self.graph.corrections(i, frame=i)[a]
+        cj = self.graph.corrections(j, frame=i)[b]
+        return ci.inverse() @ cj
+
     def _align(self, i: int, ei: int, j: int, ej: int) -> bool:
         grid_a, grid_b = self._window(i, ei), self._window(j, ej)
         if grid_a is None or grid_b is None:
             return False
         self.searches += 1
-        result = merge_grids(grid_a, grid_b, self._grid_cfg)
-        if not result.accepted:
-            return False
         half = self.config.window_anchors // 2
         a, b = ei - half, ej - half
+        if i == j or j in self.graph.component(i):  # known: search near the estimate
+            transform = align_near(grid_a, grid_b, self._predicted(i, a, j, b), self._grid_cfg,
+                                   max_deg=NEAR_DEG, reach_m=NEAR_REACH_M)
+            if transform is None:
+                return False
+            confidence = 1.0
+        else:
+            result = merge_grids(grid_a, grid_b, self._grid_cfg)
+            if not result.accepted:
+                return False
+            transform, confidence = result.transform, float(result.confidence)
         xa, xb = self.submaps[i].poses[a], self.submaps[j].poses[b]
-        relative = xa.inverse() @ result.transform @ xb
-        confidence = float(result.confidence)
+        relative = xa.inverse() @ transform @ xb
         if i == j:
             taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, confidence)
         else:

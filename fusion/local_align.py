@@ -1,0 +1,105 @@
+"""Aligning two occupancy grids near a known estimate: a local correlative search.
+
+Once a pose graph knows roughly where two local maps lie (two windows of a robot's own map
+that revisit a place, or a teammate's window after the pair is joined), a global search of
+every rotation and translation (:func:`fusion.grid_merge.merge_grids`) is both wasteful and
+drawn to look-alikes far away. :func:`align_near` searches only near the estimate — B's wall
+cells scored on A's wall likelihood field (a Gaussian of the distance to A's nearest wall
+cell, as in correlative scan matching, Olson 2009) over a small box of rotations and
+translations — then refines the best pose on the walls and keeps it only if the grids agree
+with it (:func:`fusion.grid_merge.check_with_grids`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from fusion.grid_layers import OCCUPIED, cell_states
+from fusion.grid_merge import GridMergeConfig, check_with_grids, refine_with_grids
+from fusion.grid_refine import native_walls
+from fusion.inputs import check_grid_inputs
+from fusion.rigid import Rigid2D
+from topo.validation import check_real
+
+MAX_TRANSLATIONS = 2000
+"""Translations scored per rotation at most (the search box's area in grid A's cells): what
+keeps a call's memory and time bounded."""
+MAX_WALL_POINTS = 1500
+"""B's wall cells scored at most (a regular subsample beyond): the search's cost is linear in
+them and a few hundred already pin a pose."""
+
+
+def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
+               config: GridMergeConfig | None = None, *, max_deg: float = 3.0,
+               step_deg: float = 1.0, reach_m: float = 0.5) -> Rigid2D | None:
+    """Grid B's alignment onto grid A (B → A) within ``max_deg`` degrees and ``reach_m``
+    metres of ``estimate`` (rotations about B's wall centroid in ``step_deg`` steps,
+    translations on A's cells), refined on the walls; ``None`` when either grid has fewer
+    than 10 wall cells or the grids do not agree with the best pose (too little overlap, B's
+    walls off A's walls or in A's free space: ``config``'s gates).
+
+    Args:
+        grid_a, grid_b: occupancy grids (``topo.OccupancyGrid`` or anything
+            :func:`fusion.grid_merge.merge_grids` takes).
+        estimate: the transform to search near (B's frame → A's).
+        config: the gates and refinement settings (:class:`fusion.grid_merge.GridMergeConfig`).
+        max_deg, step_deg, reach_m: the search box (``max_deg`` and ``reach_m`` ≥ 0,
+            ``step_deg`` > 0; at most :data:`MAX_TRANSLATIONS` translations).
+
+    Raises:
+        TypeError, ValueError: malformed grids or config (as ``merge_grids``), ``estimate``
+            not a :class:`fusion.Rigid2D`, a search box out of those bounds.
+    """
+    check_grid_inputs(grid_a, grid_b, config)
+    if not isinstance(estimate, Rigid2D):
+        raise TypeError(f"estimate must be a fusion.Rigid2D, got {type(estimate).__name__}")
+    max_deg = check_real(max_deg, "max_deg", low=0.0, low_inclusive=True, high=180.0)
+    step_deg = check_real(step_deg, "step_deg", low=0.0, high=180.0)
+    reach_m = check_real(reach_m, "reach_m", low=0.0, low_inclusive=True)
+    cfg = config or GridMergeConfig()
+    walls_a, res = native_walls(grid_a)
+    side = 2 * int(reach_m / res + 1e-9) + 1
+    if side * side > MAX_TRANSLATIONS:
+        raise ValueError(f"reach_m={reach_m} gives {side * side} translations a rotation on "
+                         f"grid_a's {res} m cells (at most {MAX_TRANSLATIONS}): search a "
+                         f"smaller box")
+    walls_b, _ = native_walls(grid_b)
+    if len(walls_a) < 10 or len(walls_b) < 10:
+        return None
+    if len(walls_b) > MAX_WALL_POINTS:
+        walls_b = walls_b[:: math.ceil(len(walls_b) / MAX_WALL_POINTS)]
+    field = _likelihood_field(grid_a)
+    origin = np.asarray(grid_a.origin, dtype=np.float64)
+    offsets = np.arange(-reach_m, reach_m + 1e-9, res)
+    ox, oy = (v.ravel() for v in np.meshgrid(offsets, offsets))
+    centre = walls_b.mean(axis=0)
+    anchor = estimate.apply(centre[None])[0]  # where the estimate puts B's wall centroid
+    turns = np.radians(np.arange(-max_deg, max_deg + 1e-9, step_deg))
+    scores = np.empty((len(turns), len(ox)))
+    for k, turn in enumerate(turns):
+        moved = Rigid2D(estimate.theta + turn).apply(walls_b - centre) + anchor
+        cols = (moved[:, 0] - origin[0]) / res - 0.5
+        rows = (moved[:, 1] - origin[1]) / res - 0.5
+        at = [(rows[None, :] + (oy / res)[:, None]).ravel(),
+              (cols[None, :] + (ox / res)[:, None]).ravel()]
+        scores[k] = ndimage.map_coordinates(field, at, order=0, mode="constant",
+                                            cval=0.0).reshape(len(ox), -1).mean(axis=1)
+    k, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    theta = estimate.theta + float(turns[k])
+    t = anchor + np.array([ox[j], oy[j]]) - Rigid2D(theta).R @ centre
+    best = refine_with_grids(grid_a, grid_b, Rigid2D(theta, (float(t[0]), float(t[1]))), cfg)
+    return best if check_with_grids(grid_a, grid_b, best, cfg) is None else None
+
+
+def _likelihood_field(grid: Any) -> np.ndarray:
+    """``exp(−d² / 2σ²)`` of each cell's distance ``d`` (in cells) to ``grid``'s nearest wall
+    cell (σ = 1.5 cells): how well a wall point landing there agrees."""
+    dist = ndimage.distance_transform_edt(cell_states(grid) != OCCUPIED)
+    return np.exp(-0.5 * (dist / 1.5) ** 2)
+
+
+__all__ = ["MAX_TRANSLATIONS", "MAX_WALL_POINTS", "align_near"]
