@@ -158,6 +158,7 @@ class PoseGraph:
         self._links: dict[tuple[int, int], list[Measurement]] = {}
         self._kept: dict[tuple[int, int], list[Measurement]] = {}
         self._dropped: set[int] = set()  # ids of links the optimum refused
+        self._agreement: dict[tuple[int, int], float] = {}  # PCM's χ² of two links, by id
         self._estimate: dict[Anchor, Rigid2D] = {}  # in the component's reference frame
         self._dirty = True
 
@@ -268,6 +269,25 @@ class PoseGraph:
         return [to_frame @ self._estimate[(robot, k)]
                 for k in range(len(self._chains[robot].poses))]
 
+    def correction(self, robot: int, index: int, frame: int | None = None) -> Rigid2D:
+        """:meth:`corrections`' entry for anchor ``index`` of ``robot`` alone (what reading
+        one anchor costs, not all of them).
+
+        Raises:
+            ValueError: ``index`` is not an anchor of ``robot`` (negative counts from the
+                newest); ``frame`` as :meth:`corrected_poses`."""
+        poses = self._chains[self._robot(robot, "robot")].poses
+        k = check_int(index, "index", low=-len(poses))
+        if k >= len(poses):
+            raise ValueError(f"index must be < {len(poses)} (robot {robot}'s anchors), got {k}")
+        frame = robot if frame is None else self._robot(frame, "frame")
+        self.optimise()
+        if frame not in self.component(robot):
+            raise ValueError(f"robot {frame} is not in robot {robot}'s component "
+                             f"{sorted(self.component(robot))}")
+        k %= len(poses)
+        return self._pin(frame).inverse() @ self._estimate[(robot, k)] @ poses[k].inverse()
+
     def corrections(self, robot: int, frame: int | None = None) -> list[Rigid2D]:
         """Per anchor of ``robot``, the motion taking what the robot mapped near that anchor
         (in its odometry frame) into ``frame``'s map: ``P_k · X_k⁻¹`` with ``P_k`` the
@@ -334,7 +354,10 @@ class PoseGraph:
         bound = self.config.chi2_bound
         for u in range(len(links)):
             for v in range(u + 1, len(links)):
-                if self._agree(links[u], links[v]) <= bound:
+                key = (id(links[u]), id(links[v]))
+                if key not in self._agreement:  # links and chains never change: once is enough
+                    self._agreement[key] = self._agree(links[u], links[v])
+                if self._agreement[key] <= bound:
                     graph.add_edge(u, v)
         best = max(nx.find_cliques(graph),
                    key=lambda c: (len(c), sum(links[k].confidence for k in c), -min(c)))

@@ -192,9 +192,7 @@ class GraphMerging:
     def _predicted(self, i: int, a: int, j: int, b: int) -> Rigid2D:
         """The current estimate of robot ``j``'s odometry frame at anchor ``b`` → robot
         ``i``'s at anchor ``a`` (the transform between their windows' grids)."""
-        ci = self.graph.corrections(i, frame=i)[a]
-        cj = self.graph.corrections(j, frame=i)[b]
-        return ci.inverse() @ cj
+        return self.graph.correction(i, a).inverse() @ self.graph.correction(j, b, frame=i)
 
     def _align(self, i: int, ei: int, j: int, ej: int) -> bool:
         grid_a, grid_b = self._window(i, ei), self._window(j, ej)
@@ -242,10 +240,10 @@ class GraphMerging:
     def frames(self, r: int) -> dict[int, tuple[Rigid2D, Rigid2D]]:
         """``{j: (to_r, from_r)}`` for each robot ``j`` of ``r``'s component: robot ``j``'s
         odometry frame → robot ``r``'s, right at the two robots' newest anchors."""
-        own = self.graph.corrections(r, frame=r)[-1].inverse()
+        own = self.graph.correction(r, -1).inverse()
         out = {}
         for j in sorted(self.graph.component(r)):
-            to_r = own @ self.graph.corrections(j, frame=r)[-1]
+            to_r = own @ self.graph.correction(j, -1, frame=r)
             out[j] = (to_r, to_r.inverse())
         return out
 

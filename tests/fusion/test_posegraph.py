@@ -224,3 +224,16 @@ def test_ate_is_zero_for_a_moved_copy_and_checks_shapes():
     assert ate_rms(pts, moved) < 1e-9
     with pytest.raises(ValueError, match=r"same number \(≥ 1\) of rows, got 20 and 19"):
         ate_rms(pts, moved[:19])
+
+
+def test_one_correction_is_the_list_entry():
+    graph, _ = two_robots()
+    for r in (0, 1):
+        full = graph.corrections(r, frame=0)
+        for k in (0, len(full) - 1, -1):
+            got, want = graph.correction(r, k, frame=0), full[k]
+            assert (got.theta, *got.T) == (want.theta, *want.T)  # the same numbers, bit for bit
+    with pytest.raises(ValueError, match="index must be <"):
+        graph.correction(0, 10_000)
+    with pytest.raises(TypeError, match="index must be an integer"):
+        graph.correction(0, 1.5)
