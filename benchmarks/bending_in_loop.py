@@ -9,8 +9,10 @@
 For each seed (from 100: worlds the method was not developed on) one episode per setting,
 a scripted team (``agents.registry``), ``robot.odometry_model="rot_trans_rot"`` with the
 given alphas (or ``--odometry-noise S``: the ``"increment"`` model at ``(S, S)``; ``0``:
-perfect). Every step with a teammate in robot 0's fused map is checked against the
-drift-aware truth at the robots' current places (``envs.explore.drift.drift_aware_error``);
+perfect); ``--robots N`` (> 2): ``multi_robot_explore_v0``. Every step with a teammate in
+robot 0's fused map is checked by the env's infos (``merge_rotation_error_deg``,
+``merge_translation_error_m``: the worst teammate, against the drift-aware truth at the
+robots' current places, ``envs.explore.drift.drift_aware_error``);
 **right** is within 5° and 0.5 m (the issue's target), **wrong** more than 5° or 1 m off.
 Per episode: the first merged step, the first right step, merged steps, right and wrong
 shares of them, the mean step time (seconds), and at the end
@@ -35,8 +37,7 @@ import torch
 
 from agents.base import run_episode
 from agents.registry import EXPLORERS, make_team
-from envs import two_robot_explore_v0
-from envs.explore.drift import drift_aware_error
+from envs import multi_robot_explore_v0, two_robot_explore_v0
 from envs.explore.graph_merging import LINK_SIGMAS, GraphMerging, LinkRecord
 from fusion import Rigid2D
 
@@ -71,21 +72,22 @@ def oracle_align(self, i: int, ei: int, j: int, ej: int) -> bool:
 
 
 def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
-            pose_graph: bool, mapping: dict | None = None) -> dict:
+            pose_graph: bool, mapping: dict | None = None, robots: int = 2) -> dict:
     """One episode's row (module docstring)."""
-    env = two_robot_explore_v0.parallel_env(max_cycles=steps, world={"size": (size, size)},
-                                            mapping={"pose_graph": pose_graph, **(mapping or {})},
-                                            robot=robot)
+    kwargs = dict(max_cycles=steps, world={"size": (size, size)},
+                  mapping={"pose_graph": pose_graph, **(mapping or {})}, robot=robot)
+    env = (two_robot_explore_v0.parallel_env(**kwargs) if robots == 2
+           else multi_robot_explore_v0.parallel_env(n_robots=robots, **kwargs))
     row = {"seed": seed, "graph": pose_graph, "first": None, "first_right": None,
            "merged": 0, "right": 0, "wrong": 0}
 
-    def watch(k, _obs, _rewards, _infos):
-        t = env.shared.transform
-        if t is None:
+    def watch(k, _obs, _rewards, infos):
+        info = infos.get("robot_0")
+        if not info or not info["merge_errors_valid"]:
             return
         row["merged"] += 1
         row["first"] = row["first"] or k
-        rot, trans = drift_aware_error(t, env.robots[0], env.robots[1])
+        rot, trans = info["merge_rotation_error_deg"], info["merge_translation_error_m"]
         if rot <= RIGHT_DEG and trans <= RIGHT_M:
             row["right"] += 1
             row["first_right"] = row["first_right"] or k
@@ -93,7 +95,7 @@ def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
             row["wrong"] += 1
 
     t0 = time.perf_counter()
-    out = run_episode(env, make_team(explorer), seed=seed, callback=watch)
+    out = run_episode(env, make_team(explorer, env=env), seed=seed, callback=watch)
     row["steps"] = out["steps"]
     row["step_s"] = (time.perf_counter() - t0) / max(out["steps"], 1)
     if pose_graph:
@@ -124,6 +126,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="window alignments from the truth (the ceiling of any aligner)")
     parser.add_argument("--oracle-at-last", action="store_true",
                         help="oracle links at the windows' newest anchors, not their middle")
+    parser.add_argument("--robots", type=int, default=2,
+                        help="team size (more than 2: multi_robot_explore_v0)")
     parser.add_argument("--window-searches", type=int, default=None)
     parser.add_argument("--window-anchors", type=int, default=None)
     parser.add_argument("--anchor-every", type=int, default=None)
@@ -149,7 +153,7 @@ def main(argv: list[str] | None = None) -> None:
     for seed in range(args.first_seed, args.first_seed + args.worlds):
         for setting in args.settings:
             row = episode(seed, args.explorer, args.steps, args.size, robot, setting == "on",
-                          mapping)
+                          mapping, args.robots)
             rows.append(row)
             print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
     print()
