@@ -273,8 +273,9 @@ class EpisodeHooks:
     def _fused_states(self, r: int) -> np.ndarray:
         """Robot ``r``'s fused map now (``fused_map``): ``(H, W)`` int8 cell states on its own
         grid, a new array. With the pose graph its component's patches composed at their
-        corrections (its own grid while nothing is fused into it); else its own map with
-        the teammates it holds moved in by the rigid frames in use (:func:`fused_states`)."""
+        corrections (its own grid while it has no teammate and no loop closure); else its own
+        map with the teammates it holds moved in by the rigid frames in use
+        (:func:`fused_states`)."""
         own = self.maps[r]
         graph = self._graph
         if graph is not None and not graph.trivial(r):
