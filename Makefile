@@ -19,9 +19,10 @@ $(VENV)/.torch:
 $(VENV)/constraints.txt: $(VENV)/.torch
 	echo "$(TORCH)" > $@
 
-# one stamp per set of extras, redone when pyproject.toml changes
+# one stamp per set of extras, redone when pyproject.toml changes; the demo's needs: render
+# (pygame-ce) and slam (GTSAM, a pip wheel: the pose graph of its "Maps that bend" stage)
 $(VENV)/.deps-base: pyproject.toml $(VENV)/constraints.txt
-	$(PIP) install -c $(VENV)/constraints.txt -e ".[render]"
+	$(PIP) install -c $(VENV)/constraints.txt -e ".[render,slam]"
 	touch $@
 
 $(VENV)/.deps-test: pyproject.toml $(VENV)/constraints.txt
@@ -35,7 +36,8 @@ $(VENV)/.deps-bench: pyproject.toml $(VENV)/constraints.txt
 # The main job on the embedded defaults (a few minutes on 2 cores once .venv exists): the
 # paper's example, scripted episodes, a short PPO run with fusion in the loop (on 10 m buildings,
 # the ones it is evaluated on) and its evaluation against scripted explorers, map pairs generated
-# by the trained policy, and the fusion evaluation on them. `topomerge demo` (agents/commands.py)
+# by the trained policy, the fusion evaluation on them, and maps that bend (a drifting pair merged
+# by the pose graph, out/bending.png). `topomerge demo` (agents/commands.py)
 # runs those jobs, sends each one's full output to out/logs/NAME.log and prints a short summary:
 # where every figure and table went.
 DEMO_STEPS ?= 30000

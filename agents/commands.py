@@ -178,6 +178,12 @@ def _fusion_summary(out: Path, log: str) -> list[str]:
                     f"{folder}/"]
 
 
+def _bending_summary(out: Path, log: str) -> list[str]:
+    lines = [m[0].rstrip() for m in _rows(r"^(maps that bend, .*|  (?:robot 0's own map|its "
+                                          r"fused map) .*)$", log)]
+    return lines + [f"figure: {out / 'bending.png'}"]
+
+
 def demo_stages() -> tuple[DemoStage, ...]:
     """The demo's jobs in order (the same as ``make demo``'s)."""
     examples = _source_folder("examples", "demo")
@@ -208,6 +214,9 @@ def demo_stages() -> tuple[DemoStage, ...]:
                       py, "-m", "fusion.evaluation", str(out / "pairs_demo"), "--methods",
                       "hybrid,grid,auto,paper_icp", "--out", str(out / "fusion_demo")],
                   _fusion_summary),
+        DemoStage("bending", "6. Maps that bend: a drifting pair merged by the pose graph",
+                  lambda out, steps: [py, str(examples / "bending.py"), "--out", str(out)],
+                  _bending_summary),
     )
 
 
@@ -215,13 +224,14 @@ def _demo_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="topomerge demo",
         description="Run the demo's jobs (the paper's example, scripted episodes, a short PPO "
-                    "run, map pairs from it, the fusion evaluation), each one's output to "
-                    "OUT/logs/NAME.log, and print a short summary of each.")
+                    "run, map pairs from it, the fusion evaluation, maps that bend), each "
+                    "one's output to OUT/logs/NAME.log, and print a short summary of each.")
     parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (out)")
     parser.add_argument("--steps", type=int, default=DEMO_STEPS,
                         help=f"agent-steps of the PPO run ({DEMO_STEPS})")
     parser.add_argument("--only", default=None,
-                        help="comma-separated stages to run (paper,episode,train,dataset,fusion)")
+                        help="comma-separated stages to run "
+                             "(paper,episode,train,dataset,fusion,bending)")
     return parser
 
 

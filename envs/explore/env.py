@@ -163,8 +163,8 @@ Small, numeric and comparable (no NaN, no wall clock, no live objects). Per robo
 truth, drift-aware with odometry noise; 0.0 when not valid; in a team, the largest over robot
 0's fused teammates. (g) ``MERGE_METHODS[code]`` (0: none) and ``MERGE_SOURCES[code]`` (1
 structural, 2 grid, 3 known), constants of this module; in a team, pair (robot_0, robot_1)'s.
-Maps are read through the env: ``env.unwrapped.robot_map(agent)`` (a read-only snapshot) and
-``env.unwrapped.merge_state()`` (:class:`MergeState`).
+Maps are read through the env: ``env.unwrapped.robot_map(agent)`` and ``fused_map(agent)``
+(read-only snapshots of its own and its fused map) and ``merge_state()`` (:class:`MergeState`).
 
 ## State
 
@@ -242,9 +242,9 @@ radians) places the robots; other keys are ignored with a warning.
   ``n_robots = 2``, ``comm.range = None`` the same episodes as two_robot_explore_v0 but for
   the ``teammates`` layout and the two infos).
 * v0: initial release. (Unreleased changes within v0, dynamics unchanged: small numeric
-  infos, maps read through ``robot_map``/``merge_state``, ``state()``, exact copies by replay,
-  the sonar cast by the env's own ray caster with the same readings; the topological maps
-  re-extracted (places, gateways, dead ends, clearance and frontier flags), so
+  infos, maps read through ``robot_map``/``fused_map``/``merge_state``, ``state()``, exact
+  copies by replay, the sonar cast by the env's own ray caster with the same readings; the
+  topological maps re-extracted (places, gateways, dead ends, clearance and frontier flags), so
   ``graph_nodes`` has 9 features and merges, hence rewards, differ; sonar readings beyond
   ``mapping.usable_range`` no longer draw walls or free space past it, so maps, coverage and
   rewards differ; a pair's first structural merge needs the grids to agree, so some merges
@@ -274,9 +274,7 @@ from envs.explore.global_state import (
     state_scalars,
 )
 from envs.explore.infos import merge_errors
-from envs.explore.mapping import (
-    RobotMapSnapshot,
-)
+from envs.explore.mapping import FusedMapSnapshot, RobotMapSnapshot
 from envs.explore.merging import (
     MERGE_METHODS,
     MERGE_SOURCES,
@@ -308,9 +306,9 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
     """The sonar exploration env for a team of ``n_robots``; the module docstring is its
     manual.
 
-    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`teammate_map`,
-    :meth:`merge_state`; ground truth: :meth:`true_transform`; the global state for
-    centralised critics: :meth:`state`, :attr:`state_space`.
+    Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`fused_map`,
+    :meth:`teammate_map`, :meth:`merge_state`; ground truth: :meth:`true_transform`; the
+    global state for centralised critics: :meth:`state`, :attr:`state_space`.
 
     Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
     every step; read, never modify): ``world``
@@ -440,7 +438,6 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
         if not self._ready:
             raise RuntimeError("call reset() before step(), render() or world")
 
-    # ------------------------------------------------------------------ observations
     # ------------------------------------------------------------------ infos
     def true_transform(self, i: int, j: int) -> Rigid2D:
         """The true transform from robot ``j``'s map frame into robot ``i``'s (their start
@@ -470,6 +467,29 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
         if snap is None:
             snap = RobotMapSnapshot.of(self.maps[i], self.robots[i].odometry, self.steps)
             self._snapshots[i] = snap
+        return snap
+
+    def fused_map(self, agent: str) -> FusedMapSnapshot:
+        """``agent``'s fused map now, in its own odometry frame: a read-only
+        :class:`~envs.explore.mapping.FusedMapSnapshot` (cell states, resolution, origin, the
+        robots it holds, the step) that later steps never change.
+
+        Its own grid with the maps of its fused teammates moved in by the rigid transforms in
+        use (``merge_state().frames``), or with ``mapping.pose_graph`` its component's submaps
+        composed at their corrections (maps that bend). What a robot believes the building is,
+        to plan on or to judge merges by; taken on the first call of a step and shared by
+        that step's later calls, and reading it changes nothing in the env.
+
+        Raises:
+            ValueError: ``agent`` is not one of ``possible_agents``.
+        """
+        self._require_reset()
+        i = self._index(agent, "agent")
+        snap = self._fused_snapshots[i]
+        if snap is None:
+            snap = FusedMapSnapshot.of(self._fused_states(i), self.maps[i].geometry,
+                                       sorted(self._merging.frames[i]), self.steps)
+            self._fused_snapshots[i] = snap
         return snap
 
     def _index(self, agent: str, name: str) -> int:

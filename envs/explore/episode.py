@@ -25,7 +25,14 @@ from envs.explore.global_state import GlobalState, state_space
 from envs.explore.graph_merging import GraphMerging
 from envs.explore.infos import step_infos
 from envs.explore.localize import DriftCorrector
-from envs.explore.mapping import OracleCoverage, RobotMap, RobotMapSnapshot, SharedMap
+from envs.explore.mapping import (
+    FusedMapSnapshot,
+    OracleCoverage,
+    RobotMap,
+    RobotMapSnapshot,
+    SharedMap,
+    fused_states,
+)
 from envs.explore.merging import TeamMerging
 from envs.explore.observations import Observer, observation_space
 from envs.explore.raycast import RayCaster
@@ -76,6 +83,7 @@ class EpisodeHooks:
         self._renderer = None
         self._ready = False
         self._snapshots: list[RobotMapSnapshot | None] = [None] * config.n_robots
+        self._fused_snapshots: list[FusedMapSnapshot | None] = [None] * config.n_robots
         self._history: History | None = None  # how this episode came about (Copies)
 
     def _build_spaces(self) -> None:
@@ -142,6 +150,7 @@ class EpisodeHooks:
         self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0
         self._snapshots = [None] * n
+        self._fused_snapshots = [None] * n
         self._state = GlobalState(world.extent, self.frames[0], self.oracle, self.shared)
         self._shared_delta = 0
         self._own_delta = [0] * n
@@ -261,6 +270,25 @@ class EpisodeHooks:
         self.shared.members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
         self._shared_incremental = trivial
 
+    def _fused_states(self, r: int) -> np.ndarray:
+        """Robot ``r``'s fused map now (``fused_map``): ``(H, W)`` int8 cell states on its own
+        grid, a new array. With the pose graph its component's patches composed at their
+        corrections (its own grid while it has no teammate and no loop closure); else its own
+        map with the teammates it holds moved in by the rigid frames in use
+        (:func:`fused_states`)."""
+        own = self.maps[r]
+        graph = self._graph
+        if graph is not None and not graph.trivial(r):
+            return own.grid.model.classify(graph.fused_log_odds(r, self.maps))
+        out = own.states.copy()
+        if graph is None:
+            fused = fused_states(own, [(self.views.view(r, j), to_r) for j, (to_r, _)
+                                       in sorted(self._merging.frames[r].items()) if j != r])
+            if fused is not None:
+                (rows, cols), states = fused
+                out[rows, cols] = states
+        return out
+
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:
         cfg = self.config
@@ -298,6 +326,7 @@ class EpisodeHooks:
         self.steps += 1
         n = self.n_robots
         self._snapshots = [None] * n
+        self._fused_snapshots = [None] * n
         self._shared_delta = 0
         self._contact(self.steps)
         travelled = [0.0] * n

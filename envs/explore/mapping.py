@@ -31,7 +31,7 @@ from envs.explore._kernels import NO_STATES, sample_image
 from fusion.rigid import Rigid2D
 from topo.extract import ExtractConfig, extract_topomap
 from topo.graph import TopoMap
-from topo.grid import IMAGE_VALUES, OccupancyGrid, SensorModel, sweep_scan
+from topo.grid import IMAGE_VALUES, CellState, OccupancyGrid, SensorModel, sweep_scan
 
 LOCAL_MAP_VALUES = IMAGE_VALUES
 """``local_map`` pixel value of each cell state: ``topo.grid.IMAGE_VALUES`` (unknown 128, free
@@ -247,6 +247,79 @@ class RobotMapSnapshot:
         odo = np.array(odometry, dtype=np.float64)
         odo.setflags(write=False)
         return cls(grid, robot_map.topomap, odo, int(robot_map.n_ever), int(step))
+
+
+@dataclass(frozen=True, slots=True)
+class FusedMapSnapshot:
+    """One robot's fused map at one env step, in its own odometry frame, read-only and never
+    changed by later steps: what :meth:`MultiRobotExploreEnv.fused_map` hands out.
+
+    Attributes:
+        states: ``(H, W)`` read-only int8 ``topo.grid.CellState`` codes (unknown 0, free 1,
+            occupied 2) on the robot's own grid geometry (CONTRIBUTING.md conventions).
+        resolution: metres per cell.
+        origin: ``(x, y)`` of the lower-left corner of cell (0, 0) in the robot's frame, m.
+        robots: the robots whose maps it holds (its fused component, sorted; itself included).
+        known_cells: cells whose state is known in it now (not unknown).
+        step: the env step the snapshot was taken at (0 = after ``reset``).
+    """
+
+    states: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    robots: tuple[int, ...]
+    known_cells: int
+    step: int
+
+    @classmethod
+    def of(cls, states: np.ndarray, geometry: Geometry, robots: Sequence[int],
+           step: int) -> FusedMapSnapshot:
+        """Freeze ``states`` (a new array the caller hands over) of a grid of ``geometry``."""
+        states.setflags(write=False)
+        return cls(states, geometry.resolution, geometry.origin, tuple(int(r) for r in robots),
+                   int(np.count_nonzero(states)), int(step))
+
+    def known_mask(self) -> np.ndarray:
+        """``(H, W)`` bool: cells known (free or occupied)."""
+        return self.states != CellState.UNKNOWN
+
+    def occupied_mask(self) -> np.ndarray:
+        """``(H, W)`` bool: occupied cells."""
+        return self.states == CellState.OCCUPIED
+
+
+def fused_states(owner: RobotMap, teammates: Sequence[tuple[RobotMap, Rigid2D]]
+                 ) -> tuple[tuple[slice, slice], np.ndarray] | None:
+    """The cell states of a rigid fused map on ``owner``'s grid: its states with each teammate
+    map's known window moved in by its transform (``(map, to_owner)``: its frame → the
+    owner's; nearest cell, :func:`warp_window`), the larger code winning where maps overlap
+    (module docstring).
+
+    Returns the window of the owner's grid holding every known cell and a new int8 array of
+    the states there; ``None`` before the owner's first scan. One compositor for the
+    renderer's fused panel and :meth:`MultiRobotExploreEnv.fused_map`.
+    """
+    win = owner.known_window()
+    if win is None:
+        return None
+    g = owner.geometry
+    rows, cols = win
+    moved = []
+    for peer, to_owner in teammates:
+        if peer.known_window() is None:
+            continue
+        warped = warp_window(g, peer.geometry, peer.states, peer.known_window(), to_owner)
+        if warped is not None:
+            moved.append(warped)
+            (r1, c1), _ = warped
+            rows = slice(min(rows.start, r1.start), max(rows.stop, r1.stop))
+            cols = slice(min(cols.start, c1.start), max(cols.stop, c1.stop))
+    states = owner.states[rows, cols].copy()
+    for (r1, c1), vals in moved:
+        sub = (slice(r1.start - rows.start, r1.stop - rows.start),
+               slice(c1.start - cols.start, c1.stop - cols.start))
+        np.maximum(states[sub], vals, out=states[sub])
+    return (rows, cols), states
 
 
 class SharedMap:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.explore.mapping import Geometry, warp_window
+from envs.explore.mapping import Geometry, fused_states
 
 if TYPE_CHECKING:
     from envs.explore.env import TwoRobotExploreEnv
@@ -171,28 +171,13 @@ class Renderer:
 
     def _shared_panel(self, env: TwoRobotExploreEnv, offset: tuple[int, int]) -> None:
         m0 = env.maps[0]
-        win0 = m0.known_window()
-        if win0 is None:
-            return
         members = env.shared.members
+        fused = fused_states(m0, [(env.views.view(0, j), to_0)
+                                  for j, (to_0, _) in sorted(members.items())])
+        if fused is None:
+            return
         g = m0.geometry
-        rows, cols = win0
-        moved = []
-        for j, (to_0, _) in sorted(members.items()):
-            mj = env.views.view(0, j)
-            if mj.known_window() is None:
-                continue
-            warped = warp_window(g, mj.geometry, mj.states, mj.known_window(), to_0)
-            if warped is not None:
-                moved.append(warped)
-                (r1, c1), _ = warped
-                rows = slice(min(rows.start, r1.start), max(rows.stop, r1.stop))
-                cols = slice(min(cols.start, c1.start), max(cols.stop, c1.stop))
-        states = m0.states[rows, cols].copy()
-        for (r1, c1), vals in moved:
-            sub = (slice(r1.start - rows.start, r1.stop - rows.start),
-                   slice(c1.start - cols.start, c1.stop - cols.start))
-            np.maximum(states[sub], vals, out=states[sub])
+        (rows, cols), states = fused
         box = (g.origin[0] + cols.start * g.resolution, g.origin[1] + rows.start * g.resolution,
                g.origin[0] + cols.stop * g.resolution, g.origin[1] + rows.stop * g.resolution)
         view = _View(box, offset)
