@@ -61,8 +61,9 @@ if their centres lie this close (metres) in the current estimate."""
 @dataclass(frozen=True, slots=True)
 class LinkRecord:
     """An accepted window alignment added to the graph: robots and anchors (``i == j``: a
-    loop closure), the relative pose, its confidence and whether the graph took it (loops
-    only; a link's fate is decided with its pair's others)."""
+    loop closure), the relative pose, its confidence (the grid alignment's calibrated one for a
+    global search, 1 for a search near the estimate, which has none) and whether the graph
+    took it (loops only; a link's fate is decided with its pair's others)."""
 
     i: int
     a: int
@@ -206,7 +207,7 @@ class GraphMerging:
                                    max_deg=NEAR_DEG, reach_m=NEAR_REACH_M)
             if transform is None:
                 return False
-            confidence = 1.0
+            confidence = 1.0  # no calibrated model for a local search: the graph judges it
         else:
             result = merge_grids(grid_a, grid_b, self._grid_cfg)
             if not result.accepted:
