@@ -74,11 +74,12 @@ def _pooled(states: np.ndarray, box: tuple[int, int, int, int], fine: float, ori
 
 
 class LayerCache:
-    """A grid whose cell states, known box, pooled layers (:func:`pooled_layers`) and
-    occupied cells (:func:`fusion.grid_refine.native_walls`) are each computed once, on first
-    use: what one map merged with several others (:func:`fusion.mapmerge.merge_maps_n`), or
-    read at several resolutions in one :func:`fusion.grid_merge.merge_grids`, would otherwise
-    recompute. A snapshot: ``grid`` must not change while the cache is in use.
+    """A grid whose cell states, known box, pooled layers (:func:`pooled_layers`), occupied
+    cells (:func:`fusion.grid_refine.native_walls`) and KD-trees of its wall points
+    (:func:`fusion.grid_refine.wall_tree`) are each computed once, on first use: what one map
+    merged with several others (:func:`fusion.mapmerge.merge_maps_n`), or read at several
+    resolutions in one :func:`fusion.grid_merge.merge_grids`, would otherwise recompute.
+    A snapshot: ``grid`` must not change while the cache is in use.
 
     Attributes:
         states: ``grid``'s ``(H, W)`` cell-state codes (read once: ``states()`` called, or

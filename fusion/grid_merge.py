@@ -67,6 +67,7 @@ from fusion.grid_refine import (
     local_search,
     native_evidence,
     native_walls,
+    wall_tree,
 )
 from fusion.inputs import check_grid_inputs
 from fusion.rigid import Rigid2D
@@ -468,12 +469,13 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
         # every coarse alignment turned to each rotation about B's centre (the full sweep's
         # best at a rotation may be another alignment's peak)
         lands = [c_alignment(i).apply(centre) for i in picked]
-        found = [max(fine.window_best(float(th), at - Rigid2D(float(th)).apply(centre), reach)
-                     for at in lands) for th in cand]
-        f_scores = np.array([sc for sc, _ in found])
-        f_at = np.array([kk for _, kk in found], dtype=np.int64)
         # the picked rotations themselves on the whole score map, as the full sweep
         whole = [3] + [7 + 3 * m + 1 for m in range(len(picked) - 1)]
+        f_scores, f_at = np.full(len(cand), -np.inf), np.full(len(cand), -1, dtype=np.int64)
+        for n in sorted(set(range(len(cand))) - set(whole)):
+            th = float(cand[n])
+            f_scores[n], f_at[n] = max(fine.window_best(th, at - Rigid2D(th).apply(centre),
+                                                        reach) for at in lands)
         f_scores[whole], f_at[whole], smap = fine.best(cand[whole], keep_best=True)
         k = int(np.argmax(f_scores))
         if k != whole[int(np.argmax(f_scores[whole]))]:  # smap is that rotation's
@@ -504,8 +506,9 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     moved = pts_wall  # on large maps, a regular subsample
     if large and len(pts_wall) > MAX_LARGE_ICP_POINTS:
         moved = pts_wall[:: int(math.ceil(len(pts_wall) / MAX_LARGE_ICP_POINTS))]
-    estimate = icp_refined(cell_centres(wall_a, origin_a, res), moved, estimate, res, 1.5 * res,
-                        centre, cfg)
+    walls_at = cell_centres(wall_a, origin_a, res)
+    estimate = icp_refined(walls_at, moved, estimate, res, 1.5 * res, centre, cfg,
+                           tree=wall_tree(grid_a, walls_at, ("pooled", res), len(moved)))
     if cfg.native_refine:
         estimate = local_search(grid_a, grid_b, estimate, centre, radius, cfg)
     estimate, native_agreement, native_conflict = native_evidence(grid_a, grid_b, estimate,

@@ -601,6 +601,13 @@ def test_layer_cache_gives_the_grids_own_layers_and_merge():
     t, tc = refine_with_grids(grid_a, grid_b, r.transform), refine_with_grids(cache_a, cache_b,
                                                                              r.transform)
     assert t.theta == tc.theta and np.array_equal(t.T, tc.T)
+    # A's wall trees were built once and are reused: a second merge gives the same result
+    trees = {k: v for k, v in cache_a.memo.items() if k[0] == "wall_tree"}
+    assert ("wall_tree", "native") in trees and ("wall_tree", ("pooled", 0.2)) in trees
+    again = merge_grids(cache_a, cache_b)
+    assert all(cache_a.memo[k] is v for k, v in trees.items())
+    assert (again.transform.theta, tuple(again.transform.T), again.confidence) == (
+        r.transform.theta, tuple(r.transform.T), r.confidence)
 
 
 @pytest.mark.parametrize("deg", [37.0, 251.0])
