@@ -172,6 +172,12 @@ def landing(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall, pts
     return GridAgreement(overlap, agree, conflict, free_conflict, len(hits))
 
 
+FFT_BATCH_CELLS = 2 ** 18
+""":meth:`Correlator.best` transforms as many rotations at once as fit in this many cells of
+the padded score map (at least one, at most 16): larger batches leave the CPU's caches and
+cost more per rotation."""
+
+
 class Correlator:
     """Score of every translation of B's wall and free points, rotated about ``centre``,
     against A's layers at one resolution: ``+1`` per B wall on an A wall (within one cell),
@@ -228,9 +234,11 @@ class Correlator:
         at = np.empty(n, dtype=np.int64)
         kept, kept_score = None, -np.inf
         fa_walls, fa_free = self.spectra
-        rows = np.arange(16)
-        for i in range(0, n, 16):  # bounded memory
-            th = thetas[i: i + 16]
+        # a few rotations at a time: bounded memory, and the arrays stay in the CPU's caches
+        batch = max(1, min(16, FFT_BATCH_CELLS // (self.fshape[0] * self.fshape[1])))
+        rows = np.arange(batch)
+        for i in range(0, n, batch):
+            th = thetas[i: i + batch]
             spec = fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
                                          workers=1)
             if len(self.pts_free):
@@ -240,10 +248,10 @@ class Correlator:
                                                                : self.shape[1]]
             flat = smaps.reshape(len(th), -1)
             k = np.argmax(flat, axis=1)
-            scores[i: i + 16] = flat[rows[: len(th)], k]
-            at[i: i + 16] = k
+            scores[i: i + batch] = flat[rows[: len(th)], k]
+            at[i: i + batch] = k
             if keep_best:
-                j = int(np.argmax(scores[i: i + 16]))
+                j = int(np.argmax(scores[i: i + batch]))
                 if scores[i + j] > kept_score:
                     kept, kept_score = np.array(smaps[j]), scores[i + j]
         return scores, at, kept

@@ -173,21 +173,36 @@ class _TreeMatcher:
 
     scipy's ``cKDTree`` on one thread, the squared distances recomputed from the pairs
     (``dx² + dy²``). One thread: a threaded KD-tree's workers wait for each other's cores on
-    a busy machine, and a query then costs many times more."""
+    a busy machine, and a query then costs many times more. With a gate (``max_d2`` finite)
+    the search stops just beyond it: a point of ``D`` with no point of ``M`` that near is
+    left unpaired (index ``-1``) instead of searched for across the whole set — its pair
+    would be gated out anyway, and the kept pairs, hence every update, are the same (the
+    correspondences repeat as soon as the kept ones do, so ICP may stop one update earlier,
+    on the same transform)."""
 
     def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float,
                  tree: cKDTree | None = None) -> None:
         self.tree = cKDTree(M) if tree is None else tree
         self.M, self.D, self.max_d2 = M, D, max_d2
+        # a little beyond the gate, so that no pair within it is missed by rounding
+        self.reach = math.sqrt(max_d2) * (1.0 + 1e-6) + 1e-12 if max_d2 < math.inf else math.inf
 
     def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
                  prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
                  keep: np.ndarray) -> tuple[float, bool]:
         c, s = math.cos(theta), math.sin(theta)
         moved = self.D @ np.array([[c, s], [-s, c]]) + t
-        idx[:] = self.tree.query(moved, k=1, workers=1)[1]
-        gap = moved - self.M[idx]
-        np.add(gap[:, 0] * gap[:, 0], gap[:, 1] * gap[:, 1], out=d2)
+        if self.reach == math.inf:
+            idx[:] = self.tree.query(moved, k=1, workers=1)[1]
+            gap = moved - self.M[idx]
+            np.add(gap[:, 0] * gap[:, 0], gap[:, 1] * gap[:, 1], out=d2)
+        else:
+            idx[:] = self.tree.query(moved, k=1, workers=1, distance_upper_bound=self.reach)[1]
+            found = idx < len(self.M)
+            idx[~found] = -1
+            d2[~found] = math.inf
+            gap = moved[found] - self.M[idx[found]]
+            d2[found] = gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]
         np.less_equal(d2, self.max_d2, out=keep)
         same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         return float(d2[keep].sum()), bool(same)

@@ -72,6 +72,28 @@ def test_brute_force_and_kd_tree_paths_agree(monkeypatch):
     np.testing.assert_array_equal(brute.correspondences, tree.correspondences)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_gated_kd_tree_search_gives_the_brute_force_transform(seed, monkeypatch):
+    """With a gate the KD-tree stops searching beyond it: unshared points stay unpaired, and
+    the transform is bit for bit the all-pairs one (at most one update fewer)."""
+    rng = np.random.default_rng(seed)
+    M = spread_points(seed, 300)
+    truth = Rigid2D.from_degrees(rng.uniform(-4, 4), rng.uniform(-0.3, 0.3, 2))
+    D = np.vstack([truth.inverse().apply(M[:200]) + rng.normal(0, 0.03, (200, 2)),
+                   rng.uniform(30, 40, (40, 2))])  # 40 points far from any of M
+    kw = {"tau": None, "rel_tol": 1e-9, "max_distance": 0.4, "trim": 0.9,
+          "init": Rigid2D.identity()}
+    monkeypatch.setattr(icp_module, "BRUTE_FORCE_MAX_PAIRS", 10**9)
+    brute = icp_svd(M, D, **kw)
+    monkeypatch.setattr(icp_module, "BRUTE_FORCE_MAX_PAIRS", 0)
+    tree = icp_svd(M, D, **kw)
+    assert brute.transform.theta == tree.transform.theta
+    np.testing.assert_array_equal(brute.T, tree.T)
+    np.testing.assert_array_equal(brute.correspondences, tree.correspondences)
+    assert (tree.correspondences[-40:] == -1).all()
+    assert 0 <= brute.iterations - tree.iterations <= 1 and tree.converged
+
+
 def test_prebuilt_tree_gives_the_same_result(monkeypatch):
     """A KD-tree built once on M and passed in is what icp_svd would build itself."""
     M = spread_points(4, 300)
