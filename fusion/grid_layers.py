@@ -115,6 +115,48 @@ class LayerCache:
         return self._pooled[res]
 
 
+def cached(grid: Any, key: Any, make: Any) -> Any:
+    """``make()``, computed once per ``key`` for a :class:`LayerCache` (kept in its
+    :attr:`~LayerCache.memo`; its arrays made read-only), else computed here: what depends
+    only on one grid (and the settings in ``key``) is then shared by all its pairs."""
+    if not isinstance(grid, LayerCache):
+        return make()
+    if key not in grid.memo:
+        value = make()
+        for a in value if isinstance(value, tuple) else (value,):
+            if isinstance(a, np.ndarray):
+                a.flags.writeable = False
+        grid.memo[key] = value
+    return grid.memo[key]
+
+
+def centres_of(grid: Any, wall: np.ndarray, free: np.ndarray, origin: np.ndarray, res: float,
+               key: Any) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cell_centres` of ``grid``'s pooled ``wall`` and ``free`` layers (cells ``res``
+    wide), computed once per ``key`` (:func:`cached`)."""
+    return cached(grid, ("centres", key), lambda: (cell_centres(wall, origin, res),
+                                                   cell_centres(free, origin, res)))
+
+
+def score_layers(wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :class:`Correlator` scores B's cells against, from A's pooled layers: A's walls
+    dilated by one cell, and the terms met by a B wall and by a B free cell per A cell
+    (single precision: scores are sums of a few thousand small terms)."""
+    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+    for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
+    for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
+    return near_wall_a, for_walls.astype(np.float32), for_free.astype(np.float32)
+
+
+def score_layers_of(grid: Any, wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig,
+                    key: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`score_layers` of ``grid``'s pooled ``wall_a``, ``free_a``, computed once per
+    ``key`` (:func:`cached`, with the settings it depends on)."""
+    return cached(grid, ("score_layers", key, cfg.conflict, cfg.free_weight),
+                  lambda: score_layers(wall_a, free_a, cfg))
+
+
 def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
     """``(N, 2)`` centres (metres) of ``mask``'s true cells, for a grid whose cell ``(0, 0)``
     has its lower-left corner at ``origin`` and cells ``res`` metres wide."""
@@ -191,19 +233,18 @@ class Correlator:
 
     def __init__(self, wall_a: np.ndarray, free_a: np.ndarray, origin_a: np.ndarray,
                  res: float, pts_wall: np.ndarray, pts_free: np.ndarray, centre: np.ndarray,
-                 radius: float, cfg: GridMergeConfig) -> None:
+                 radius: float, cfg: GridMergeConfig,
+                 prepared: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         self.res, self.origin_a, self.centre = res, origin_a, centre
         self.pts_wall, self.pts_free = pts_wall, pts_free
-        near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
-        for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
-        for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
+        # ``prepared``: A's score_layers(wall_a, free_a, cfg), if already computed
+        _, for_walls, for_free = prepared or score_layers(wall_a, free_a, cfg)
         # B rotated about ``centre`` fits in a square of side 2·radius
         self.side = int(math.ceil(2 * radius / res)) + 2
         self.half = self.side // 2
         self.shape = (wall_a.shape[0] + self.side, wall_a.shape[1] + self.side)
         self.fshape = tuple(sfft.next_fast_len(n, real=True) for n in self.shape)
-        # single precision: scores are sums of a few thousand small terms
-        self.layers = (for_walls.astype(np.float32), for_free.astype(np.float32))
+        self.layers = (for_walls, for_free)
         self._spectra: tuple[np.ndarray, np.ndarray] | None = None
 
     @property

@@ -20,9 +20,10 @@ from fusion.grid_layers import (
     UNKNOWN,
     Correlator,
     LayerCache,
-    cell_centres,
     cell_states,
+    centres_of,
     pooled_layers,
+    score_layers_of,
 )
 from fusion.icp import BRUTE_FORCE_MAX_PAIRS, icp_svd
 from fusion.rigid import Rigid2D
@@ -71,12 +72,13 @@ def local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray
     if fine > 0.75 * cell or cell > 0.75 * cfg.resolution:
         return estimate
     la, lb = pooled_layers(grid_a, cell), pooled_layers(grid_b, cell)
-    pts_wall, pts_free = cell_centres(lb[0], lb[2], cell), cell_centres(lb[1], lb[2], cell)
+    pts_wall, pts_free = centres_of(grid_b, *lb, cell, cell)
     if len(pts_wall) < 3:
         return estimate
     if len(pts_free) > 8000:
         pts_free = pts_free[:: int(math.ceil(len(pts_free) / 8000))]
-    corr = Correlator(la[0], la[1], la[2], cell, pts_wall, pts_free, centre, radius + cell, cfg)
+    corr = Correlator(la[0], la[1], la[2], cell, pts_wall, pts_free, centre, radius + cell, cfg,
+                      score_layers_of(grid_a, la[0], la[1], cfg, cell))
     thetas = estimate.theta + np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 5) / 3)
     best, out = -np.inf, estimate
     for th in thetas:  # only the translations within reach are scored (not the whole map)

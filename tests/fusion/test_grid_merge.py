@@ -604,8 +604,14 @@ def test_layer_cache_gives_the_grids_own_layers_and_merge():
     # A's wall trees were built once and are reused: a second merge gives the same result
     trees = {k: v for k, v in cache_a.memo.items() if k[0] == "wall_tree"}
     assert ("wall_tree", "native") in trees and ("wall_tree", ("pooled", 0.2)) in trees
+    # so are A's score layers and B's cell centres, read-only
+    kept = {k: v for k, v in {**cache_a.memo, **cache_b.memo}.items()
+            if k[0] in ("score_layers", "centres")}
+    assert ("score_layers", 0.2, 1.0, 0.05) in kept and ("centres", 0.2) in kept
+    assert not any(a.flags.writeable for v in kept.values() for a in v)
     again = merge_grids(cache_a, cache_b)
     assert all(cache_a.memo[k] is v for k, v in trees.items())
+    assert all({**cache_a.memo, **cache_b.memo}[k] is v for k, v in kept.items())
     assert (again.transform.theta, tuple(again.transform.T), again.confidence) == (
         r.transform.theta, tuple(r.transform.T), r.confidence)
 
