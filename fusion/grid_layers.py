@@ -278,23 +278,26 @@ class Correlator:
         # a few rotations at a time: bounded memory, and the arrays stay in the CPU's caches
         batch = max(1, min(16, FFT_BATCH_CELLS // (self.fshape[0] * self.fshape[1])))
         rows = np.arange(batch)
+        h, w = self.shape
         for i in range(0, n, batch):
             th = thetas[i: i + batch]
-            spec = fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
-                                         workers=1)
+            spec = sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape, workers=1)
+            np.multiply(fa_walls, spec, out=spec)  # in place, A's spectrum first as ever
             if len(self.pts_free):
-                spec += fa_free * sfft.rfft2(self._kernels(self.pts_free, th), self.fshape,
-                                             workers=1)
-            smaps = sfft.irfft2(spec, self.fshape, workers=1)[:, : self.shape[0],
-                                                               : self.shape[1]]
-            flat = smaps.reshape(len(th), -1)
-            k = np.argmax(flat, axis=1)
-            scores[i: i + batch] = flat[rows[: len(th)], k]
-            at[i: i + batch] = k
+                free = sfft.rfft2(self._kernels(self.pts_free, th), self.fshape, workers=1)
+                spec += np.multiply(fa_free, free, out=free)
+            full = sfft.irfft2(spec, self.fshape, workers=1)
+            # the FFT's padding never wins, and the score map is searched without a copy
+            full[:, h:, :] = -np.inf
+            full[:, :h, w:] = -np.inf
+            k = np.argmax(full.reshape(len(th), -1), axis=1)
+            r, c = np.divmod(k, full.shape[2])
+            scores[i: i + batch] = full[rows[: len(th)], r, c]
+            at[i: i + batch] = r * w + c
             if keep_best:
                 j = int(np.argmax(scores[i: i + batch]))
                 if scores[i + j] > kept_score:
-                    kept, kept_score = np.array(smaps[j]), scores[i + j]
+                    kept, kept_score = np.array(full[j, :h, :w]), scores[i + j]
         return scores, at, kept
 
     def box_scores(self, theta: float, r0: int, c0: int, h: int, w: int) -> np.ndarray:
