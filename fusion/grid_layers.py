@@ -257,11 +257,13 @@ class Correlator:
 
     def _kernels(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
         """``(len(thetas), side, side)`` rasters of ``pts`` rotated about the centre, flipped
-        (correlation is convolution with the flipped kernel)."""
-        k = np.zeros((len(thetas), self.side, self.side), dtype=np.float32)
+        (correlation is convolution with the flipped kernel), in the corner of zeros the size
+        of the FFT (``fshape``: padded here rather than copied into padding by the FFT)."""
+        k = np.zeros((len(thetas), *self.fshape), dtype=np.float32)
         if len(pts):
-            GK.raster_rotated(k, pts, float(self.centre[0]), float(self.centre[1]),
-                              np.cos(thetas), np.sin(thetas), self.res, self.half)
+            GK.raster_rotated(k[:, : self.side, : self.side], pts, float(self.centre[0]),
+                              float(self.centre[1]), np.cos(thetas), np.sin(thetas), self.res,
+                              self.half)
         return k
 
     def best(self, thetas: np.ndarray, keep_best: bool = False
@@ -281,10 +283,10 @@ class Correlator:
         h, w = self.shape
         for i in range(0, n, batch):
             th = thetas[i: i + batch]
-            spec = sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape, workers=1)
+            spec = sfft.rfft2(self._kernels(self.pts_wall, th), workers=1)
             np.multiply(fa_walls, spec, out=spec)  # in place, A's spectrum first as ever
             if len(self.pts_free):
-                free = sfft.rfft2(self._kernels(self.pts_free, th), self.fshape, workers=1)
+                free = sfft.rfft2(self._kernels(self.pts_free, th), workers=1)
                 spec += np.multiply(fa_free, free, out=free)
             full = sfft.irfft2(spec, self.fshape, workers=1)
             # the FFT's padding never wins, and the score map is searched without a copy
