@@ -160,8 +160,15 @@ def score_layers_of(grid: Any, wall_a: np.ndarray, free_a: np.ndarray, cfg: Grid
 def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
     """``(N, 2)`` centres (metres) of ``mask``'s true cells, for a grid whose cell ``(0, 0)``
     has its lower-left corner at ``origin`` and cells ``res`` metres wide."""
-    rows, cols = np.nonzero(mask)
+    rows, cols = true_cells(mask)
     return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
+
+
+def true_cells(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of ``mask``'s true cells in row-major order: ``np.nonzero(mask)`` of a
+    2-D array, found on the flattened array (many times faster on large grids)."""
+    rows, cols = np.divmod(np.flatnonzero(mask), mask.shape[1])
+    return rows, cols
 
 
 class GridAgreement(NamedTuple):

@@ -24,6 +24,7 @@ from fusion.grid_layers import (
     centres_of,
     pooled_layers,
     score_layers_of,
+    true_cells,
 )
 from fusion.icp import BRUTE_FORCE_MAX_PAIRS, icp_svd
 from fusion.rigid import Rigid2D
@@ -131,7 +132,7 @@ def wall_tree(grid: Any, walls: np.ndarray, key: Any, n_moved: int = 0) -> cKDTr
 
 
 def _walls(states: np.ndarray, fine: float, origin: Any) -> np.ndarray:
-    rows, cols = np.nonzero(states == OCCUPIED)
+    rows, cols = true_cells(states == OCCUPIED)
     origin = np.asarray(origin, dtype=np.float64)
     return np.stack([origin[0] + (cols + 0.5) * fine, origin[1] + (rows + 0.5) * fine], axis=1)
 

@@ -654,3 +654,14 @@ def test_blocks_merge_pooled_cells_by_the_layers_rule():
     np.testing.assert_array_equal(wb, [[True, False], [False, False], [False, False]])
     np.testing.assert_array_equal(fb, [[False, False], [True, False], [False, False]])
     np.testing.assert_array_equal(origin, [1.0, 2.0])
+
+
+@pytest.mark.parametrize("shape", [(0, 5), (3, 0), (2, 3), (40, 70)])
+def test_true_cells_is_nonzero(shape):
+    """true_cells gives np.nonzero's rows and columns, in its order and dtype."""
+    from fusion.grid_layers import true_cells
+
+    mask = np.random.default_rng(len(shape) + shape[0]).random(shape) < 0.3
+    for got, want in zip(true_cells(mask), np.nonzero(mask), strict=True):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
