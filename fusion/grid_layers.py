@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from scipy import fft as sfft
-from scipy import ndimage
 
 from fusion import _kernels as GK
 
@@ -143,10 +142,22 @@ def score_layers(wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig
     """What :class:`Correlator` scores B's cells against, from A's pooled layers: A's walls
     dilated by one cell, and the terms met by a B wall and by a B free cell per A cell
     (single precision: scores are sums of a few thousand small terms)."""
-    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+    near_wall_a = dilated(wall_a)
     for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
     for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
     return near_wall_a, for_walls.astype(np.float32), for_free.astype(np.float32)
+
+
+def dilated(mask: np.ndarray) -> np.ndarray:
+    """``mask`` dilated by one cell along rows and columns: ``scipy.ndimage.binary_dilation``
+    with its default (cross) structure and one iteration, by shifted ORs (many times faster
+    on large grids)."""
+    out = mask.copy()
+    out[1:] |= mask[:-1]
+    out[:-1] |= mask[1:]
+    out[:, 1:] |= mask[:, :-1]
+    out[:, :-1] |= mask[:, 1:]
+    return out
 
 
 def score_layers_of(grid: Any, wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig,

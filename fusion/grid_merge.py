@@ -51,7 +51,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from fusion.decision import DEFAULT_ACCEPT_THRESHOLD, DEFAULT_RULE, MergeRule, clearly_different
 from fusion.grid_layers import (
@@ -61,6 +60,7 @@ from fusion.grid_layers import (
     cached,
     cell_centres,
     centres_of,
+    dilated,
     landing,
     pooled_layers,
     score_layers_of,
@@ -282,7 +282,7 @@ def grid_agreement(grid_a: Any, grid_b: Any, transform: Rigid2D,
         return None
     wall_a, free_a, origin_a = pa
     wall_b, free_b, origin_b = pb
-    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+    near_wall_a = dilated(wall_a)
     return landing(wall_a, free_a, near_wall_a, origin_a, cfg.resolution, transform,
                         cell_centres(wall_b, origin_b, cfg.resolution),
                         cell_centres(free_b, origin_b, cfg.resolution), int(free_b.sum()))

@@ -665,3 +665,14 @@ def test_true_cells_is_nonzero(shape):
     for got, want in zip(true_cells(mask), np.nonzero(mask), strict=True):
         assert got.dtype == want.dtype
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("shape", [(0, 3), (1, 7), (7, 1), (60, 45)])
+def test_dilated_is_scipys_binary_dilation(shape):
+    """dilated: scipy.ndimage.binary_dilation with its default cross, one iteration."""
+    from scipy import ndimage
+
+    from fusion.grid_layers import dilated
+
+    mask = np.random.default_rng(shape[0]).random(shape) < 0.1
+    np.testing.assert_array_equal(dilated(mask), ndimage.binary_dilation(mask, iterations=1))
