@@ -21,7 +21,8 @@ Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
 and free of LAPACK call overhead (:func:`rigid_fit`). Small sets find their nearest neighbours
 by one compiled all-pairs pass (:func:`fusion._kernels.match_brute`), large ones by a KD-tree
-(scipy's ``cKDTree``, one thread) built once on ``M``; both feed one loop.
+(scipy's ``cKDTree``, one thread) built once on ``M`` (or passed in, ``tree``) and, with a gate,
+searched no farther than it; both feed one loop.
 """
 
 from __future__ import annotations
