@@ -31,10 +31,11 @@ With ``--tool MAP`` (a ROS map YAML or a DungeonMaps PNG) it times the map-merge
 windows of ``--cells`` × ``--cells`` cells are cut from it at random places and turned by
 random angles (each its own frame; occupied cells more than two cells from free space are
 made unknown, as a robot sees walls, not solid rock), and it prints the time of every pair's
-``merge_grids``, of the whole N-map merge (``merge_maps_n``: all pairs, cycle check, drawing
-the merged map) and of writing it, and each placed map's error against the truth; with
-``--reference REV`` also those of that revision, interleaved pair by pair, and the median
-ratio of the pairs' CPU times.
+``merge_grids`` (on fresh grids, and on grids each read once for all its pairs, a
+``LayerCache`` per map as ``merge_maps_n`` runs them), of the whole N-map merge
+(``merge_maps_n``: all pairs, cycle check, drawing the merged map) and of writing it, and
+each placed map's error against the truth; with ``--reference REV`` also those of that
+revision, interleaved pair by pair, and the median ratio of the pairs' CPU times.
 """
 
 from __future__ import annotations
@@ -300,18 +301,24 @@ def tool_times(source: Path, n_maps: int, cells: int, seed: int, rev: str | None
                              importlib.import_module("fusion_ref.mapmerge"))
         for grid_merge, _ in versions.values():  # compiled kernels load on the first call
             grid_merge.merge_grids(maps[0], maps[1])
-        pair_t = {k: [] for k in versions}
-        pair_cpu = {k: [] for k in versions}
-        pair_ok = dict.fromkeys(versions, 0)
+        # each pair on fresh grids, and on grids each read once for all its pairs (a
+        # LayerCache per map, as merge_maps_n runs them; revisions without one: fresh)
+        runs = [(k, fresh) for fresh in (True, False) for k in versions]
+        caches = {k: [_layer_cache(grid_merge, m) for m in maps]
+                  for k, (grid_merge, _) in versions.items()}
+        pair_t = {run: [] for run in runs}
+        pair_cpu = {run: [] for run in runs}
+        pair_ok = dict.fromkeys(runs, 0)
         for i in range(n_maps):
             for j in range(i + 1, n_maps):
                 true = truth[i] @ truth[j].inverse()
-                for k, (grid_merge, _) in versions.items():
+                for k, fresh in runs:
+                    grids = maps if fresh else caches[k]
                     t0, c0 = time.perf_counter(), time.process_time()
-                    r = grid_merge.merge_grids(maps[i], maps[j])
-                    pair_t[k].append(time.perf_counter() - t0)
-                    pair_cpu[k].append(time.process_time() - c0)
-                    pair_ok[k] += r.accepted and r.transform.translation_error(
+                    r = versions[k][0].merge_grids(grids[i], grids[j])
+                    pair_t[k, fresh].append(time.perf_counter() - t0)
+                    pair_cpu[k, fresh].append(time.process_time() - c0)
+                    pair_ok[k, fresh] += r.accepted and r.transform.translation_error(
                         true, at=maps[j].centre()) <= 0.3
         for k, (grid_merge, mapmerge) in versions.items():
             # the revision's own classes (its Rigid2D composes only with its own)
@@ -326,11 +333,14 @@ def tool_times(source: Path, n_maps: int, cells: int, seed: int, rev: str | None
                 t0 = time.perf_counter()
                 mapmerge.write_outputs(team, Path(out))
                 t_write = time.perf_counter() - t0
-            print(f"[{k}] pairs: {len(pair_t[k])}, median "
-                  f"{1000 * statistics.median(pair_t[k]):.0f} ms, max "
-                  f"{1000 * max(pair_t[k]):.0f} ms (CPU median "
-                  f"{1000 * statistics.median(pair_cpu[k]):.0f} ms, max "
-                  f"{1000 * max(pair_cpu[k]):.0f} ms), accepted within 0.3 m: {pair_ok[k]}")
+            for fresh in (True, False):
+                run = k, fresh
+                print(f"[{k}] pairs ({'fresh grids' if fresh else 'a cache per map'}): "
+                      f"{len(pair_t[run])}, median {1000 * statistics.median(pair_t[run]):.0f} "
+                      f"ms, max {1000 * max(pair_t[run]):.0f} ms (CPU median "
+                      f"{1000 * statistics.median(pair_cpu[run]):.0f} ms, max "
+                      f"{1000 * max(pair_cpu[run]):.0f} ms), accepted within 0.3 m: "
+                      f"{pair_ok[run]}")
             print(f"[{k}] merge_maps_n of {n_maps} maps: {t_team:.2f} s (CPU {cpu_team:.2f} s); "
                   f"writing: {t_write:.2f} s; merged "
                   f"{sum(p.merged for p in team.placements)}/{n_maps}, grid "
@@ -347,9 +357,18 @@ def tool_times(source: Path, n_maps: int, cells: int, seed: int, rev: str | None
                 else:
                     print(f"  {p.name}: not merged: {p.why}")
     if rev is not None:
-        ratio = statistics.median(a / b for a, b in zip(pair_cpu["now"], pair_cpu[rev],
-                                                        strict=True))
-        print(f"merge_grids: median per-pair CPU time ratio now / {rev}: {ratio:.2f}")
+        for fresh in (True, False):
+            ratio = statistics.median(a / b for a, b in zip(
+                pair_cpu["now", fresh], pair_cpu[rev, fresh], strict=True))
+            print(f"merge_grids ({'fresh grids' if fresh else 'a cache per map'}): median "
+                  f"per-pair CPU time ratio now / {rev}: {ratio:.2f}")
+
+
+def _layer_cache(grid_merge, grid):
+    """``grid`` read once for all its pairs by the ``LayerCache`` of ``grid_merge``'s revision
+    (``grid`` itself for revisions without one)."""
+    layers = importlib.import_module(grid_merge.__name__.replace("grid_merge", "grid_layers"))
+    return layers.LayerCache(grid) if hasattr(layers, "LayerCache") else grid
 
 
 def main() -> None:

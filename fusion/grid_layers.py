@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from scipy import fft as sfft
-from scipy import ndimage
 
 from fusion import _kernels as GK
 
@@ -74,11 +73,12 @@ def _pooled(states: np.ndarray, box: tuple[int, int, int, int], fine: float, ori
 
 
 class LayerCache:
-    """A grid whose cell states, known box, pooled layers (:func:`pooled_layers`) and
-    occupied cells (:func:`fusion.grid_refine.native_walls`) are each computed once, on first
-    use: what one map merged with several others (:func:`fusion.mapmerge.merge_maps_n`), or
-    read at several resolutions in one :func:`fusion.grid_merge.merge_grids`, would otherwise
-    recompute. A snapshot: ``grid`` must not change while the cache is in use.
+    """A grid whose cell states, known box, pooled layers (:func:`pooled_layers`), occupied
+    cells (:func:`fusion.grid_refine.native_walls`) and KD-trees of its wall points
+    (:func:`fusion.grid_refine.wall_tree`) are each computed once, on first use: what one map
+    merged with several others (:func:`fusion.mapmerge.merge_maps_n`), or read at several
+    resolutions in one :func:`fusion.grid_merge.merge_grids`, would otherwise recompute.
+    A snapshot: ``grid`` must not change while the cache is in use.
 
     Attributes:
         states: ``grid``'s ``(H, W)`` cell-state codes (read once: ``states()`` called, or
@@ -114,11 +114,72 @@ class LayerCache:
         return self._pooled[res]
 
 
+def cached(grid: Any, key: Any, make: Any) -> Any:
+    """``make()``, computed once per ``key`` for a :class:`LayerCache` (kept in its
+    :attr:`~LayerCache.memo`; its arrays made read-only), else computed here: what depends
+    only on one grid (and the settings in ``key``) is then shared by all its pairs."""
+    if not isinstance(grid, LayerCache):
+        return make()
+    if key not in grid.memo:
+        value = make()
+        for a in value if isinstance(value, tuple) else (value,):
+            if isinstance(a, np.ndarray):
+                a.flags.writeable = False
+        grid.memo[key] = value
+    return grid.memo[key]
+
+
+def centres_of(grid: Any, wall: np.ndarray, free: np.ndarray, origin: np.ndarray, res: float,
+               key: Any) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cell_centres` of ``grid``'s pooled ``wall`` and ``free`` layers (cells ``res``
+    wide), computed once per ``key`` (:func:`cached`)."""
+    return cached(grid, ("centres", key), lambda: (cell_centres(wall, origin, res),
+                                                   cell_centres(free, origin, res)))
+
+
+def score_layers(wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :class:`Correlator` scores B's cells against, from A's pooled layers: A's walls
+    dilated by one cell, and the terms met by a B wall and by a B free cell per A cell
+    (single precision: scores are sums of a few thousand small terms)."""
+    near_wall_a = dilated(wall_a)
+    for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
+    for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
+    return near_wall_a, for_walls.astype(np.float32), for_free.astype(np.float32)
+
+
+def dilated(mask: np.ndarray) -> np.ndarray:
+    """``mask`` dilated by one cell along rows and columns: ``scipy.ndimage.binary_dilation``
+    with its default (cross) structure and one iteration, by shifted ORs (many times faster
+    on large grids)."""
+    out = mask.copy()
+    out[1:] |= mask[:-1]
+    out[:-1] |= mask[1:]
+    out[:, 1:] |= mask[:, :-1]
+    out[:, :-1] |= mask[:, 1:]
+    return out
+
+
+def score_layers_of(grid: Any, wall_a: np.ndarray, free_a: np.ndarray, cfg: GridMergeConfig,
+                    key: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`score_layers` of ``grid``'s pooled ``wall_a``, ``free_a``, computed once per
+    ``key`` (:func:`cached`, with the settings it depends on)."""
+    return cached(grid, ("score_layers", key, cfg.conflict, cfg.free_weight),
+                  lambda: score_layers(wall_a, free_a, cfg))
+
+
 def cell_centres(mask: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
     """``(N, 2)`` centres (metres) of ``mask``'s true cells, for a grid whose cell ``(0, 0)``
     has its lower-left corner at ``origin`` and cells ``res`` metres wide."""
-    rows, cols = np.nonzero(mask)
+    rows, cols = true_cells(mask)
     return np.stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res], axis=1)
+
+
+def true_cells(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of ``mask``'s true cells in row-major order: ``np.nonzero(mask)`` of a
+    2-D array, found on the flattened array (many times faster on large grids)."""
+    rows, cols = np.divmod(np.flatnonzero(mask), mask.shape[1])
+    return rows, cols
 
 
 class GridAgreement(NamedTuple):
@@ -171,6 +232,12 @@ def landing(wall_a, free_a, near_wall_a, origin_a, res, transform, pts_wall, pts
     return GridAgreement(overlap, agree, conflict, free_conflict, len(hits))
 
 
+FFT_BATCH_CELLS = 2 ** 18
+""":meth:`Correlator.best` transforms as many rotations at once as fit in this many cells of
+the padded score map (at least one, at most 16): larger batches leave the CPU's caches and
+cost more per rotation."""
+
+
 class Correlator:
     """Score of every translation of B's wall and free points, rotated about ``centre``,
     against A's layers at one resolution: ``+1`` per B wall on an A wall (within one cell),
@@ -184,19 +251,18 @@ class Correlator:
 
     def __init__(self, wall_a: np.ndarray, free_a: np.ndarray, origin_a: np.ndarray,
                  res: float, pts_wall: np.ndarray, pts_free: np.ndarray, centre: np.ndarray,
-                 radius: float, cfg: GridMergeConfig) -> None:
+                 radius: float, cfg: GridMergeConfig,
+                 prepared: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         self.res, self.origin_a, self.centre = res, origin_a, centre
         self.pts_wall, self.pts_free = pts_wall, pts_free
-        near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
-        for_walls = near_wall_a.astype(np.float64) - cfg.conflict * (free_a & ~near_wall_a)
-        for_free = cfg.free_weight * free_a - cfg.conflict * wall_a
+        # ``prepared``: A's score_layers(wall_a, free_a, cfg), if already computed
+        _, for_walls, for_free = prepared or score_layers(wall_a, free_a, cfg)
         # B rotated about ``centre`` fits in a square of side 2·radius
         self.side = int(math.ceil(2 * radius / res)) + 2
         self.half = self.side // 2
         self.shape = (wall_a.shape[0] + self.side, wall_a.shape[1] + self.side)
         self.fshape = tuple(sfft.next_fast_len(n, real=True) for n in self.shape)
-        # single precision: scores are sums of a few thousand small terms
-        self.layers = (for_walls.astype(np.float32), for_free.astype(np.float32))
+        self.layers = (for_walls, for_free)
         self._spectra: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
@@ -209,11 +275,13 @@ class Correlator:
 
     def _kernels(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
         """``(len(thetas), side, side)`` rasters of ``pts`` rotated about the centre, flipped
-        (correlation is convolution with the flipped kernel)."""
-        k = np.zeros((len(thetas), self.side, self.side), dtype=np.float32)
+        (correlation is convolution with the flipped kernel), in the corner of zeros the size
+        of the FFT (``fshape``: padded here rather than copied into padding by the FFT)."""
+        k = np.zeros((len(thetas), *self.fshape), dtype=np.float32)
         if len(pts):
-            GK.raster_rotated(k, pts, float(self.centre[0]), float(self.centre[1]),
-                              np.cos(thetas), np.sin(thetas), self.res, self.half)
+            GK.raster_rotated(k[:, : self.side, : self.side], pts, float(self.centre[0]),
+                              float(self.centre[1]), np.cos(thetas), np.sin(thetas), self.res,
+                              self.half)
         return k
 
     def best(self, thetas: np.ndarray, keep_best: bool = False
@@ -227,24 +295,29 @@ class Correlator:
         at = np.empty(n, dtype=np.int64)
         kept, kept_score = None, -np.inf
         fa_walls, fa_free = self.spectra
-        rows = np.arange(16)
-        for i in range(0, n, 16):  # bounded memory
-            th = thetas[i: i + 16]
-            spec = fa_walls * sfft.rfft2(self._kernels(self.pts_wall, th), self.fshape,
-                                         workers=1)
+        # a few rotations at a time: bounded memory, and the arrays stay in the CPU's caches
+        batch = max(1, min(16, FFT_BATCH_CELLS // (self.fshape[0] * self.fshape[1])))
+        rows = np.arange(batch)
+        h, w = self.shape
+        for i in range(0, n, batch):
+            th = thetas[i: i + batch]
+            spec = sfft.rfft2(self._kernels(self.pts_wall, th), workers=1)
+            np.multiply(fa_walls, spec, out=spec)  # in place, A's spectrum first as ever
             if len(self.pts_free):
-                spec += fa_free * sfft.rfft2(self._kernels(self.pts_free, th), self.fshape,
-                                             workers=1)
-            smaps = sfft.irfft2(spec, self.fshape, workers=1)[:, : self.shape[0],
-                                                               : self.shape[1]]
-            flat = smaps.reshape(len(th), -1)
-            k = np.argmax(flat, axis=1)
-            scores[i: i + 16] = flat[rows[: len(th)], k]
-            at[i: i + 16] = k
+                free = sfft.rfft2(self._kernels(self.pts_free, th), workers=1)
+                spec += np.multiply(fa_free, free, out=free)
+            full = sfft.irfft2(spec, self.fshape, workers=1)
+            # the FFT's padding never wins, and the score map is searched without a copy
+            full[:, h:, :] = -np.inf
+            full[:, :h, w:] = -np.inf
+            k = np.argmax(full.reshape(len(th), -1), axis=1)
+            r, c = np.divmod(k, full.shape[2])
+            scores[i: i + batch] = full[rows[: len(th)], r, c]
+            at[i: i + batch] = r * w + c
             if keep_best:
-                j = int(np.argmax(scores[i: i + 16]))
+                j = int(np.argmax(scores[i: i + batch]))
                 if scores[i + j] > kept_score:
-                    kept, kept_score = np.array(smaps[j]), scores[i + j]
+                    kept, kept_score = np.array(full[j, :h, :w]), scores[i + j]
         return scores, at, kept
 
     def box_scores(self, theta: float, r0: int, c0: int, h: int, w: int) -> np.ndarray:

@@ -51,22 +51,26 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from fusion.decision import DEFAULT_ACCEPT_THRESHOLD, DEFAULT_RULE, MergeRule, clearly_different
 from fusion.grid_layers import (
     Correlator,
     GridAgreement,
     LayerCache,
+    cached,
     cell_centres,
+    centres_of,
+    dilated,
     landing,
     pooled_layers,
+    score_layers_of,
 )
 from fusion.grid_refine import (
     icp_refined,
     local_search,
     native_evidence,
     native_walls,
+    wall_tree,
 )
 from fusion.inputs import check_grid_inputs
 from fusion.rigid import Rigid2D
@@ -278,7 +282,7 @@ def grid_agreement(grid_a: Any, grid_b: Any, transform: Rigid2D,
         return None
     wall_a, free_a, origin_a = pa
     wall_b, free_b, origin_b = pb
-    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
+    near_wall_a = dilated(wall_a)
     return landing(wall_a, free_a, near_wall_a, origin_a, cfg.resolution, transform,
                         cell_centres(wall_b, origin_b, cfg.resolution),
                         cell_centres(free_b, origin_b, cfg.resolution), int(free_b.sum()))
@@ -345,19 +349,21 @@ MAX_LARGE_ICP_POINTS = 1500
 cells (a regular subsample), as the refinement on the grids' own cells does."""
 
 
-def _pyramid_sweep(coarse_a: tuple, coarse_b: tuple, coarse: Correlator, thetas: np.ndarray,
-                   centre: np.ndarray, radius: float, cfg: GridMergeConfig
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def _pyramid_sweep(grid_a: Any, grid_b: Any, coarse_a: tuple, coarse_b: tuple,
+                   coarse: Correlator, thetas: np.ndarray, centre: np.ndarray, radius: float,
+                   cfg: GridMergeConfig) -> tuple[np.ndarray, np.ndarray]:
     """The coarse sweep of large grids (:func:`merge_grids`): every rotation on the coarse
     layers ``coarse_a``, ``coarse_b`` (wall, free, origin) merged by blocks of 2 × 2 cells
     (:func:`blocks`), then the :data:`PYRAMID_TOP` best of them by ``coarse``. Returns, per
     rotation, ``coarse``'s best score and the flat index of its translation (``-inf`` and
     ``-1`` for the rotations not swept by ``coarse``). The blocks' FFTs cost a quarter of
-    ``coarse``'s, whose sweep of every rotation is what dominates on large maps."""
+    ``coarse``'s, whose sweep of every rotation is what dominates on large maps. What depends
+    on one grid only is computed once per :class:`~fusion.grid_layers.LayerCache`."""
     r = 2 * coarse.res
-    (wa, fa, oa), (wb, fb, ob) = blocks(*coarse_a, 2), blocks(*coarse_b, 2)
-    level = Correlator(wa, fa, oa, r, cell_centres(wb, ob, r), cell_centres(fb, ob, r), centre,
-                       radius + r, cfg)
+    wa, fa, oa = cached(grid_a, ("blocks", coarse.res), lambda: blocks(*coarse_a, 2))
+    wb, fb, ob = cached(grid_b, ("blocks", coarse.res), lambda: blocks(*coarse_b, 2))
+    level = Correlator(wa, fa, oa, r, *centres_of(grid_b, wb, fb, ob, r, ("blocks", r)), centre,
+                       radius + r, cfg, score_layers_of(grid_a, wa, fa, cfg, ("blocks", r)))
     keep = np.sort(np.argsort(-level.best(thetas)[0], kind="stable")[:PYRAMID_TOP])
     scores, at = np.full(len(thetas), -np.inf), np.full(len(thetas), -1, dtype=np.int64)
     scores[keep], at[keep], _ = coarse.best(thetas[keep])
@@ -416,9 +422,10 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     (wall_b, free_b, origin_b), coarse_b = layers_b[0], layers_b[-1]
     if wall_a.sum() < 10 or wall_b.sum() < 10:
         return _rejected("too few wall cells to align", t0)
-    near_wall_a = ndimage.binary_dilation(wall_a, iterations=1)
-    pts_wall = cell_centres(wall_b, origin_b, res)
-    pts_free = cell_centres(free_b, origin_b, res)
+    # what depends on one grid only: computed once for all its pairs with a LayerCache
+    prepared_a = score_layers_of(grid_a, wall_a, free_a, cfg, res)
+    near_wall_a = prepared_a[0]
+    pts_wall, pts_free = centres_of(grid_b, wall_b, free_b, origin_b, res, res)
     if len(pts_free) > 4000:  # free space is only a weak term: a regular subsample is enough
         pts_free = pts_free[:: int(math.ceil(len(pts_free) / 4000))]
     centre = pts_wall.mean(axis=0)
@@ -430,17 +437,18 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     if cfg.coarse_factor > 1:
         cres = res * cfg.coarse_factor
         ca, cb = coarse_a, coarse_b
-        coarse = Correlator(ca[0], ca[1], ca[2], cres, cell_centres(cb[0], cb[2], cres),
-                             cell_centres(cb[1], cb[2], cres), centre, radius + cres, cfg)
+        coarse = Correlator(ca[0], ca[1], ca[2], cres, *centres_of(grid_b, *cb, cres, cres),
+                            centre, radius + cres, cfg,
+                            score_layers_of(grid_a, ca[0], ca[1], cfg, cres))
     else:
         coarse = None
     fine = Correlator(wall_a, free_a, origin_a, fine_res, pts_wall, pts_free, centre, radius,
-                       cfg)
+                      cfg, prepared_a)
     sweep = coarse or fine
     large = coarse is not None and max(wall_a.size, wall_b.size) > LARGE_POOLED_CELLS
     if large:
-        c_scores, c_at = _pyramid_sweep(coarse_a, coarse_b, coarse, thetas, centre, radius,
-                                        cfg)
+        c_scores, c_at = _pyramid_sweep(grid_a, grid_b, coarse_a, coarse_b, coarse, thetas,
+                                        centre, radius, cfg)
     else:
         c_scores, c_at, _ = sweep.best(thetas)
     c_alignments: dict[int, Rigid2D] = {}  # of the rotations looked at
@@ -468,12 +476,13 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
         # every coarse alignment turned to each rotation about B's centre (the full sweep's
         # best at a rotation may be another alignment's peak)
         lands = [c_alignment(i).apply(centre) for i in picked]
-        found = [max(fine.window_best(float(th), at - Rigid2D(float(th)).apply(centre), reach)
-                     for at in lands) for th in cand]
-        f_scores = np.array([sc for sc, _ in found])
-        f_at = np.array([kk for _, kk in found], dtype=np.int64)
         # the picked rotations themselves on the whole score map, as the full sweep
         whole = [3] + [7 + 3 * m + 1 for m in range(len(picked) - 1)]
+        f_scores, f_at = np.full(len(cand), -np.inf), np.full(len(cand), -1, dtype=np.int64)
+        for n in sorted(set(range(len(cand))) - set(whole)):
+            th = float(cand[n])
+            f_scores[n], f_at[n] = max(fine.window_best(th, at - Rigid2D(th).apply(centre),
+                                                        reach) for at in lands)
         f_scores[whole], f_at[whole], smap = fine.best(cand[whole], keep_best=True)
         k = int(np.argmax(f_scores))
         if k != whole[int(np.argmax(f_scores[whole]))]:  # smap is that rotation's
@@ -504,8 +513,9 @@ def merge_grids(grid_a: Any, grid_b: Any, config: GridMergeConfig | None = None
     moved = pts_wall  # on large maps, a regular subsample
     if large and len(pts_wall) > MAX_LARGE_ICP_POINTS:
         moved = pts_wall[:: int(math.ceil(len(pts_wall) / MAX_LARGE_ICP_POINTS))]
-    estimate = icp_refined(cell_centres(wall_a, origin_a, res), moved, estimate, res, 1.5 * res,
-                        centre, cfg)
+    walls_at = cell_centres(wall_a, origin_a, res)
+    estimate = icp_refined(walls_at, moved, estimate, res, 1.5 * res, centre, cfg,
+                           tree=wall_tree(grid_a, walls_at, ("pooled", res), len(moved)))
     if cfg.native_refine:
         estimate = local_search(grid_a, grid_b, estimate, centre, radius, cfg)
     estimate, native_agreement, native_conflict = native_evidence(grid_a, grid_b, estimate,

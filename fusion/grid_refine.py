@@ -20,11 +20,13 @@ from fusion.grid_layers import (
     UNKNOWN,
     Correlator,
     LayerCache,
-    cell_centres,
     cell_states,
+    centres_of,
     pooled_layers,
+    score_layers_of,
+    true_cells,
 )
-from fusion.icp import icp_svd
+from fusion.icp import BRUTE_FORCE_MAX_PAIRS, icp_svd
 from fusion.rigid import Rigid2D
 
 if TYPE_CHECKING:
@@ -33,15 +35,17 @@ if TYPE_CHECKING:
 
 def icp_refined(walls_a: np.ndarray, walls_b: np.ndarray, estimate: Rigid2D, res: float,
              gate: float, centre: np.ndarray, cfg: GridMergeConfig,
-             max_iter: int = 30, bound: tuple[float, float] | None = None) -> Rigid2D:
+             max_iter: int = 30, bound: tuple[float, float] | None = None,
+             tree: cKDTree | None = None) -> Rigid2D:
     """``estimate`` refined by gated, trimmed ICP-SVD of B's wall points onto A's, kept only if
     it stays within ``bound`` (degrees, metres at ``centre``; by default ``step_deg`` and two
-    ``res``) of ``estimate`` (else ``estimate``)."""
+    ``res``) of ``estimate`` (else ``estimate``). ``tree``: a ``cKDTree`` of ``walls_a``
+    already built (:func:`wall_tree`), or ``None``."""
     if len(walls_a) < 3 or len(walls_b) < 3:
         return estimate
     max_deg, max_m = bound or (cfg.step_deg, 2 * res)
     icp = icp_svd(walls_a, walls_b, tau=None, rel_tol=1e-6, max_iter=max_iter, init=estimate,
-                  max_distance=gate, trim=0.8)
+                  max_distance=gate, trim=0.8, tree=tree)
     if icp.degenerate is None and (
             icp.transform.rotation_error(estimate) < math.radians(max_deg)
             and icp.transform.translation_error(estimate, at=centre) < max_m):
@@ -69,12 +73,13 @@ def local_search(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndarray
     if fine > 0.75 * cell or cell > 0.75 * cfg.resolution:
         return estimate
     la, lb = pooled_layers(grid_a, cell), pooled_layers(grid_b, cell)
-    pts_wall, pts_free = cell_centres(lb[0], lb[2], cell), cell_centres(lb[1], lb[2], cell)
+    pts_wall, pts_free = centres_of(grid_b, *lb, cell, cell)
     if len(pts_wall) < 3:
         return estimate
     if len(pts_free) > 8000:
         pts_free = pts_free[:: int(math.ceil(len(pts_free) / 8000))]
-    corr = Correlator(la[0], la[1], la[2], cell, pts_wall, pts_free, centre, radius + cell, cfg)
+    corr = Correlator(la[0], la[1], la[2], cell, pts_wall, pts_free, centre, radius + cell, cfg,
+                      score_layers_of(grid_a, la[0], la[1], cfg, cell))
     thetas = estimate.theta + np.radians(np.linspace(-cfg.step_deg, cfg.step_deg, 5) / 3)
     best, out = -np.inf, estimate
     for th in thetas:  # only the translations within reach are scored (not the whole map)
@@ -111,8 +116,23 @@ def native_walls(grid: Any) -> tuple[np.ndarray, float]:
     return grid.memo["native_walls"]
 
 
+def wall_tree(grid: Any, walls: np.ndarray, key: Any, n_moved: int = 0) -> cKDTree | None:
+    """A ``cKDTree`` of ``walls`` (wall points of ``grid``), for ICP onto them and distances to
+    them: built once per ``key`` for a :class:`fusion.grid_layers.LayerCache` (a map aligned
+    with several others reuses it), else built here. ``None`` when ICP moving ``n_moved``
+    points onto ``walls`` would not use a tree (:data:`fusion.icp.BRUTE_FORCE_MAX_PAIRS`) and
+    none is cached yet."""
+    memo = grid.memo if isinstance(grid, LayerCache) else {}
+    name = ("wall_tree", key)
+    if name not in memo:
+        if len(walls) * n_moved <= BRUTE_FORCE_MAX_PAIRS:
+            return None
+        memo[name] = cKDTree(walls)
+    return memo[name]
+
+
 def _walls(states: np.ndarray, fine: float, origin: Any) -> np.ndarray:
-    rows, cols = np.nonzero(states == OCCUPIED)
+    rows, cols = true_cells(states == OCCUPIED)
     origin = np.asarray(origin, dtype=np.float64)
     return np.stack([origin[0] + (cols + 0.5) * fine, origin[1] + (rows + 0.5) * fine], axis=1)
 
@@ -134,13 +154,15 @@ def native_evidence(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndar
     if len(walls_b) > MAX_NATIVE_POINTS:
         walls_b = walls_b[:: int(math.ceil(len(walls_b) / MAX_NATIVE_POINTS))]
     fine = max(fine_a, fine_b)
+    # A's walls' tree: built once for the ICP passes and the distances below
+    tree = wall_tree(grid_a, walls_a, "native", math.inf)
     if cfg.native_refine and fine <= 0.75 * cfg.resolution:
         sub = walls_b[:: int(math.ceil(len(walls_b) / MAX_NATIVE_ICP_POINTS))]
         # the pooled estimate is within about one pooled cell; then a tighter gate
         estimate = icp_refined(walls_a, sub, estimate, cfg.resolution, cfg.resolution, centre,
-                            cfg, max_iter=15, bound=bound)
+                            cfg, max_iter=15, bound=bound, tree=tree)
         estimate = icp_refined(walls_a, sub, estimate, cfg.resolution, 2.5 * fine, centre, cfg,
-                            max_iter=15, bound=bound)
+                            max_iter=15, bound=bound, tree=tree)
     states_a = cell_states(grid_a)
     ij = np.floor((estimate.apply(walls_b) - np.asarray(grid_a.origin)) / fine_a).astype(int)
     h, w = states_a.shape
@@ -150,8 +172,7 @@ def native_evidence(grid_a: Any, grid_b: Any, estimate: Rigid2D, centre: np.ndar
     if not known.any():
         return estimate, 0.0, 0.0
     pts = (ij[known] + 0.5) * fine_a + np.asarray(grid_a.origin)
-    d = cKDTree(walls_a).query(pts, k=1, distance_upper_bound=NATIVE_DEEP_M + fine_a,
-                               workers=1)[0]
+    d = tree.query(pts, k=1, distance_upper_bound=NATIVE_DEEP_M + fine_a, workers=1)[0]
     near = float(np.mean(d <= NATIVE_NEAR_M))
     deep = float(np.mean((d > NATIVE_DEEP_M) & (on[known] == FREE)))
     return estimate, near, deep

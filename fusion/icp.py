@@ -21,7 +21,8 @@ Speed: in 2-D the SVD of Step 2 has a closed form, ``θ = atan2(Σ d'×m', Σ d'
 the reflection-safe ``U Vᵀ`` (tests check it against :func:`svd_rotation`, the literal Step 2)
 and free of LAPACK call overhead (:func:`rigid_fit`). Small sets find their nearest neighbours
 by one compiled all-pairs pass (:func:`fusion._kernels.match_brute`), large ones by a KD-tree
-(scipy's ``cKDTree``, one thread) built once on ``M``; both feed one loop.
+(scipy's ``cKDTree``, one thread) built once on ``M`` (or passed in, ``tree``) and, with a gate,
+searched no farther than it; both feed one loop.
 """
 
 from __future__ import annotations
@@ -173,20 +174,36 @@ class _TreeMatcher:
 
     scipy's ``cKDTree`` on one thread, the squared distances recomputed from the pairs
     (``dx² + dy²``). One thread: a threaded KD-tree's workers wait for each other's cores on
-    a busy machine, and a query then costs many times more."""
+    a busy machine, and a query then costs many times more. With a gate (``max_d2`` finite)
+    the search stops just beyond it: a point of ``D`` with no point of ``M`` that near is
+    left unpaired (index ``-1``) instead of searched for across the whole set — its pair
+    would be gated out anyway, and the kept pairs, hence every update, are the same (the
+    correspondences repeat as soon as the kept ones do, so ICP may stop one update earlier,
+    on the same transform)."""
 
-    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float) -> None:
-        self.tree = cKDTree(M)
+    def __init__(self, M: np.ndarray, D: np.ndarray, max_d2: float,
+                 tree: cKDTree | None = None) -> None:
+        self.tree = cKDTree(M) if tree is None else tree
         self.M, self.D, self.max_d2 = M, D, max_d2
+        # a little beyond the gate, so that no pair within it is missed by rounding
+        self.reach = math.sqrt(max_d2) * (1.0 + 1e-6) + 1e-12 if max_d2 < math.inf else math.inf
 
     def __call__(self, theta: float, t: np.ndarray, prev_idx: np.ndarray,
                  prev_keep: np.ndarray, idx: np.ndarray, d2: np.ndarray,
                  keep: np.ndarray) -> tuple[float, bool]:
         c, s = math.cos(theta), math.sin(theta)
         moved = self.D @ np.array([[c, s], [-s, c]]) + t
-        idx[:] = self.tree.query(moved, k=1, workers=1)[1]
-        gap = moved - self.M[idx]
-        np.add(gap[:, 0] * gap[:, 0], gap[:, 1] * gap[:, 1], out=d2)
+        if self.reach == math.inf:
+            idx[:] = self.tree.query(moved, k=1, workers=1)[1]
+            gap = moved - self.M[idx]
+            np.add(gap[:, 0] * gap[:, 0], gap[:, 1] * gap[:, 1], out=d2)
+        else:
+            idx[:] = self.tree.query(moved, k=1, workers=1, distance_upper_bound=self.reach)[1]
+            found = idx < len(self.M)
+            idx[~found] = -1
+            d2[~found] = math.inf
+            gap = moved[found] - self.M[idx[found]]
+            d2[found] = gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]
         np.less_equal(d2, self.max_d2, out=keep)
         same = np.array_equal(idx, prev_idx) and np.array_equal(keep, prev_keep)
         return float(d2[keep].sum()), bool(same)
@@ -216,6 +233,7 @@ def icp_svd(
     *,
     max_distance: float | None = None,
     trim: float | None = None,
+    tree: cKDTree | None = None,
 ) -> IcpResult:
     """Register point set ``D`` onto the fixed point set ``M`` with the paper's ICP-SVD.
 
@@ -231,6 +249,9 @@ def icp_svd(
             gating, as Open3D's ``max_correspondence_distance``); ``None`` keeps all (the paper).
         trim: keep only this fraction of the closest pairs in each update (TrICP), in ``(0, 1]``;
             ``None`` keeps all (the paper).
+        tree: a ``scipy.spatial.cKDTree`` already built on ``M`` (its default options), used
+            instead of building one when the sets are large enough for a tree (results are the
+            same): a caller aligning many sets onto one ``M`` builds it once.
 
     Whatever the rules, ICP also stops (converged) when the correspondences repeat, since the
     next update would then be the identity. Without ``max_distance``/``trim`` the objective
@@ -240,10 +261,12 @@ def icp_svd(
         :class:`IcpResult`.
 
     Raises:
-        TypeError: ``M``/``D`` not numeric arrays, ``init`` not a ``Rigid2D``.
+        TypeError: ``M``/``D`` not numeric arrays, ``init`` not a ``Rigid2D``, ``tree`` not a
+            ``cKDTree``.
         ValueError: shapes other than ``(N, 2)``, fewer than two points or more than
             :data:`fusion.inputs.MAX_POINTS`, NaN/inf, ``tau <= 0``,
-            ``max_iter < 1``, ``rel_tol <= 0``, ``max_distance <= 0``, ``trim`` outside ``(0, 1]``.
+            ``max_iter < 1``, ``rel_tol <= 0``, ``max_distance <= 0``, ``trim`` outside ``(0, 1]``,
+            a ``tree`` not built on ``M``.
 
     Example (the paper's full-overlap case is recovered exactly):
         >>> import numpy as np
@@ -256,16 +279,27 @@ def icp_svd(
     M = check_point_count(as_points(M, "M", min_points=2), "M")
     D = check_point_count(as_points(D, "D", min_points=2), "D")
     _check_options(tau, max_iter, rel_tol, max_distance, trim, init)
-    return icp_checked(M, D, tau, max_iter, init, rel_tol, max_distance, trim)
+    if tree is not None:
+        _check_tree(tree, M)
+    return icp_checked(M, D, tau, max_iter, init, rel_tol, max_distance, trim, tree)
+
+
+def _check_tree(tree: object, M: np.ndarray) -> None:
+    if not isinstance(tree, cKDTree):
+        raise TypeError(f"tree must be a scipy.spatial.cKDTree or None, got "
+                        f"{type(tree).__name__}")
+    if tree.data.shape != M.shape or not np.array_equal(tree.data, M):
+        raise ValueError(f"tree must be built on M: it holds {tree.data.shape[0]} points of "
+                         f"dimension {tree.data.shape[1]}, M {M.shape[0]} other points")
 
 
 def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
                 init: Rigid2D | None, rel_tol: float | None, max_distance: float | None,
-                trim: float | None) -> IcpResult:
+                trim: float | None, tree: cKDTree | None = None) -> IcpResult:
     """:func:`icp_svd` without its argument checks, for callers whose inputs are valid by
     construction (``M``, ``D``: finite float64 ``(N, 2)`` arrays of at least 2 points; options
-    within :func:`icp_svd`'s ranges): the merge refines many small alignments, where the
-    checks would cost a good part of each."""
+    within :func:`icp_svd`'s ranges; ``tree`` ``None`` or a ``cKDTree`` built on ``M``): the
+    merge refines many small alignments, where the checks would cost a good part of each."""
     m_moments, d_moments = spread(M), spread(D)
     degenerate = moments_degeneracy(m_moments, "M") or moments_degeneracy(d_moments, "D")
 
@@ -278,9 +312,12 @@ def icp_checked(M: np.ndarray, D: np.ndarray, tau: float | None, max_iter: int,
     n_trim = len(D) if trim is None else max(2, math.ceil(trim * len(D)))
     rule_tau = -1.0 if tau is None else tau  # the stopping rules, off when negative
     rule_rel = -1.0 if rel_tol is None else rel_tol
-    matcher = _BruteMatcher if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS else _TreeMatcher
+    if len(M) * len(D) <= BRUTE_FORCE_MAX_PAIRS:
+        matcher = _BruteMatcher(M, D, max_d2)
+    else:
+        matcher = _TreeMatcher(M, D, max_d2, tree)
     theta, t, iterations, errors, converged, idx, keep, short = _icp_loop(
-        matcher(M, D, max_d2), M, D, theta, t, n_trim, rule_tau, rule_rel, max_iter)
+        matcher, M, D, theta, t, n_trim, rule_tau, rule_rel, max_iter)
     if short >= 0:
         degenerate = degenerate or (
             f"only {short} pair(s) within max_distance/trim: transform not updated")

@@ -601,6 +601,19 @@ def test_layer_cache_gives_the_grids_own_layers_and_merge():
     t, tc = refine_with_grids(grid_a, grid_b, r.transform), refine_with_grids(cache_a, cache_b,
                                                                              r.transform)
     assert t.theta == tc.theta and np.array_equal(t.T, tc.T)
+    # A's wall trees were built once and are reused: a second merge gives the same result
+    trees = {k: v for k, v in cache_a.memo.items() if k[0] == "wall_tree"}
+    assert ("wall_tree", "native") in trees and ("wall_tree", ("pooled", 0.2)) in trees
+    # so are A's score layers and B's cell centres, read-only
+    kept = {k: v for k, v in {**cache_a.memo, **cache_b.memo}.items()
+            if k[0] in ("score_layers", "centres")}
+    assert ("score_layers", 0.2, 1.0, 0.05) in kept and ("centres", 0.2) in kept
+    assert not any(a.flags.writeable for v in kept.values() for a in v)
+    again = merge_grids(cache_a, cache_b)
+    assert all(cache_a.memo[k] is v for k, v in trees.items())
+    assert all({**cache_a.memo, **cache_b.memo}[k] is v for k, v in kept.items())
+    assert (again.transform.theta, tuple(again.transform.T), again.confidence) == (
+        r.transform.theta, tuple(r.transform.T), r.confidence)
 
 
 @pytest.mark.parametrize("deg", [37.0, 251.0])
@@ -641,3 +654,25 @@ def test_blocks_merge_pooled_cells_by_the_layers_rule():
     np.testing.assert_array_equal(wb, [[True, False], [False, False], [False, False]])
     np.testing.assert_array_equal(fb, [[False, False], [True, False], [False, False]])
     np.testing.assert_array_equal(origin, [1.0, 2.0])
+
+
+@pytest.mark.parametrize("shape", [(0, 5), (3, 0), (2, 3), (40, 70)])
+def test_true_cells_is_nonzero(shape):
+    """true_cells gives np.nonzero's rows and columns, in its order and dtype."""
+    from fusion.grid_layers import true_cells
+
+    mask = np.random.default_rng(len(shape) + shape[0]).random(shape) < 0.3
+    for got, want in zip(true_cells(mask), np.nonzero(mask), strict=True):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("shape", [(0, 3), (1, 7), (7, 1), (60, 45)])
+def test_dilated_is_scipys_binary_dilation(shape):
+    """dilated: scipy.ndimage.binary_dilation with its default cross, one iteration."""
+    from scipy import ndimage
+
+    from fusion.grid_layers import dilated
+
+    mask = np.random.default_rng(shape[0]).random(shape) < 0.1
+    np.testing.assert_array_equal(dilated(mask), ndimage.binary_dilation(mask, iterations=1))

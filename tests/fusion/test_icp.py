@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
+from scipy.spatial import cKDTree
 
 from fusion import Rigid2D, icp_svd, svd_rotation
 from fusion import icp as icp_module
@@ -71,6 +72,43 @@ def test_brute_force_and_kd_tree_paths_agree(monkeypatch):
     np.testing.assert_array_equal(brute.correspondences, tree.correspondences)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_gated_kd_tree_search_gives_the_brute_force_transform(seed, monkeypatch):
+    """With a gate the KD-tree stops searching beyond it: unshared points stay unpaired, and
+    the transform is bit for bit the all-pairs one (at most one update fewer)."""
+    rng = np.random.default_rng(seed)
+    M = spread_points(seed, 300)
+    truth = Rigid2D.from_degrees(rng.uniform(-4, 4), rng.uniform(-0.3, 0.3, 2))
+    D = np.vstack([truth.inverse().apply(M[:200]) + rng.normal(0, 0.03, (200, 2)),
+                   rng.uniform(30, 40, (40, 2))])  # 40 points far from any of M
+    kw = {"tau": None, "rel_tol": 1e-9, "max_distance": 0.4, "trim": 0.9,
+          "init": Rigid2D.identity()}
+    monkeypatch.setattr(icp_module, "BRUTE_FORCE_MAX_PAIRS", 10**9)
+    brute = icp_svd(M, D, **kw)
+    monkeypatch.setattr(icp_module, "BRUTE_FORCE_MAX_PAIRS", 0)
+    tree = icp_svd(M, D, **kw)
+    assert brute.transform.theta == tree.transform.theta
+    np.testing.assert_array_equal(brute.T, tree.T)
+    np.testing.assert_array_equal(brute.correspondences, tree.correspondences)
+    assert (tree.correspondences[-40:] == -1).all()
+    assert 0 <= brute.iterations - tree.iterations <= 1 and tree.converged
+
+
+def test_prebuilt_tree_gives_the_same_result(monkeypatch):
+    """A KD-tree built once on M and passed in is what icp_svd would build itself."""
+    M = spread_points(4, 300)
+    truth = Rigid2D.from_degrees(3.0, (0.2, -0.1))
+    D = truth.inverse().apply(M)[::3] + np.random.default_rng(1).normal(0, 0.02, (100, 2))
+    monkeypatch.setattr(icp_module, "BRUTE_FORCE_MAX_PAIRS", 0)
+    kw = {"tau": None, "rel_tol": 1e-9, "max_distance": 0.5, "trim": 0.8}
+    own = icp_svd(M, D, **kw)
+    given_tree = icp_svd(M, D, tree=cKDTree(M), **kw)
+    assert own.transform.theta == given_tree.transform.theta
+    np.testing.assert_array_equal(own.T, given_tree.T)
+    np.testing.assert_array_equal(own.errors, given_tree.errors)
+    np.testing.assert_array_equal(own.correspondences, given_tree.correspondences)
+
+
 def test_paper_init_and_tau():
     M = spread_points(0, 25)
     truth = Rigid2D.from_degrees(3.0, (20.0, -7.0))  # large shift: Step 1 aligns centroids
@@ -129,6 +167,10 @@ def test_degenerate_geometry_is_reported_not_nan():
         ({"trim": 1.5}, ValueError, r"trim must be <= 1.0, got 1.5"),
         ({"max_distance": 0}, ValueError, "max_distance must be > 0.0, got 0.0"),
         ({"init": np.eye(3)}, TypeError, "init must be a fusion.Rigid2D or None, got ndarray"),
+        ({"tree": np.eye(2)}, TypeError, "tree must be a scipy.spatial.cKDTree or None, got "
+                                         "ndarray"),
+        ({"tree": cKDTree([[0, 0], [1, 0]])}, ValueError,
+         "tree must be built on M: it holds 2 points of dimension 2, M 3 other points"),
     ],
 )
 def test_bad_input(kwargs, error, match):
