@@ -259,13 +259,7 @@ class PoseGraph:
 
     def corrected_poses(self, robot: int, frame: int | None = None) -> list[Rigid2D]:
         """:meth:`trajectory` as :class:`fusion.Rigid2D` poses."""
-        frame = robot if frame is None else self._robot(frame, "frame")
-        self._robot(robot, "robot")
-        self.optimise()
-        if frame not in self.component(robot):
-            raise ValueError(f"robot {frame} is not in robot {robot}'s component "
-                             f"{sorted(self.component(robot))}")
-        to_frame = self._pin(frame).inverse()
+        to_frame = self._to_frame(self._robot(robot, "robot"), frame)
         return [to_frame @ self._estimate[(robot, k)]
                 for k in range(len(self._chains[robot].poses))]
 
@@ -280,13 +274,9 @@ class PoseGraph:
         k = check_int(index, "index", low=-len(poses))
         if k >= len(poses):
             raise ValueError(f"index must be < {len(poses)} (robot {robot}'s anchors), got {k}")
-        frame = robot if frame is None else self._robot(frame, "frame")
-        self.optimise()
-        if frame not in self.component(robot):
-            raise ValueError(f"robot {frame} is not in robot {robot}'s component "
-                             f"{sorted(self.component(robot))}")
+        to_frame = self._to_frame(robot, frame)
         k %= len(poses)
-        return self._pin(frame).inverse() @ self._estimate[(robot, k)] @ poses[k].inverse()
+        return to_frame @ self._estimate[(robot, k)] @ poses[k].inverse()
 
     def corrections(self, robot: int, frame: int | None = None) -> list[Rigid2D]:
         """Per anchor of ``robot``, the motion taking what the robot mapped near that anchor
@@ -461,6 +451,17 @@ class PoseGraph:
         for r in robots:
             for k in range(len(self._chains[r].poses)):
                 self._estimate[(r, k)] = _rigid(values.atPose2(_key(gtsam, r, k)))
+
+    def _to_frame(self, robot: int, frame: int | None) -> Rigid2D:
+        """The optimised graph's motion from ``robot``'s component frame into ``frame``'s
+        odometry frame (default: ``robot``'s own), after checking ``frame`` is in that
+        component."""
+        frame = robot if frame is None else self._robot(frame, "frame")
+        self.optimise()
+        if frame not in self.component(robot):
+            raise ValueError(f"robot {frame} is not in robot {robot}'s component "
+                             f"{sorted(self.component(robot))}")
+        return self._pin(frame).inverse()
 
     def _pin(self, robot: int) -> Rigid2D:
         """``robot``'s odometry frame in its component's frame, pinned at its first anchor."""
