@@ -132,7 +132,7 @@ def judged(pair: dict, b: InputMap, estimate: Rigid2D | None) -> dict:
                                                       float(estimate.theta)]}
     if pair["truth"] is None or estimate is None:
         return out
-    truth = Rigid2D(float(pair["truth"][2]), pair["truth"][:2])
+    truth = Rigid2D.from_pose(pair["truth"])
     centre = b.frame.apply(b.centre()[None])[0]
     rot = math.degrees(estimate.rotation_error(truth))
     trans = float(estimate.translation_error(truth, at=centre))

@@ -88,6 +88,18 @@ class Rigid2D:
         return cls(0.0, (0.0, 0.0))
 
     @classmethod
+    def from_pose(cls, pose: Any) -> Rigid2D:
+        """The motion placing a frame at ``pose`` = ``(x, y, theta)`` (a robot's pose: its
+        frame → the world's), so that ``from_pose(p).apply((0, 0)) == (x, y)``.
+
+        Raises:
+            ValueError: ``pose`` does not hold 3 numbers (or they are not finite).
+        """
+        if isinstance(pose, (str, bytes)) or len(pose) != 3:
+            raise ValueError(f"pose must be (x, y, theta), got {pose!r}")
+        return cls(float(pose[2]), (float(pose[0]), float(pose[1])))
+
+    @classmethod
     def from_degrees(cls, degrees: float, T: Any = (0.0, 0.0)) -> Rigid2D:
         return cls(math.radians(check_real(degrees, "degrees")), T)
 

@@ -116,7 +116,7 @@ class EpisodeHooks:
         self.caster = RayCaster(world.segments, cfg.robot.radius, robots=n)
         self.sonars = [Sonar(cfg.sonar, cfg.robot.radius) for _ in range(n)]
         # map frames: each robot's start; the truth frame_i -> world is its start pose
-        self.frames = [Rigid2D(float(s[2]), (float(s[0]), float(s[1]))) for s in starts]
+        self.frames = [Rigid2D.from_pose(s) for s in starts]
         self._truths = [[f_i.inverse() @ f_j for f_j in self.frames] for f_i in self.frames]
         self.true_merge = self._truths[0][1]
         x0, y0, x1, y1 = world.extent

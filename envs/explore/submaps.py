@@ -115,7 +115,7 @@ class RobotSubmaps:
             math.sqrt(pos_var), math.sqrt(pos_var), math.sqrt(self._var[1])))
         self._var = [0.0, 0.0]
         self._swing = []
-        self.poses.append(Rigid2D(float(odometry[2]), (float(odometry[0]), float(odometry[1]))))
+        self.poses.append(Rigid2D.from_pose(odometry))
         self.truths.append(np.array(truth, dtype=np.float64))
         self.scans.append([])
         return len(self.poses) - 1

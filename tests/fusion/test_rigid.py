@@ -79,3 +79,13 @@ def test_from_matrix_refuses_reflections():
         Rigid2D.from_matrix([[1, 0], [0, -1]])
     with pytest.raises(ValueError, match=r"last row must be \[0, 0, 1\]"):
         Rigid2D.from_matrix([[1, 0, 0], [0, 1, 0], [1, 0, 1]])
+
+
+def test_from_pose_places_a_frame_at_the_pose():
+    t = Rigid2D.from_pose(np.array([2.0, -1.0, math.pi / 2]))
+    assert np.allclose(t.apply(np.array([[0.0, 0.0], [1.0, 0.0]])), [[2.0, -1.0], [2.0, 0.0]])
+    assert t.allclose(Rigid2D(math.pi / 2, (2.0, -1.0)))
+    with pytest.raises(ValueError, match=r"pose must be \(x, y, theta\), got \(1.0, 2.0\)"):
+        Rigid2D.from_pose((1.0, 2.0))
+    with pytest.raises(ValueError, match="theta must be finite"):
+        Rigid2D.from_pose((0.0, 0.0, float("nan")))
