@@ -38,7 +38,7 @@ import torch
 from agents.base import run_episode
 from agents.registry import EXPLORERS, make_team
 from envs import multi_robot_explore_v0, two_robot_explore_v0
-from envs.explore.graph_merging import LINK_SIGMAS, GraphMerging, LinkRecord
+from envs.explore.graph_merging import GraphMerging
 from fusion import Rigid2D
 
 RIGHT_DEG, RIGHT_M = 5.0, 0.5
@@ -59,16 +59,9 @@ def oracle_align(self, i: int, ei: int, j: int, ej: int) -> bool:
         return False
     half = 0 if ORACLE_AT_LAST else w // 2
     a, b = ei - half, ej - half
-    ta, tb = (Rigid2D(float(p[2]), (float(p[0]), float(p[1])))
-              for p in (self.submaps[i].truths[a], self.submaps[j].truths[b]))
-    relative = ta.inverse() @ tb
-    if i == j:
-        taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, 1.0)
-    else:
-        self.graph.add_link((i, a), (j, b), relative, LINK_SIGMAS, 1.0)
-        taken = True
-    self.records.append(LinkRecord(i, a, j, b, relative, 1.0, taken))
-    return taken
+    ta = Rigid2D.from_pose(self.submaps[i].truths[a])
+    tb = Rigid2D.from_pose(self.submaps[j].truths[b])
+    return self.add_alignment(i, a, j, b, ta.inverse() @ tb, 1.0)
 
 
 def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,

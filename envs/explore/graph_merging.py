@@ -74,10 +74,6 @@ class LinkRecord:
     taken: bool
 
 
-def _rigid(pose: np.ndarray) -> Rigid2D:
-    return Rigid2D(float(pose[2]), (float(pose[0]), float(pose[1])))
-
-
 class GraphMerging:
     """The team's pose-graph merging for one episode (module docstring).
 
@@ -214,7 +210,15 @@ class GraphMerging:
                 return False
             transform, confidence = result.transform, float(result.confidence)
         xa, xb = self.submaps[i].poses[a], self.submaps[j].poses[b]
-        relative = xa.inverse() @ transform @ xb
+        return self.add_alignment(i, a, j, b, xa.inverse() @ transform @ xb, confidence)
+
+    def add_alignment(self, i: int, a: int, j: int, b: int, relative: Rigid2D,
+                      confidence: float) -> bool:
+        """Anchor ``b`` of robot ``j`` placed in anchor ``a``'s frame of robot ``i``
+        (``relative``) into the graph: a loop closure if ``i == j`` (``True`` if the graph
+        took it), else a link (``True``; its fate is decided with its pair's others), and
+        recorded (:attr:`records`). What every accepted window alignment becomes — and what a
+        benchmark's oracle aligner calls with the truth."""
         if i == j:
             taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, confidence)
         else:
@@ -258,8 +262,8 @@ class GraphMerging:
                ) -> tuple[float, float]:
         """Rotation (degrees) and translation (metres) error of ``relative`` (anchor ``b``
         in anchor ``a``'s frame) against the anchors' true poses."""
-        ta = _rigid(self.submaps[a[0]].truths[a[1]])
-        tb = _rigid(self.submaps[b[0]].truths[b[1]])
+        ta = Rigid2D.from_pose(self.submaps[a[0]].truths[a[1]])
+        tb = Rigid2D.from_pose(self.submaps[b[0]].truths[b[1]])
         err = (ta.inverse() @ tb).inverse() @ relative
         return abs(math.degrees(err.theta)), float(np.hypot(*err.T))
 
