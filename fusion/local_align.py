@@ -61,18 +61,19 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
     step_deg = check_real(step_deg, "step_deg", low=0.0, high=180.0)
     reach_m = check_real(reach_m, "reach_m", low=0.0, low_inclusive=True)
     cfg = config or GridMergeConfig()
-    walls_a, res = native_walls(grid_a)
+    walls_a = cell_states(grid_a) == OCCUPIED
+    res = float(grid_a.resolution)
     side = 2 * int(reach_m / res + 1e-9) + 1
     if side * side > MAX_TRANSLATIONS:
         raise ValueError(f"reach_m={reach_m} gives {side * side} translations a rotation on "
                          f"grid_a's {res} m cells (at most {MAX_TRANSLATIONS}): search a "
                          f"smaller box")
     walls_b, _ = native_walls(grid_b)
-    if len(walls_a) < 10 or len(walls_b) < 10:
+    if np.count_nonzero(walls_a) < 10 or len(walls_b) < 10:
         return None
     if len(walls_b) > MAX_WALL_POINTS:
         walls_b = walls_b[:: math.ceil(len(walls_b) / MAX_WALL_POINTS)]
-    field = _likelihood_field(grid_a)
+    field = _likelihood_field(walls_a)
     origin = np.asarray(grid_a.origin, dtype=np.float64)
     offsets = np.arange(-reach_m, reach_m + 1e-9, res)
     ox, oy = (v.ravel() for v in np.meshgrid(offsets, offsets))
@@ -95,11 +96,10 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
     return best if check_with_grids(grid_a, grid_b, best, cfg) is None else None
 
 
-def _likelihood_field(grid: Any) -> np.ndarray:
-    """``exp(−d² / 2σ²)`` of each cell's distance ``d`` (in cells) to ``grid``'s nearest wall
-    cell (σ = 1.5 cells): how well a wall point landing there agrees."""
-    dist = ndimage.distance_transform_edt(cell_states(grid) != OCCUPIED)
-    return np.exp(-0.5 * (dist / 1.5) ** 2)
+def _likelihood_field(walls: np.ndarray) -> np.ndarray:
+    """``exp(−d² / 2σ²)`` of each cell's distance ``d`` (in cells) to the nearest true cell of
+    ``walls`` (σ = 1.5 cells): how well a wall point landing there agrees."""
+    return np.exp(-0.5 * (ndimage.distance_transform_edt(~walls) / 1.5) ** 2)
 
 
 __all__ = ["MAX_TRANSLATIONS", "MAX_WALL_POINTS", "align_near"]
