@@ -82,7 +82,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from team_size import add_run_arguments, append_row, read_rows, run_all
+from team_size import add_run_arguments, append_row, run_all
 
 import fusion.grid_merge as grid_merge
 import fusion.hybrid as hybrid
@@ -92,6 +92,7 @@ from envs import multi_robot_explore_v0, two_robot_explore_v0
 from envs.explore.config import RobotConfig
 from envs.explore.drift import drift_aware_error, odometry_noise_level
 from envs.explore.robot import start_frame_pose
+from topo.fileio import read_json_lines
 
 WRONG_DEG, WRONG_M = 5.0, 1.0
 """Two robots: wrong is more than this off (a teammate's rooms on the wrong rooms)."""
@@ -343,7 +344,7 @@ def team_tables(rows: list[dict[str, Any]]) -> str:
 
 def team_main(args: argparse.Namespace) -> None:
     """The team run: the episodes not yet in ``--out``, then the tables."""
-    rows = read_rows(args.out)
+    rows = read_json_lines(args.out)
     wanted = [(seed, args.robots, args.size, args.steps, check == "on", args.comm_range)
               for seed in range(args.first_seed, args.first_seed + args.worlds)
               for check in args.checks]

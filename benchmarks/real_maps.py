@@ -43,7 +43,7 @@ import math
 import statistics
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +58,11 @@ from fusion.evaluation.results import is_success  # noqa: E402
 from fusion.grid_merge import GridMergeConfig, merge_grids  # noqa: E402
 from fusion.mapmerge import InputMap, load_input, resampled  # noqa: E402
 from fusion.rigid import Rigid2D  # noqa: E402
-from topo.fileio import atomic_write_bytes  # noqa: E402
+from topo.fileio import (  # noqa: E402
+    atomic_write_bytes,
+    atomic_write_json_lines,
+    read_json_lines,
+)
 
 FORMAT = "topomerge.real_pairs"
 """The manifest's ``format`` (version 1)."""
@@ -179,19 +183,6 @@ def run_orb(orb_rigid: Any, pair: dict, a: InputMap, b: InputMap) -> dict:
     return row
 
 
-def read_rows(path: Path) -> list[dict]:
-    """The rows of a JSON-lines file (none when it does not exist)."""
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-
-
-def write_rows(path: Path, rows: Iterable[dict]) -> None:
-    """Write ``rows`` as JSON lines, atomically."""
-    text = "".join(json.dumps(r, allow_nan=False) + "\n" for r in rows)
-    atomic_write_bytes(path, text.encode())
-
-
 def evaluate(pairs: Sequence[dict], methods: Sequence[str], out: Path) -> dict[str, list[dict]]:
     """Run ``methods`` on ``pairs``, appending to ``OUT/<method>.jsonl`` (pairs already there
     are skipped); returns every method's rows for ``pairs``."""
@@ -204,7 +195,7 @@ def evaluate(pairs: Sequence[dict], methods: Sequence[str], out: Path) -> dict[s
                 runners[m] = lambda p, a, b, orb=orb: run_orb(orb, p, a, b)
         else:
             runners[m] = run_grid
-    rows = {m: read_rows(out / f"{m}.jsonl") for m in runners}
+    rows = {m: read_json_lines(out / f"{m}.jsonl") for m in runners}
     done = {m: {r["id"] for r in rs} for m, rs in rows.items()}
     for k, pair in enumerate(pairs):
         todo = [m for m in runners if pair["id"] not in done[m]]
@@ -220,7 +211,7 @@ def evaluate(pairs: Sequence[dict], methods: Sequence[str], out: Path) -> dict[s
                             # the calibration's row keys (fusion.calibration.rows)
                             "set": f"real_pairs_{pair['split']}", "pair": pair["id"],
                             "world": pair["building"], "way": "ab", **row})
-            write_rows(out / f"{m}.jsonl", rows[m])
+            atomic_write_json_lines(out / f"{m}.jsonl", rows[m], allow_nan=False)
         print(f"{k + 1}/{len(pairs)} {pair['id']}: " + ", ".join(
             f"{m} {'accepted' if r['accepted'] else 'rejected'} "
             f"{'right' if r['right'] else 'wrong'}"

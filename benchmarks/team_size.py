@@ -49,7 +49,6 @@ ratio T85(range-limited) / T85(unlimited), what the range costs.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import statistics
@@ -63,7 +62,7 @@ from typing import Any
 
 from _poses import split_poses, with_merge_method
 
-from topo.fileio import atomic_write_bytes
+from topo.fileio import atomic_write_json_lines, read_json_lines
 
 LEVELS = (0.5, 0.85, 0.95)
 """The coverage levels timed (T50, T85, T95)."""
@@ -77,19 +76,11 @@ QUICK = {"ns": [2, 4, 8], "seeds": 2}
 
 
 # ----------------------------------------------------------------------------- the results file
-def read_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows of a JSON-lines results file (none if it does not exist)."""
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-
-
 def append_row(path: Path, rows: list[dict[str, Any]], row: dict[str, Any]) -> None:
     """Add ``row`` to ``rows`` and rewrite ``path`` with them all, atomically (a crash leaves
     the file as it was before or after, never half a line)."""
     rows.append(row)
-    text = "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows)
-    atomic_write_bytes(path, text.encode())
+    atomic_write_json_lines(path, rows, sort_keys=True)
 
 
 def run_all(fn: Callable[..., dict[str, Any]], tasks: list[tuple], jobs: int
@@ -373,7 +364,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    rows = read_rows(args.out)
+    rows = read_json_lines(args.out)
     if not args.table_only:
         done = {cell_key(r) for r in rows}
         todo = [c for c in planned(args) if c not in done]

@@ -1,7 +1,7 @@
 """File writing shared by every package: atomic writes (write to a temporary file in the target's
-folder, flush and fsync it, then rename it into place — a file exists whole or not at all), JSON
-and whole folders written that way, and an exclusive lock file (one writer of a folder at a
-time)."""
+folder, flush and fsync it, then rename it into place — a file exists whole or not at all), JSON,
+JSON lines and whole folders written that way, JSON lines read back, and an exclusive lock file
+(one writer of a folder at a time)."""
 
 from __future__ import annotations
 
@@ -50,6 +50,31 @@ def atomic_write_json(path: str | Path, obj: Any, *, allow_nan: bool = True) -> 
     ``allow_nan=False`` refuses NaN/inf (strict JSON) instead of writing ``NaN``."""
     text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=allow_nan) + "\n"
     return atomic_write_bytes(path, text.encode())
+
+
+def atomic_write_json_lines(path: str | Path, rows: Any, *, sort_keys: bool = False,
+                           allow_nan: bool = True) -> Path:
+    """Write ``rows`` (JSON-encodable objects) one per line, atomically; returns the path.
+    Results files that grow a row at a time are rewritten whole this way, so a crash leaves
+    the file as it was before or after, never half a line."""
+    text = "".join(json.dumps(r, sort_keys=sort_keys, allow_nan=allow_nan) + "\n" for r in rows)
+    return atomic_write_bytes(path, text.encode())
+
+
+def read_json_lines(path: str | Path) -> list[Any]:
+    """The rows of a JSON-lines file (blank lines skipped), or of a file holding one JSON list;
+    ``[]`` when ``path`` does not exist (a results file not yet begun).
+
+    Raises:
+        json.JSONDecodeError: a line (or the list) is not JSON.
+    """
+    path = Path(path)
+    if not path.exists():
+        return []
+    text = path.read_text()
+    if text.lstrip().startswith("["):
+        return json.loads(text)
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
 
 
 def atomic_write_dir(path: str | Path, write: Callable[[Path], object]) -> Path:

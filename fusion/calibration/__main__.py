@@ -49,7 +49,7 @@ from fusion.calibration.fit import (
 from fusion.calibration.report import held_out_report, print_fit, print_ranking
 from fusion.calibration.rows import DATA, collect, default_dirs
 from fusion.decision import DEFAULT_RULE
-from topo.fileio import atomic_write_json
+from topo.fileio import atomic_write_json, read_json_lines
 
 SCRIPT = "python -m fusion.calibration fit"
 
@@ -97,17 +97,14 @@ def parser() -> argparse.ArgumentParser:
 
 
 def read_rows(path: Path) -> list[dict]:
-    """The rows of a JSON list or JSON-lines file.
+    """The rows of ``--rows`` file ``path`` (JSON lines or a JSON list).
 
     Raises:
         ValueError: a missing file (named).
     """
     if not path.is_file():
         raise ValueError(f"--rows: {path} not found")
-    text = path.read_text()
-    if text.lstrip().startswith("["):
-        return json.loads(text)
-    return [json.loads(line) for line in text.splitlines() if line.strip()]
+    return read_json_lines(path)
 
 
 def main(argv: list[str] | None = None) -> int:

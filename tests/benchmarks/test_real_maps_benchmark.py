@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from topo.fileio import read_json_lines
 from topo.maps import FloorPlan, load_ros_map, save_ros_map
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -54,7 +55,7 @@ def test_rows_judge_the_estimate_against_the_truth_and_a_rerun_resumes(tmp_path,
     path = manifest(tmp_path)
     out = tmp_path / "out"
     assert real_maps.main(["--pairs", str(path), "--split", "all", "--out", str(out)]) == 0
-    rows = {r["id"]: r for r in real_maps.read_rows(out / "grid.jsonl")}
+    rows = {r["id"]: r for r in read_json_lines(out / "grid.jsonl")}
     assert set(rows) == {"p0", "x0"}
     p0, x0 = rows["p0"], rows["x0"]
     assert p0["right"] and p0["rotation_error_deg"] < 1.0 and p0["translation_error_m"] < 0.2

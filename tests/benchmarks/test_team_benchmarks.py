@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from topo.fileio import read_json_lines
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # their shared helpers, as when run
 
@@ -36,7 +38,7 @@ def test_team_size_runs_resumes_and_prints(tmp_path, capsys):
     argv = ["--sizes", "10", "--cycles-per-metre", "2", "--ns", "2", "3", "--seeds", "1",
             "--explorers", "frontier", "--comms", "unlimited", "5", "--out", str(out)]
     ts.main(argv)
-    rows = ts.read_rows(out)
+    rows = read_json_lines(out)
     # Frontier ignores the range: its limited-range episodes are not run
     assert sorted((r["n"], r["comm"]) for r in rows) == [(2, "unlimited"), (3, "unlimited")]
     assert all(r["steps"] == 20 and r["max_cycles"] == 20 for r in rows)
@@ -44,7 +46,7 @@ def test_team_size_runs_resumes_and_prints(tmp_path, capsys):
     assert "| frontier | 10 | unlimited | 3 | 1 |" in text and "T85(N) / T85(2)" in text
     ts.main(argv)  # resumed: nothing left to run
     assert "0 episodes to run" in capsys.readouterr().out
-    assert len(ts.read_rows(out)) == 2
+    assert len(read_json_lines(out)) == 2
 
 
 def test_team_size_known_poses_team_fuses_from_the_start():
@@ -89,7 +91,7 @@ def test_team_size_rejects_bad_arguments():
 def test_team_merge_in_loop_runs_both_checks(tmp_path, capsys):
     out = tmp_path / "merge.jsonl"
     mil.main(["--robots", "3", "--worlds", "1", "--steps", "20", "--size", "10", "--out", str(out)])
-    rows = ts.read_rows(out)
+    rows = read_json_lines(out)
     assert sorted(r["cycle_check"] for r in rows) == [False, True]
     assert all(0 <= r["gross"] <= r["wrong"] <= r["merged"] and r["steps"] == 20 for r in rows)
     assert "| cycle check | episodes | merged robot-steps |" in capsys.readouterr().out

@@ -53,3 +53,19 @@ def test_a_failed_move_into_place_puts_the_old_folder_back(tmp_path, monkeypatch
         atomic_write_dir(target, lambda f: (f / "a.txt").write_text("new"))
     assert (target / "a.txt").read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["ckpt"]
+
+
+def test_json_lines_round_trip_and_a_missing_file_is_empty(tmp_path):
+    from topo.fileio import atomic_write_json_lines, read_json_lines
+
+    path = tmp_path / "rows.jsonl"
+    assert read_json_lines(path) == []
+    rows = [{"b": 1, "a": [1.5, None]}, {"c": "x"}]
+    atomic_write_json_lines(path, rows, sort_keys=True)
+    assert path.read_text().splitlines()[0] == '{"a": [1.5, null], "b": 1}'
+    assert read_json_lines(path) == rows
+    (tmp_path / "list.json").write_text('[{"a": 1}, {"a": 2}]')
+    assert read_json_lines(tmp_path / "list.json") == [{"a": 1}, {"a": 2}]
+    with pytest.raises(ValueError, match="Out of range float values"):
+        atomic_write_json_lines(path, [{"a": float("nan")}], allow_nan=False)
+    assert read_json_lines(path) == rows  # a refused write leaves the file as it was
