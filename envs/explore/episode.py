@@ -272,22 +272,35 @@ class EpisodeHooks:
 
     def _fused_states(self, r: int) -> np.ndarray:
         """Robot ``r``'s fused map now (``fused_map``): ``(H, W)`` int8 cell states on its own
-        grid, a new array. With the pose graph its component's patches composed at their
-        corrections (its own grid while it has no teammate and no loop closure); else its own
-        map with the teammates it holds moved in by the rigid frames in use
-        (:func:`fused_states`)."""
+        grid, a new array (:meth:`_fused_window` pasted on unknown)."""
+        out = np.zeros_like(self.maps[r].states)
+        fused = self._fused_window(r)
+        if fused is not None:
+            (rows, cols), states = fused
+            out[rows, cols] = states
+        return out
+
+    def _fused_window(self, r: int) -> tuple[tuple[slice, slice], np.ndarray] | None:
+        """Robot ``r``'s fused map as the window of its own grid holding every known cell and
+        a new int8 array of the states there (``None`` before its first scan): with the pose
+        graph its component's patches composed at their corrections (its own grid while it
+        has no teammate and no loop closure); else its own map with the teammates it holds
+        moved in by the rigid frames in use (:func:`fused_states`). The one compositor of
+        ``fused_map`` and the renderer's fused panel."""
         own = self.maps[r]
         graph = self._graph
-        if graph is not None and not graph.trivial(r):
-            return own.grid.model.classify(graph.fused_log_odds(r, self.maps))
-        out = own.states.copy()
         if graph is None:
-            fused = fused_states(own, [(self.views.view(r, j), to_r) for j, (to_r, _)
-                                       in sorted(self._merging.frames[r].items()) if j != r])
-            if fused is not None:
-                (rows, cols), states = fused
-                out[rows, cols] = states
-        return out
+            return fused_states(own, [(self.views.view(r, j), to_r) for j, (to_r, _)
+                                      in sorted(self._merging.frames[r].items()) if j != r])
+        if graph.trivial(r):
+            win = own.known_window()
+            return None if win is None else (win, own.states[win].copy())
+        states = own.grid.model.classify(graph.fused_log_odds(r, self.maps))
+        rows, cols = np.nonzero(states.any(axis=1))[0], np.nonzero(states.any(axis=0))[0]
+        if not len(rows):
+            return None
+        win = slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+        return win, states[win].copy()
 
     # ------------------------------------------------------------------ rewards, ends
     def _rewards(self) -> dict[str, float]:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.explore.mapping import Geometry, fused_states
+from envs.explore.mapping import Geometry
 
 if TYPE_CHECKING:
     from envs.explore.env import TwoRobotExploreEnv
@@ -172,8 +172,7 @@ class Renderer:
     def _shared_panel(self, env: TwoRobotExploreEnv, offset: tuple[int, int]) -> None:
         m0 = env.maps[0]
         members = env.shared.members
-        fused = fused_states(m0, [(env.views.view(0, j), to_0)
-                                  for j, (to_0, _) in sorted(members.items())])
+        fused = env._fused_window(0)
         if fused is None:
             return
         g = m0.geometry
@@ -183,7 +182,9 @@ class Renderer:
         view = _View(box, offset)
         self._blit_cells(STATE_COLOURS[states], g, rows, cols, view)
         merge = env.merge
-        if (len(members) == 1 and merge is not None and merge.accepted
+        if env._graph is not None:
+            pass  # maps that bend: no one rigid frame carries the topological maps onto it
+        elif (len(members) == 1 and merge is not None and merge.accepted
                 and getattr(merge, "merged", None) is not None):
             self._draw_graph(merge.merged, view)  # the last merge fused the two graphs
         else:  # each graph moved by its transform in use

@@ -212,3 +212,33 @@ def test_same_seed_same_maps_and_reading_changes_nothing(mapping):
         np.testing.assert_array_equal(again.states, snap.states)
         assert (again.robots, again.step, again.known_cells) == (snap.robots, snap.step,
                                                                    snap.known_cells)
+
+
+def test_the_renderers_fused_panel_draws_the_pose_graphs_fused_map(graph):
+    """``render()``'s fused panel is robot 0's ``fused_map``: with the pose graph, its
+    corrected submaps — not its own map with the teammate moved in rigidly."""
+    pytest.importorskip("pygame")
+    from envs.explore.mapping import fused_states
+    from envs.explore.render import PANEL, Renderer
+
+    class Rigid:  # the env as the renderer reads it, its fused map composed rigidly
+        def __init__(self, env):
+            self._env = env
+
+        def __getattr__(self, name):
+            return getattr(self._env, name)
+
+        def _fused_window(self, r):
+            env = self._env
+            return fused_states(env.maps[r], [(env.views.view(r, j), to_r) for j, to_r
+                                              in env.merge_state().frames[r].items() if j != r])
+
+    renderer = Renderer("rgb_array", 4)
+    try:
+        drawn, rigid = renderer.draw(graph), renderer.draw(Rigid(graph))
+    finally:
+        renderer.close()
+    panel = (slice(0, PANEL), slice(PANEL, 2 * PANEL))  # the top right panel, (row, col)
+    assert not np.array_equal(drawn[panel], rigid[panel])
+    others = (slice(PANEL, 2 * PANEL), slice(0, 2 * PANEL))
+    np.testing.assert_array_equal(drawn[others], rigid[others])
