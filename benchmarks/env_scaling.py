@@ -2,7 +2,7 @@
 
     python benchmarks/env_scaling.py [--quick] [--ns 2 4 8] [--steps 1000] [--rounds 2]
         [--seed 0] [--size 20] [--comm-range R] [--driver random|frontier] [--profile]
-        [--out FILE.json]
+        [--pose-graph] [--odometry perfect|pioneer3dx] [--out FILE.json]
 
 The env alone, no explorers: for each N one episode of ``--steps`` steps (``max_cycles``;
 at least 1000, so that the merges, every 25 steps, and the grid alignments, every 100, are
@@ -24,7 +24,11 @@ Timed by this process's CPU time (steadier than wall time on a shared machine) a
 the Ns alternate in order (2, 4, 8, then 8, 4, 2, …) over ``--rounds`` rounds and each N's
 lower-median round is reported (of two, the faster: the less disturbed): ms per env step, ms
 per robot-step (step / N), and its ratio to N = 2's (target at N = 8: ≤ 1.3), with that ratio
-round by round (on a busy machine the rounds differ by a third). The stages of a step are timed
+round by round (on a busy machine the rounds differ by a third), and the share of a step spent
+mapping and merging (``_sense_and_map`` + ``_fuse``; issue 41's target with ``--pose-graph``:
+≤ 30 %). ``--pose-graph`` turns on ``mapping.pose_graph`` (maps that bend) and
+``--odometry pioneer3dx`` the Pioneer 3-DX odometry preset (default: perfect odometry; the
+Frontier team is recorded with the same settings). The stages of a step are timed
 by wrapping the env's hooks (``_apply_actions``, ``_simulate``, ``_contact``,
 ``_sense_and_map`` — scans, grids, topological extraction —, ``_fuse`` — merges and fused maps
 —, ``_rewards``, ``_observe``, ``_infos``; a few µs of overhead a step): ms per step each. With
@@ -72,16 +76,27 @@ def commands(n: int, steps: int, seed: int) -> list[dict[str, np.ndarray]]:
     return out
 
 
-def frontier_commands(n: int, steps: int, seed: int, size: float,
-                      comm_range: float | None) -> list[dict[str, np.ndarray]]:
+def env_kwargs(size: float, comm_range: float | None = None, pose_graph: bool = False,
+               odometry: str = "perfect") -> dict[str, Any]:
+    """The env's settings from the command line: building side (m), ``comm.range``,
+    ``mapping.pose_graph`` and the odometry (``"perfect"`` or ``"pioneer3dx"``: the
+    ``rot_trans_rot`` model with the Pioneer 3-DX preset)."""
+    kwargs: dict[str, Any] = {"world": {"size": (size, size)}, "comm": {"range": comm_range}}
+    if pose_graph:
+        kwargs["mapping"] = {"pose_graph": True}
+    if odometry == "pioneer3dx":
+        kwargs["robot"] = {"odometry_model": "rot_trans_rot", "odometry_alphas": "pioneer3dx"}
+    return kwargs
+
+
+def frontier_commands(n: int, steps: int, seed: int, kwargs: dict[str, Any]
+                      ) -> list[dict[str, np.ndarray]]:
     """The actions a :class:`agents.scripted.Frontier` team of ``n`` takes in the episode of
     ``seed`` (``--driver frontier``; recorded, untimed; shorter if the episode ends)."""
     from agents.scripted import Frontier
     from envs import multi_robot_explore_v0
 
-    env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps,
-                                              world={"size": (size, size)},
-                                              comm={"range": comm_range})
+    env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps, **kwargs)
     team = {a: Frontier() for a in env.possible_agents}
     obs, infos = env.reset(seed=seed)
     for k, (a, x) in enumerate(team.items()):
@@ -118,17 +133,15 @@ class _StageClock:
         return timed
 
 
-def run(n: int, steps: int, seed: int, size: float, comm_range: float | None,
-        stages: bool = True, prof: cProfile.Profile | None = None,
+def run(n: int, steps: int, seed: int, kwargs: dict[str, Any], stages: bool = True,
+        prof: cProfile.Profile | None = None,
         acts: list[dict[str, np.ndarray]] | None = None) -> dict[str, Any]:
     """One timed episode of ``n`` robots: CPU and wall seconds, per-stage CPU seconds (the
     steps only: not the reset that builds the world; ``prof`` profiles the same), driven by
-    ``acts`` (default: :func:`commands`)."""
+    ``acts`` (default: :func:`commands`); ``kwargs``: :func:`env_kwargs`."""
     from envs import multi_robot_explore_v0
 
-    env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps,
-                                              world={"size": (size, size)},
-                                              comm={"range": comm_range})
+    env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps, **kwargs)
     clock = _StageClock(env) if stages else None
     acts = commands(n, steps, seed) if acts is None else acts
     steps = len(acts)
@@ -151,12 +164,12 @@ def run(n: int, steps: int, seed: int, size: float, comm_range: float | None,
             "stages": dict(clock.seconds) if clock else {}}
 
 
-def profile(n: int, steps: int, seed: int, size: float, comm_range: float | None,
-            top: int, acts: list[dict[str, np.ndarray]] | None = None) -> str:
+def profile(n: int, steps: int, seed: int, kwargs: dict[str, Any], top: int,
+            acts: list[dict[str, np.ndarray]] | None = None) -> str:
     """The ``top`` entries by own time of one run's steps under ``cProfile`` (no stage
     clock)."""
     prof = cProfile.Profile()
-    run(n, steps, seed, size, comm_range, stages=False, prof=prof, acts=acts)
+    run(n, steps, seed, kwargs, stages=False, prof=prof, acts=acts)
     buf = io.StringIO()
     pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(top)
     lines = buf.getvalue().splitlines()
@@ -177,15 +190,26 @@ def table(results: dict[int, list[dict[str, Any]]]) -> tuple[str, dict[int, floa
         rows.append((n, med, ms))
     base = per_robot[ns[0]]
     lines = [f"| N | steps | rounds | ms/step (CPU) | ms/step (wall) | ms/robot-step | "
-             f"÷ N = {ns[0]} | merges | fused in robot 0's map | "
+             f"÷ N = {ns[0]} | merges | fused in robot 0's map | mapping + merging | "
              + " | ".join(s.strip("_") for s in STAGES) + " |",
-             "|---|---|---|---|---|---|---|---|---|" + "---|" * len(STAGES)]
+             "|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(STAGES)]
     for n, med, ms in rows:
         st = " | ".join(f"{1e3 * med['stages'].get(s, 0.0) / med['steps']:.2f}" for s in STAGES)
         lines.append(f"| {n} | {med['steps']} | {len(results[n])} | {ms:.2f} | "
                      f"{1e3 * med['wall_s'] / med['steps']:.2f} | {per_robot[n]:.2f} | "
-                     f"{per_robot[n] / base:.2f} | {med['merges']} | {med['fused0']} | {st} |")
+                     f"{per_robot[n] / base:.2f} | {med['merges']} | {med['fused0']} | "
+                     f"{mapping_share(med):.0%} | {st} |")
     return "\n".join(lines), per_robot
+
+
+def mapping_share(result: dict[str, Any]) -> float:
+    """The share of a run's timed stages spent mapping and merging (``_sense_and_map`` and
+    ``_fuse``; NaN without stage timings)."""
+    stages = result["stages"]
+    total = sum(stages.values())
+    if not total:
+        return float("nan")
+    return (stages.get("_sense_and_map", 0.0) + stages.get("_fuse", 0.0)) / total
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -200,6 +224,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="comm.range in m (default unlimited)")
     parser.add_argument("--driver", choices=("random", "frontier"), default="random",
                         help="the commands: fixed random ones, or a Frontier team's recorded")
+    parser.add_argument("--pose-graph", action="store_true",
+                        help="mapping.pose_graph: maps that bend (issue 41)")
+    parser.add_argument("--odometry", choices=("perfect", "pioneer3dx"), default="perfect",
+                        help="perfect odometry or the Pioneer 3-DX preset")
     parser.add_argument("--profile", action="store_true",
                         help="cProfile the largest N and the smallest even if on target")
     parser.add_argument("--top", type=int, default=25, help="cProfile entries printed")
@@ -219,19 +247,19 @@ def main(argv: list[str] | None = None) -> None:
     ns = sorted(set(args.ns))
     print(f"# env cost against team size: {args.steps} steps, {args.size:g} m building of seed "
           f"{args.seed}, comm.range {args.comm_range}, {args.driver} commands, {args.rounds} "
-          f"round(s)\n", flush=True)
+          f"round(s), pose graph {args.pose_graph}, odometry {args.odometry}\n", flush=True)
+    kwargs = env_kwargs(args.size, args.comm_range, args.pose_graph, args.odometry)
     acts: dict[int, list | None] = dict.fromkeys(ns)
     if args.driver == "frontier":
         for n in ns:
-            acts[n] = frontier_commands(n, args.steps, args.seed, args.size, args.comm_range)
+            acts[n] = frontier_commands(n, args.steps, args.seed, kwargs)
             print(f"recorded a Frontier team of {n}: {len(acts[n])} steps", flush=True)
     for n in ns:  # warm-up: compiled kernels load from their caches on first use
-        run(n, min(WARMUP, args.steps), args.seed, args.size, args.comm_range)
+        run(n, min(WARMUP, args.steps), args.seed, kwargs)
     results: dict[int, list[dict[str, Any]]] = defaultdict(list)
     for k in range(args.rounds):
         for n in (ns if k % 2 == 0 else ns[::-1]):
-            results[n].append(run(n, args.steps, args.seed, args.size, args.comm_range,
-                                  acts=acts[n]))
+            results[n].append(run(n, args.steps, args.seed, kwargs, acts=acts[n]))
             r = results[n][-1]
             print(f"round {k}, N = {n}: {1e3 * r['cpu_s'] / r['steps']:.2f} ms/step CPU",
                   flush=True)
@@ -248,8 +276,7 @@ def main(argv: list[str] | None = None) -> None:
     profiles = {}
     if args.profile or ratio > TARGET:
         for n in (hi, lo):
-            profiles[n] = profile(n, args.steps, args.seed, args.size, args.comm_range,
-                                  args.top, acts[n])
+            profiles[n] = profile(n, args.steps, args.seed, kwargs, args.top, acts[n])
             print(f"\ncProfile, N = {n}, {args.steps} steps, top {args.top} by own time:\n")
             print(profiles[n])
     if args.out is not None:

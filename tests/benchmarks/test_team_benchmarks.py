@@ -106,6 +106,20 @@ def test_env_scaling_runs_and_reports_per_robot_cost(capsys, tmp_path, driver):
     assert (tmp_path / "scaling.json").exists()
 
 
+def test_env_scaling_times_the_pose_graph_with_drifting_odometry(capsys):
+    es.main(["--ns", "2", "--steps", "30", "--rounds", "1", "--size", "10", "--pose-graph",
+             "--odometry", "pioneer3dx"])
+    text = capsys.readouterr().out
+    assert "pose graph True, odometry pioneer3dx" in text
+    row = next(line for line in text.splitlines() if line.startswith("| 2 |"))
+    assert row.split(" | ")[9].endswith("%")  # mapping + merging share of a step
+    kwargs = es.env_kwargs(10.0, None, True, "pioneer3dx")
+    assert kwargs["mapping"] == {"pose_graph": True}
+    assert kwargs["robot"]["odometry_alphas"] == "pioneer3dx"
+    assert es.mapping_share({"stages": {"_sense_and_map": 1.0, "_fuse": 1.0,
+                                        "_simulate": 2.0}}) == 0.5
+
+
 def test_env_scaling_commands_are_the_same_for_the_first_robots_at_any_n():
     two, four = es.commands(2, 30, seed=5), es.commands(4, 30, seed=5)
     for a, b in zip(two, four, strict=True):
