@@ -384,8 +384,9 @@ class MappingConfig:
             many steps: a few metres of travel, short enough that a submap is rigid.
         window_anchors: with ``pose_graph``, how many consecutive anchors make a local
             window that is aligned as one rigid grid.
-        window_searches: with ``pose_graph``, window alignments tried per merge step, the
-            whole team together (each is one ``fusion.grid_merge.merge_grids`` call).
+        window_searches: with ``pose_graph``, window alignments each robot tries per merge
+            step (each a ``fusion.grid_merge.merge_grids`` or a search near the graph's
+            estimate): the team's cost grows with its size, each robot's does not.
     """
 
     grid_resolution: float = 0.1
@@ -407,7 +408,7 @@ class MappingConfig:
     pose_graph: bool = False
     anchor_every: int = 100
     window_anchors: int = 4
-    window_searches: int = 2
+    window_searches: int = 1
 
     def __post_init__(self) -> None:
         _set(self, "grid_resolution", check_real(self.grid_resolution,

@@ -2,10 +2,11 @@
 windows, loop closures, and fused maps rendered from submaps.
 
 Each robot's map is a chain of anchors with their patches (:mod:`envs.explore.submaps`) in a
-team :class:`fusion.PoseGraph`. On every merge step (``mapping.merge_every``) at most
-``mapping.window_searches`` window alignments are tried, the team together: a **window** is
-``mapping.window_anchors`` consecutive closed anchors rebuilt as one grid from their own
-scans, near-rigid even when the whole map is bent. A robot's newest window is aligned against
+team :class:`fusion.PoseGraph`. On every merge step (``mapping.merge_every``) each robot
+tries at most ``mapping.window_searches`` window alignments (:meth:`GraphMerging._candidates`):
+a **window** is ``mapping.window_anchors`` consecutive closed anchors rebuilt as one grid from
+their own scans, near-rigid even when the whole map is bent. A robot's newest window is
+aligned against
 
 * the windows of a teammate it is in contact with — an accepted alignment ``T`` (window
   ``j``'s odometry frame → window ``i``'s) becomes the link ``X_a⁻¹ · T · X_b`` between the
@@ -104,6 +105,8 @@ class GraphMerging:
         self._alphas = (tuple(robot.odometry_alphas) if robot.odometry_model == "rot_trans_rot"
                         else None)
         self._tried: set[tuple[int, int, int, int]] = set()
+        self._turns = [0] * self.n  # merge steps each robot searched on
+        self._joins = [0] * self.n  # joining searches each robot made
         self._windows: dict[tuple[int, int], object] = {}
         self._grid_cfg = GridMergeConfig()
 
@@ -132,7 +135,7 @@ class GraphMerging:
         """Try this merge step's window alignments; returns whether the graph gained a link
         or a loop closure."""
         changed = False
-        for i, ei, j, ej in self._candidates(views)[: self.config.window_searches]:
+        for i, ei, j, ej in self._candidates(views):
             self._tried.add((i, ei, j, ej))
             changed |= self._align(i, ei, j, ej)
         return changed
@@ -146,15 +149,22 @@ class GraphMerging:
         return np.mean([p.T for p in poses[first:end + 1]], axis=0)
 
     def _candidates(self, views: TeamViews) -> list[tuple[int, int, int, int]]:
-        """``(i, newest window end of i, j, window end of j)`` to try, best first: links of
-        pairs not yet joined, then loop closures, then links of joined pairs."""
+        """``(i, newest window end of i, j, window end of j)`` to try this merge step: each
+        robot's own ``window_searches`` (its budget: a team's cost grows with its size, and
+        the pairs still to join cannot starve a joined robot's loop closures). A robot alone
+        in its map searches its teammates first (**joining**: one candidate per teammate in
+        contact, taken in turn), then its own loop closures; a robot already joined to some
+        alternates, merge step by merge step, between joining the rest and the searches
+        **near** its estimate (its loop closures, then its joined teammates' windows)."""
         w = self.config.window_anchors
         stride = max(1, w // 2)
-        joining, loops, joined = [], [], []
+        out = []
         for i in range(self.n):
             ei = self._closed(i) - 1
             if ei < w - 1:
                 continue
+            joining, loops, joined = [], [], []
+            component = self.graph.component(i)
             for j in range(self.n):
                 ej_max = self._closed(j) - 1 if j != i else ei - w
                 ends = [e for e in range(ej_max, w - 2, -stride)
@@ -162,14 +172,26 @@ class GraphMerging:
                 if not ends:
                     continue
                 if j == i:
-                    near = self._near(i, ei, i, ends)
-                    loops += [(i, ei, i, e) for e in near[:1]]
+                    loops += [(i, ei, i, e) for e in self._near(i, ei, i, ends)[:1]]
                 elif views.in_contact(i, j):
-                    if j in self.graph.component(i):
+                    if j in component:
                         joined += [(i, ei, j, e) for e in self._near(i, ei, j, ends)[:1]]
                     else:
                         joining.append((i, ei, j, ends[0]))
-        return joining + loops + joined
+            if joining:  # teammates in turn
+                k = self._joins[i] % len(joining)
+                joining = joining[k:] + joining[:k]
+            near = loops + joined
+            if len(component) > 1 and joining and near and self._turns[i] % 2:
+                order = near + joining
+            else:
+                order = joining + near
+            if joining or near:
+                self._turns[i] += 1
+            chosen = order[: self.config.window_searches]
+            self._joins[i] += sum(c[2] != i and c[2] not in component for c in chosen)
+            out += chosen
+        return out
 
     def _near(self, i: int, ei: int, j: int, ends: list[int]) -> list[int]:
         """``ends`` of ``j``'s windows whose centre lies within :data:`NEAR_M` of ``i``'s

@@ -84,3 +84,30 @@ def test_setting_off_builds_no_graph():
     env.reset(seed=4)
     assert env._graph is None
     assert env.merge_state().bending == {}
+
+
+@pytest.mark.parametrize("budget", [1, 2])
+def test_each_robot_has_its_own_search_budget(budget):
+    """``mapping.window_searches`` is each robot's per merge step: in a team of four in
+    contact, every robot with a window searches, none more than its budget."""
+    from collections import Counter
+
+    from envs import multi_robot_explore_v0
+
+    env = multi_robot_explore_v0.parallel_env(
+        n_robots=4, robot=PIONEER, max_cycles=400, world={"size": (10.0, 10.0)},
+        mapping={"pose_graph": True, "anchor_every": 10, "window_anchors": 2,
+                 "merge_every": 5, "window_searches": budget})
+    env.reset(seed=1)
+    graph = env._graph
+    calls: list[tuple[int, int]] = []
+    align = graph._align
+    graph._align = lambda i, ei, j, ej: calls.append((env.steps, i)) or align(i, ei, j, ej)
+    rng = np.random.default_rng(0)
+    for _ in range(120):
+        env.step({a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.agents})
+    per_step = Counter(calls)
+    assert per_step and max(per_step.values()) <= budget
+    assert {i for _, i in calls} == {0, 1, 2, 3}
+    first = min(step for step, _ in calls)
+    assert {i for step, i in calls if step == first} == {0, 1, 2, 3}
