@@ -17,7 +17,9 @@ robots' current places, ``envs.explore.drift.drift_aware_error``);
 Per episode: the first merged step, the first right step, merged steps, right and wrong
 shares of them, the mean step time (seconds), and at the end
 ``merge_state().bending`` (the fused map's anchor ATE and wall share beside robot 0's own
-uncorrected map, links kept and how many of them are wrong at their own anchors). With
+uncorrected map, links kept and how many of them are wrong at their own anchors) and the
+bend floor of window links (:func:`bend_floor`: how often even a perfect window aligner's
+link is wrong at its anchors, the windows being bent inside). With
 ``--oracle`` every window alignment is replaced by the truth wherever the two windows' true
 anchor positions come within ``ORACLE_MEET_M`` (and nothing elsewhere): the ceiling of any
 window aligner with these anchors, windows and searches (``--oracle-at-last``: the links at
@@ -64,6 +66,53 @@ def oracle_align(self, i: int, ei: int, j: int, ej: int) -> bool:
     return self.add_alignment(i, a, j, b, ta.inverse() @ tb, 1.0)
 
 
+def bend_floor(graph: GraphMerging, meet_m: float = ORACLE_MEET_M) -> dict[str, float]:
+    """The bend floor of window links (what even a perfect window aligner inherits): every
+    pair of closed windows (two robots', or one robot's that do not overlap) whose true
+    anchors come within ``meet_m``, each window put in the world by its best rigid fit (its
+    anchors' odometry headings and positions onto their true ones: the circular mean of the
+    heading differences, then the mean position), the link this implies checked against the
+    truth at the windows' middle anchors (where links are made) and at their newest ones.
+    Returns the pairs and the shares of them more than 5° or 1 m off at each."""
+    w = graph.config.window_anchors
+    odo, true = [], []
+    for sub in graph.submaps:
+        k = len(sub.patches)
+        odo.append(np.array([[p.T[0], p.T[1], p.theta] for p in sub.poses[:k]]).reshape(-1, 3))
+        true.append(np.array(sub.truths[:k]).reshape(-1, 3))
+
+    def fit(r: int, end: int) -> Rigid2D:
+        o, t = odo[r][end - w + 1:end + 1], true[r][end - w + 1:end + 1]
+        d = t[:, 2] - o[:, 2]
+        turn = Rigid2D(float(np.arctan2(np.sin(d).mean(), np.cos(d).mean())))
+        shift = t[:, :2].mean(axis=0) - turn.apply(o[:, :2]).mean(axis=0)
+        return Rigid2D(turn.theta, (float(shift[0]), float(shift[1])))
+
+    wrong = {"mid": 0, "last": 0}
+    pairs = 0
+    n = len(graph.submaps)
+    for i in range(n):
+        for j in range(i, n):
+            for ei in range(w - 1, len(odo[i])):
+                for ej in range(w - 1, len(odo[j]) if j != i else ei - w + 1):
+                    ti, tj = true[i][ei - w + 1:ei + 1, :2], true[j][ej - w + 1:ej + 1, :2]
+                    if np.min(np.linalg.norm(ti[:, None] - tj[None], axis=2)) > meet_m:
+                        continue
+                    pairs += 1
+                    fi, fj = fit(i, ei), fit(j, ej)
+                    for where, (a, b) in (("mid", (ei - w // 2, ej - w // 2)),
+                                          ("last", (ei, ej))):
+                        ideal = ((fi @ Rigid2D.from_pose(odo[i][a])).inverse()
+                                 @ fj @ Rigid2D.from_pose(odo[j][b]))
+                        err = (Rigid2D.from_pose(true[i][a]).inverse()
+                               @ Rigid2D.from_pose(true[j][b])).inverse() @ ideal
+                        wrong[where] += bool(abs(np.degrees(err.theta)) > WRONG_DEG
+                                             or float(np.hypot(*err.T)) > WRONG_M)
+    return {"floor_pairs": float(pairs),
+            "floor_mid_wrong": wrong["mid"] / pairs if pairs else float("nan"),
+            "floor_last_wrong": wrong["last"] / pairs if pairs else float("nan")}
+
+
 def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
             pose_graph: bool, mapping: dict | None = None, robots: int = 2) -> dict:
     """One episode's row (module docstring)."""
@@ -93,6 +142,7 @@ def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
     row["step_s"] = (time.perf_counter() - t0) / max(out["steps"], 1)
     if pose_graph:
         row.update(env.unwrapped.merge_state().bending)
+        row.update(bend_floor(env.unwrapped._graph))
     return row
 
 
@@ -141,7 +191,8 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
             "fused_ate_m", "own_ate_m", "fused_wall_share", "own_wall_share", "links_kept",
-            "links_kept_wrong", "loops_kept", "window_searches")
+            "links_kept_wrong", "loops_kept", "window_searches", "floor_pairs",
+            "floor_mid_wrong", "floor_last_wrong")
     print(" | ".join(keys), flush=True)
     for seed in range(args.first_seed, args.first_seed + args.worlds):
         for setting in args.settings:
@@ -152,6 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     print()
     print("setting | merged episodes | median first right | right / merged steps | "
           "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
+          "links kept wrong | bend floor: ideal window links wrong (middle / newest anchors) | "
           "step ms")
     for setting in args.settings:
         sel = [r for r in rows if r["graph"] == (setting == "on")]
@@ -166,10 +218,16 @@ def main(argv: list[str] | None = None) -> None:
                    f"({statistics.median(r['own_ate_m'] for r in sel):.2f})")
             wall = (f"{statistics.median(r['fused_wall_share'] for r in sel):.2f} "
                     f"({statistics.median(r['own_wall_share'] for r in sel):.2f})")
+            kept = (f"{sum(r['links_kept_wrong'] for r in sel):.0f} / "
+                    f"{sum(r['links_kept'] for r in sel):.0f}")
+            pairs = sum(r["floor_pairs"] for r in sel)
+            floor = " / ".join(
+                f"{sum(r[k] * r['floor_pairs'] for r in sel if r['floor_pairs']) / pairs:.3f}"
+                if pairs else "-" for k in ("floor_mid_wrong", "floor_last_wrong"))
         else:
-            ate = wall = "-"
+            ate = wall = kept = floor = "-"
         print(f"{setting} | {merged}/{len(sel)} | {first} | {right:.2f} | {wrong:.2f} | {ate} | "
-              f"{wall} | {ms:.1f}")
+              f"{wall} | {kept} | {floor} | {ms:.1f}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,66 @@
+"""``benchmarks/bending_in_loop.py``: a tiny run prints its tables, and its bend floor (how
+often even a perfect window aligner's link is wrong) is zero for rigid maps and not for bent
+ones."""
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from fusion import Rigid2D
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+bil = _load("bending_in_loop")
+
+
+def _graph(turn_per_anchor_deg: float, anchors: int = 12, window: int = 4):
+    """Two robots driving the same square loop (side 4 m, an anchor a metre), robot 1 starting
+    half a metre aside; each robot's odometry is its true path seen from a rotated, shifted
+    start frame, robot 0's heading drifting ``turn_per_anchor_deg`` per anchor (its path bent
+    with it)."""
+    subs = []
+    for r, start in enumerate((Rigid2D(0.3, (1.0, -2.0)), Rigid2D(-1.2, (0.5, 3.0)))):
+        true, odo = [], []
+        pose, bent = Rigid2D(0.0, (0.0, 0.5 * r)), Rigid2D()
+        for k in range(anchors):
+            true.append([pose.T[0], pose.T[1], pose.theta])
+            o = start @ bent
+            odo.append(Rigid2D(o.theta, (float(o.T[0]), float(o.T[1]))))
+            step = Rigid2D(math.pi / 2 if k % 4 == 3 else 0.0, (1.0, 0.0))
+            pose = pose @ step
+            drift = math.radians(turn_per_anchor_deg) if r == 0 else 0.0
+            bent = bent @ Rigid2D(step.theta + drift, step.T)
+        subs.append(SimpleNamespace(patches=[None] * anchors, poses=odo, truths=true))
+    return SimpleNamespace(config=SimpleNamespace(window_anchors=window), submaps=subs)
+
+
+def test_bend_floor_is_zero_for_rigid_maps_and_not_for_bent_ones():
+    rigid = bil.bend_floor(_graph(0.0))
+    assert rigid["floor_pairs"] > 20
+    assert rigid["floor_mid_wrong"] == rigid["floor_last_wrong"] == 0.0
+    bent = bil.bend_floor(_graph(12.0))
+    assert bent["floor_pairs"] == rigid["floor_pairs"]
+    assert 0.0 < bent["floor_mid_wrong"] <= bent["floor_last_wrong"]
+
+
+def test_a_tiny_run_prints_both_tables(capsys):
+    pytest.importorskip("gtsam")
+    bil.main(["--worlds", "1", "--steps", "40", "--size", "10", "--settings", "on", "off"])
+    out = capsys.readouterr().out
+    assert "bend floor: ideal window links wrong (middle / newest anchors)" in out
+    rows = [line for line in out.splitlines() if line.startswith(("on |", "off |"))]
+    assert len(rows) == 2 and rows[0].split(" | ")[1] == "0/1"
