@@ -9,13 +9,17 @@ their own scans, near-rigid even when the whole map is bent. A robot's newest wi
 aligned against
 
 * the windows of a teammate it is in contact with — an accepted alignment ``T`` (window
-  ``j``'s odometry frame → window ``i``'s) becomes the link ``X_a⁻¹ · T · X_b`` between the
-  windows' middle anchors ``a`` and ``b``. Before the pair is joined every window is a
-  candidate (newest first), searched globally by ``fusion.grid_merge.merge_grids`` (no drift
-  prior: a window has not drifted); after it, only windows whose estimate lies near, searched
-  only near that estimate (``fusion.local_align.align_near``, :data:`NEAR_DEG`,
-  :data:`NEAR_REACH_M`): a global search is drawn to look-alikes the estimate already rules
-  out;
+  ``j``'s odometry frame → window ``i``'s) is made right at robot ``i``'s newest anchor
+  ``a``: that anchor's own scans aligned on ``j``'s window near ``T`` (a window bends a few
+  degrees inside, one anchor's stretch hardly; :data:`ANCHOR_DEG`), paired with the anchor
+  ``b`` of ``j``'s window nearest to it, gives the link ``X_a⁻¹ · T_a · X_b`` (if the anchor's
+  scans do not align: ``T`` between the windows' middle anchors). Links at the newest
+  anchors are what keeps the robots' current places right. Before the pair is joined every
+  window is a candidate (newest first), searched globally by
+  ``fusion.grid_merge.merge_grids`` (no drift prior: a window has not drifted); after it,
+  only windows whose estimate lies near, searched only near that estimate
+  (``fusion.local_align.align_near``, :data:`NEAR_DEG`, :data:`NEAR_REACH_M`): a global
+  search is drawn to look-alikes the estimate already rules out;
 * its own older windows that do not overlap it and lie near in the current estimate — a loop
   closure, searched near the estimate too (``PoseGraph.add_loop``: kept only if the odometry
   can explain it).
@@ -53,6 +57,11 @@ few degrees inside."""
 NEAR_DEG, NEAR_REACH_M = 3.0, 0.5
 """A known pair's window alignment (a joined pair, a loop closure) is searched only this close
 (degrees, metres) to the graph's estimate (``fusion.local_align.align_near``)."""
+
+ANCHOR_DEG = 4.0
+"""A link's anchor alignment (robot ``i``'s newest anchor's scans on ``j``'s window) is searched
+this close (degrees; and :data:`NEAR_REACH_M`) to the windows' alignment: about the heading
+a window bends inside."""
 
 NEAR_M = 8.0
 """A window is searched against another (after a pair is joined, or for a loop closure) only
@@ -107,7 +116,7 @@ class GraphMerging:
         self._tried: set[tuple[int, int, int, int]] = set()
         self._turns = [0] * self.n  # merge steps each robot searched on
         self._joins = [0] * self.n  # joining searches each robot made
-        self._windows: dict[tuple[int, int], object] = {}
+        self._windows: dict[tuple[int, int, int], object] = {}
         self._grid_cfg = GridMergeConfig()
 
     # ----------------------------------------------------------------- per step
@@ -200,10 +209,13 @@ class GraphMerging:
         dist = [(float(np.linalg.norm(self._centre(j, e, i) - c)), e) for e in ends]
         return [e for d, e in sorted(dist) if d <= NEAR_M]
 
-    def _window(self, r: int, end: int):
-        key = (r, end)
-        if key not in self._windows:
+    def _window(self, r: int, end: int, first: int | None = None):
+        """Robot ``r``'s grid of anchors ``first … end`` (default: the window ending at
+        ``end``) rebuilt from their scans, cached."""
+        if first is None:
             first = end - self.config.window_anchors + 1
+        key = (r, first, end)
+        if key not in self._windows:
             self._windows[key] = self.submaps[r].window_grid(
                 first, end, self.submaps[r].geometry.resolution, self.scan)
         return self._windows[key]
@@ -231,8 +243,31 @@ class GraphMerging:
             if not result.accepted:
                 return False
             transform, confidence = result.transform, float(result.confidence)
+        if i != j:
+            at = self._at_anchor(i, ei, j, ej, transform)
+            if at is not None:
+                a, b, transform = at
         xa, xb = self.submaps[i].poses[a], self.submaps[j].poses[b]
         return self.add_alignment(i, a, j, b, xa.inverse() @ transform @ xb, confidence)
+
+    def _at_anchor(self, i: int, ei: int, j: int, ej: int, transform: Rigid2D):
+        """The window alignment ``transform`` (``j``'s odometry frame → ``i``'s) made right
+        at robot ``i``'s newest anchor ``ei``: that anchor's own scans aligned on ``j``'s
+        window near ``transform`` — a window bends a few degrees inside, an anchor hardly —
+        and paired with ``j``'s window anchor nearest to it. ``(a, b, transform)``, or
+        ``None`` if the anchor's scans do not align."""
+        one, window = self._window(i, ei, ei), self._window(j, ej)
+        if one is None:
+            return None
+        local = align_near(window, one, transform.inverse(), self._grid_cfg,
+                           max_deg=ANCHOR_DEG, reach_m=NEAR_REACH_M)
+        if local is None:
+            return None
+        here = local.apply(self.submaps[i].poses[ei].T[None])[0]
+        first = ej - self.config.window_anchors + 1
+        b = min(range(first, ej + 1),
+                key=lambda k: float(np.linalg.norm(self.submaps[j].poses[k].T - here)))
+        return ei, b, local.inverse()
 
     def add_alignment(self, i: int, a: int, j: int, b: int, relative: Rigid2D,
                       confidence: float) -> bool:

@@ -109,6 +109,10 @@ def test_rigid_merge_fuses_the_teammate_onto_the_true_walls(rigid):
 def test_pose_graph_fuses_the_teammate_onto_the_true_walls(graph):
     for agent in graph.possible_agents:
         _check_fused(graph, agent)
+    # with perfect odometry every accepted window alignment is right (5°, 0.5 m) at its anchors
+    errors = graph._graph.link_errors()
+    assert errors and max(rot for rot, _ in errors) < 5.0
+    assert max(trans for _, trans in errors) < 0.5
     # on a merge step robot 0's shared map is recomposed: the same cells
     assert graph.steps % GRAPH["merge_every"] == 0
     np.testing.assert_array_equal(graph.fused_map("robot_0").known_mask(), graph.shared.ever)
