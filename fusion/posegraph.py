@@ -160,6 +160,7 @@ class PoseGraph:
         self._dropped: set[int] = set()  # ids of links the optimum refused
         self._agreement: dict[tuple[int, int], float] = {}  # PCM's χ² of two links, by id
         self._estimate: dict[Anchor, Rigid2D] = {}  # in the component's reference frame
+        self._groups: list[frozenset[int]] = []  # the components at the last optimise
         self._dirty = True
 
     # ----------------------------------------------------------------- building
@@ -221,6 +222,7 @@ class PoseGraph:
         self._dropped = set()
         for robots in self._components():
             self._settle(gtsam, robots)
+        self._groups = self._components()  # what component() reads until the next change
         self._dirty = False
 
     def _settle(self, gtsam, robots: frozenset[int]) -> None:
@@ -246,7 +248,7 @@ class PoseGraph:
         """The robots whose maps ``robot``'s fused map holds (itself included)."""
         self._robot(robot, "robot")
         self.optimise()
-        return next(c for c in self._components() if robot in c)
+        return next(c for c in self._groups if robot in c)
 
     def trajectory(self, robot: int, frame: int | None = None) -> np.ndarray:
         """``robot``'s optimised anchors as ``(K, 3)`` rows ``(x, y, θ)`` in ``frame``'s

@@ -117,6 +117,7 @@ class GraphMerging:
         self._turns = [0] * self.n  # merge steps each robot searched on
         self._joins = [0] * self.n  # joining searches each robot made
         self._windows: dict[tuple[int, int, int], object] = {}
+        self._poses: dict[tuple[int, int], list[Rigid2D]] = {}
         self._grid_cfg = GridMergeConfig()
 
     # ----------------------------------------------------------------- per step
@@ -153,7 +154,9 @@ class GraphMerging:
         return len(self.submaps[r].patches)
 
     def _centre(self, r: int, end: int, frame: int) -> np.ndarray:
-        poses = self.graph.corrected_poses(r, frame)
+        if (r, frame) not in self._poses:
+            self._poses[(r, frame)] = self.graph.corrected_poses(r, frame)
+        poses = self._poses[(r, frame)]
         first = end - self.config.window_anchors + 1
         return np.mean([p.T for p in poses[first:end + 1]], axis=0)
 
@@ -167,6 +170,7 @@ class GraphMerging:
         **near** its estimate (its loop closures, then its joined teammates' windows)."""
         w = self.config.window_anchors
         stride = max(1, w // 2)
+        self._poses = {}  # corrected poses by (robot, frame), as the graph is now
         out = []
         for i in range(self.n):
             ei = self._closed(i) - 1
