@@ -1,10 +1,13 @@
-"""Timing helpers shared by the benchmark scripts (medians, warm-up, interleaving)."""
+"""Timing helpers shared by the benchmark scripts (medians, warm-up, interleaving, the CPU
+time of an env's stages)."""
 
 from __future__ import annotations
 
 import statistics
 import time
-from collections.abc import Callable
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from typing import Any
 
 
 def median_time(fn: Callable[[], object], repeats: int) -> float:
@@ -25,3 +28,25 @@ def interleaved_medians(fns: dict[str, Callable[[], object]], repeats: int) -> d
             fn()
             times[k].append(time.perf_counter() - t0)
     return {k: statistics.median(v) for k, v in times.items()}
+
+
+class StageClock:
+    """CPU seconds spent in each of an env's hooks (``stages``: method names such as
+    ``"_fuse"``), by wrapping them on the instance: ``seconds[name]`` accumulates."""
+
+    def __init__(self, env: Any, stages: Sequence[str]) -> None:
+        self.seconds: dict[str, float] = defaultdict(float)
+        for name in stages:
+            setattr(env, name, self._wrap(name, getattr(env, name)))
+
+    def _wrap(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        seconds = self.seconds
+        clock = time.process_time
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = clock()
+            out = fn(*args, **kwargs)
+            seconds[name] += clock() - t0
+            return out
+
+        return timed

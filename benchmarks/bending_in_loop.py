@@ -15,7 +15,9 @@ robot 0's fused map is checked by the env's infos (``merge_rotation_error_deg``,
 robots' current places, ``envs.explore.drift.drift_aware_error``);
 **right** is within 5° and 0.5 m (the issue's target), **wrong** more than 5° or 1 m off.
 Per episode: the first merged step, the first right step, merged steps, right and wrong
-shares of them, the mean step time (seconds), and at the end
+shares of them, the mean step time (seconds, wall and CPU, the explorers included), the share
+of the CPU time spent mapping and merging (the env's ``_sense_and_map`` and ``_fuse``; merging
+alone: ``_fuse``), and at the end
 ``merge_state().bending`` (the fused map's anchor ATE and wall share beside robot 0's own
 uncorrected map, links kept and how many of them are wrong at their own anchors) and the
 bend floor of window links (:func:`bend_floor`: how often even a perfect window aligner's
@@ -36,6 +38,7 @@ import time
 
 import numpy as np
 import torch
+from _timing import StageClock
 
 from agents.base import run_episode
 from agents.registry import EXPLORERS, make_team
@@ -136,10 +139,15 @@ def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
         elif rot > WRONG_DEG or trans > WRONG_M:
             row["wrong"] += 1
 
-    t0 = time.perf_counter()
+    clock = StageClock(env.unwrapped, ("_sense_and_map", "_fuse"))
+    t0, cpu = time.perf_counter(), time.process_time()
     out = run_episode(env, make_team(explorer, env=env), seed=seed, callback=watch)
+    cpu = time.process_time() - cpu
     row["steps"] = out["steps"]
     row["step_s"] = (time.perf_counter() - t0) / max(out["steps"], 1)
+    row["cpu_step_s"] = cpu / max(out["steps"], 1)
+    row["mapping_share"] = sum(clock.seconds.values()) / cpu if cpu else float("nan")
+    row["merging_share"] = clock.seconds["_fuse"] / cpu if cpu else float("nan")
     if pose_graph:
         row.update(env.unwrapped.merge_state().bending)
         row.update(bend_floor(env.unwrapped._graph))
@@ -204,7 +212,7 @@ def main(argv: list[str] | None = None) -> None:
     print("setting | merged episodes | median first right | right / merged steps | "
           "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
           "links kept wrong | bend floor: ideal window links wrong (middle / newest anchors) | "
-          "step ms")
+          "step ms | mapping + merging, merging alone: share of a step")
     for setting in args.settings:
         sel = [r for r in rows if r["graph"] == (setting == "on")]
         merged = sum(r["merged"] > 0 for r in sel)
@@ -226,8 +234,11 @@ def main(argv: list[str] | None = None) -> None:
                 if pairs else "-" for k in ("floor_mid_wrong", "floor_last_wrong"))
         else:
             ate = wall = kept = floor = "-"
+        cpu = [r["cpu_step_s"] * r["steps"] for r in sel]
+        share = " ".join(f"{sum(r[k] * c for r, c in zip(sel, cpu, strict=True)) / sum(cpu):.0%}"
+                         for k in ("mapping_share", "merging_share"))
         print(f"{setting} | {merged}/{len(sel)} | {first} | {right:.2f} | {wrong:.2f} | {ate} | "
-              f"{wall} | {kept} | {floor} | {ms:.1f}")
+              f"{wall} | {kept} | {floor} | {ms:.1f} | {share}")
 
 
 if __name__ == "__main__":

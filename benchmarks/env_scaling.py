@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _timing import StageClock
 
 from topo.fileio import atomic_write_bytes
 
@@ -111,28 +112,6 @@ def frontier_commands(n: int, steps: int, seed: int, kwargs: dict[str, Any]
     return out
 
 
-class _StageClock:
-    """CPU seconds spent in each of the env's hooks (:data:`STAGES`), by wrapping them on the
-    instance."""
-
-    def __init__(self, env: Any) -> None:
-        self.seconds: dict[str, float] = defaultdict(float)
-        for name in STAGES:
-            setattr(env, name, self._wrap(name, getattr(env, name)))
-
-    def _wrap(self, name: str, fn: Any) -> Any:
-        seconds = self.seconds
-        clock = time.process_time
-
-        def timed(*args: Any, **kwargs: Any) -> Any:
-            t0 = clock()
-            out = fn(*args, **kwargs)
-            seconds[name] += clock() - t0
-            return out
-
-        return timed
-
-
 def run(n: int, steps: int, seed: int, kwargs: dict[str, Any], stages: bool = True,
         prof: cProfile.Profile | None = None,
         acts: list[dict[str, np.ndarray]] | None = None) -> dict[str, Any]:
@@ -142,7 +121,7 @@ def run(n: int, steps: int, seed: int, kwargs: dict[str, Any], stages: bool = Tr
     from envs import multi_robot_explore_v0
 
     env = multi_robot_explore_v0.parallel_env(n_robots=n, max_cycles=steps, **kwargs)
-    clock = _StageClock(env) if stages else None
+    clock = StageClock(env, STAGES) if stages else None
     acts = commands(n, steps, seed) if acts is None else acts
     steps = len(acts)
     env.reset(seed=seed)
