@@ -262,7 +262,7 @@ class EpisodeHooks:
         if trivial and not self._shared_incremental:
             self._shared_delta += self.shared.rebuild({0: self.maps[0]}, {})
         elif not trivial:
-            known = graph.fused_known(0, self.maps)
+            known = graph.fused_known(0, self.maps, self.views)
             count = int(np.count_nonzero(known))
             self.shared.ever[...] = known
             self._shared_delta += count - self.shared.count
@@ -295,7 +295,7 @@ class EpisodeHooks:
         if graph.trivial(r):
             win = own.known_window()
             return None if win is None else (win, own.states[win].copy())
-        states = own.grid.model.classify(graph.fused_log_odds(r, self.maps))
+        states = own.grid.model.classify(graph.fused_log_odds(r, self.maps, self.views))
         rows, cols = np.nonzero(states.any(axis=1))[0], np.nonzero(states.any(axis=0))[0]
         if not len(rows):
             return None

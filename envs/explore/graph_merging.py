@@ -28,8 +28,9 @@ The pose graph keeps each pair's pairwise-consistent links (at least two), optim
 component of robots, and a robot's **fused map** is its component's patches composed at
 ``corrections(robot, frame=i)``. Its teammates' places in it (``frames``) are the rigid
 transforms right at the robots' newest anchors: ``C_i⁻¹ · C_j`` of the two newest anchors'
-corrections. This slice's simplification: the graph is the team's, whatever the robots'
-contacts (communication limits are not applied to it).
+corrections, of the patches it has received (``received``: a teammate's as of their last
+contact). This slice's simplification: the graph's estimates are the team's, whatever the
+robots' contacts (a link found while ``r`` was out of contact still moves ``r``'s map).
 """
 
 from __future__ import annotations
@@ -289,19 +290,33 @@ class GraphMerging:
         return taken
 
     # ----------------------------------------------------------------- fused maps
-    def fused_log_odds(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
-        """Robot ``r``'s fused map: its component's patches composed at their corrections
-        into ``r``'s frame, float64 log-odds of ``r``'s grid geometry."""
+    def fused_log_odds(self, r: int, maps: Sequence[RobotMap], views: TeamViews) -> np.ndarray:
+        """Robot ``r``'s fused map: its component's patches that ``r`` has received
+        (:meth:`received`) composed at their corrections into ``r``'s frame, float64 log-odds
+        of ``r``'s grid geometry."""
         dst = maps[r].geometry
         acc = np.zeros(dst.shape, dtype=np.float64)
         for m in sorted(self.graph.component(r)):
-            patches = self.submaps[m].all_patches(maps[m].grid.log_odds)
-            compose(patches, self.graph.corrections(m, frame=r), maps[m].geometry, dst, acc)
+            patches = self.received(r, m, maps, views)
+            corrections = self.graph.corrections(m, frame=r)[:len(patches)]
+            compose(patches, corrections, maps[m].geometry, dst, acc)
         return acc
 
-    def fused_known(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
+    def received(self, r: int, m: int, maps: Sequence[RobotMap], views: TeamViews) -> list:
+        """Robot ``m``'s patches as robot ``r`` has them (index = anchor): all, the newest one
+        so far included, for ``r`` itself and while the two are in contact (``views``); else
+        those closed by their last contact (none if they never were in contact) — what a
+        teammate's map is between contacts (``envs.explore.comm``). Why: communication limits
+        hold for the maps a fused map is made of (the graph's estimates are the team's)."""
+        sub = self.submaps[m]
+        if m == r or views.in_contact(r, m):
+            return sub.all_patches(maps[m].grid.log_odds)
+        seen = int(views.seen[r, m])
+        return [] if seen < 0 else sub.patches[:seen // self.config.anchor_every]
+
+    def fused_known(self, r: int, maps: Sequence[RobotMap], views: TeamViews) -> np.ndarray:
         """``(H, W)`` bool known cells of robot ``r``'s fused map."""
-        return maps[r].grid.model.classify(self.fused_log_odds(r, maps)) != 0
+        return maps[r].grid.model.classify(self.fused_log_odds(r, maps, views)) != 0
 
     def frames(self, r: int) -> dict[int, tuple[Rigid2D, Rigid2D]]:
         """``{j: (to_r, from_r)}`` for each robot ``j`` of ``r``'s component: robot ``j``'s
@@ -329,7 +344,8 @@ class GraphMerging:
         return abs(math.degrees(err.theta)), float(np.hypot(*err.T))
 
     # ----------------------------------------------------------------- truth
-    def bending(self, maps: Sequence[RobotMap], segments: np.ndarray) -> dict[str, float]:
+    def bending(self, maps: Sequence[RobotMap], segments: np.ndarray, views: TeamViews
+                ) -> dict[str, float]:
         """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
         its own uncorrected map: ATE of the anchors (m), the share of occupied cells within
         0.2 m of a true wall; and the links the graph keeps, with how many of them are more
@@ -341,7 +357,7 @@ class GraphMerging:
         truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
         odo = np.array([[p.T[0], p.T[1]] for p in self.submaps[0].poses])
         own_truth = np.array(self.submaps[0].truths)
-        fused = maps[0].grid.model.classify(self.fused_log_odds(0, maps)) == 2
+        fused = maps[0].grid.model.classify(self.fused_log_odds(0, maps, views)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
         errors = [self._error(m.a, m.b, m.relative) for m in kept]

@@ -246,3 +246,31 @@ def test_the_renderers_fused_panel_draws_the_pose_graphs_fused_map(graph):
     assert not np.array_equal(drawn[panel], rigid[panel])
     others = (slice(PANEL, 2 * PANEL), slice(0, 2 * PANEL))
     np.testing.assert_array_equal(drawn[others], rigid[others])
+
+
+def test_pose_graph_fused_map_holds_only_the_submaps_received(graph):
+    """Under communication limits a robot's fused map holds a teammate's submaps as of their
+    last contact: none if they never met, the closed ones after that, all while in contact."""
+    g, maps = graph._graph, graph.maps
+
+    class Apart:  # robots out of contact, last in contact at step ``seen``
+        def __init__(self, seen):
+            self.seen = np.array([[graph.steps, seen], [seen, graph.steps]])
+
+        def in_contact(self, i, j):
+            return i == j
+
+    def known(views):
+        return maps[0].grid.model.classify(g.fused_log_odds(0, maps, views)) != 0
+
+    live = known(graph.views)  # unlimited communication: in contact
+    never, early = known(Apart(-1)), known(Apart(2 * GRAPH["anchor_every"]))
+    just_lost = known(Apart(graph.steps))
+    own = graph.robot_map("robot_0").grid.known_mask()
+    assert never.sum() < early.sum() < just_lost.sum() <= live.sum()
+    # more evidence can cancel a cell's log-odds back to unknown, rarely
+    assert (early & ~just_lost).sum() < 0.01 * early.sum()
+    assert (just_lost & ~live).sum() < 0.01 * just_lost.sum()
+    assert abs(int(never.sum()) - int(own.sum())) < 0.05 * own.sum()  # its own map, corrected
+    assert len(g.received(0, 1, maps, Apart(2 * GRAPH["anchor_every"]))) == 2
+    assert g.received(0, 1, maps, Apart(-1)) == []
