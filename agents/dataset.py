@@ -2,7 +2,7 @@
 
     python -m agents.dataset generate --explorer frontier --pairs 60 --out data/pairs \\
         [--world procedural|PATH] [--snapshots 3] [--workers 2] [--backend process|ray] \\
-        [--address ADDR] [--seed 0] [--robots 2]
+        [--address ADDR] [--seed 0] [--robots 2] [--odometry perfect|pioneer3dx|SIGMA]
     python -m agents.dataset info data/pairs
 
 Each **episode** ``e`` of a run is seeded from ``(seed, e)`` alone and yields ``snapshots``
@@ -13,7 +13,9 @@ snapshots of a team of ``robots`` robots (``two_robot_explore_v0`` for 2, the de
 ``j``'s, its transform the true one from ``j``'s frame into ``i``'s (the env's
 ``true_transform(i, j)``; ``true_merge`` for (0, 1)), its overlap the share of the smaller of
 the two robots' true sweeps that the other also swept, and ``extra["robots"]`` is ``[i, j]``
-(pairs written before this key existed are (0, 1)). Snapshot ``k`` is taken the first time the
+(pairs written before this key existed are (0, 1)). With drifting odometry (``--odometry``)
+the pair's transform is still the start-frame truth, and ``extra`` also holds the truth at the
+robots' current places (:func:`current_truth`). Snapshot ``k`` is taken the first time the
 true coverage reaches
 ``coverage_levels[k]`` (spread over 15–85 % so that overlaps vary) or, for an explorer too slow
 to get there, at step ``(k + 1) / snapshots · max_cycles``, whichever comes first (so the
@@ -146,6 +148,11 @@ class GenerateArgs:
     """Env steps per episode at most."""
     robots: int = 2
     """Robots in the team (2–8): every two of them make a pair of each snapshot."""
+    odometry: str = "perfect"
+    """The robots' odometry: 'perfect', 'pioneer3dx' (the Pioneer 3-DX preset of the
+    'rot_trans_rot' model) or a relative noise level such as '0.02' (the 'increment' model at
+    (0.02, 0.02)). With drift, maps bend and each pair also holds the truth at the robots'
+    current places."""
     progress: bool = True
     """Show a progress bar."""
 
@@ -160,6 +167,8 @@ class GenerateArgs:
                 check_int(getattr(self, name), name, low=low)
         with _setting("robots"):
             EnvConfig(n_robots=self.robots)  # names n_robots and the value
+        with _setting("odometry"):
+            odometry_kwargs(self.odometry)
         if self.backend not in BACKENDS:
             raise SettingsError("backend", f"backend must be one of {list(BACKENDS)}, got "
                                            f"{self.backend!r}")
@@ -191,12 +200,13 @@ class GenerateArgs:
 
     def settings(self) -> dict[str, Any]:
         """What determines the pairs (stored in ``dataset.json``; a resume must match).
-        ``robots`` only for teams of more than two, so that two-robot datasets made before it
-        existed resume."""
+        ``robots`` only for teams of more than two and ``odometry`` only when it drifts, so
+        that datasets made before they existed resume."""
         return {"explorer": self.explorer, "world": self.world, "snapshots": self.snapshots,
                 "seed": self.seed, "max_cycles": self.max_cycles,
                 "world_size": [float(v) for v in self.world_size],
-                **({"robots": self.robots} if self.robots != 2 else {})}
+                **({"robots": self.robots} if self.robots != 2 else {}),
+                **({"odometry": self.odometry} if self.odometry != "perfect" else {})}
 
 
 def robot_pairs(robots: int) -> np.ndarray:
@@ -215,14 +225,41 @@ def coverage_levels(snapshots: int) -> np.ndarray:
     return 0.15 + 0.70 * (np.arange(snapshots) + 0.5) / snapshots
 
 
+def odometry_kwargs(odometry: str) -> dict[str, Any]:
+    """The env's ``robot`` settings of ``--odometry`` (:class:`GenerateArgs`): ``{}`` for
+    ``"perfect"``, the ``"rot_trans_rot"`` model with the ``"pioneer3dx"`` preset, or the
+    ``"increment"`` model at ``(σ, σ)`` for a number ``σ``.
+
+    Raises:
+        ValueError: anything else, or a noise level the env refuses (named)."""
+    from envs.explore.config import RobotConfig
+
+    if odometry == "perfect":
+        return {}
+    if odometry == "pioneer3dx":
+        kwargs: dict[str, Any] = {"odometry_model": "rot_trans_rot",
+                                  "odometry_alphas": "pioneer3dx"}
+    else:
+        try:
+            sigma = float(odometry)
+        except (TypeError, ValueError):
+            raise ValueError(f"odometry must be 'perfect', 'pioneer3dx' or a noise level such "
+                             f"as '0.02', got {odometry!r}") from None
+        kwargs = {"odometry_noise": (sigma, sigma)}
+    RobotConfig(**kwargs)  # the env's own check of the level
+    return kwargs
+
+
 def env_kwargs(settings: dict[str, Any]) -> dict[str, Any]:
     """The ``parallel_env`` arguments of a run's ``settings``."""
     world: dict[str, Any] = {"source": settings["world"]}
     if settings["world"] == "procedural":
         world["size"] = tuple(settings["world_size"])
     robots = settings.get("robots", 2)
+    robot = odometry_kwargs(settings.get("odometry", "perfect"))
     return {"max_cycles": settings["max_cycles"], "world": world,
-            **({"n_robots": robots} if robots != 2 else {})}
+            **({"n_robots": robots} if robots != 2 else {}),
+            **({"robot": robot} if robot else {})}
 
 
 def pair_overlap(swept_a: np.ndarray, swept_b: np.ndarray) -> float:
@@ -248,16 +285,35 @@ def _snapshot(env: Any, infos: dict, first_id: int, episode: int, k: int, seed: 
     world = settings["world"]
     world_id = f"procedural:{seed}" if world == "procedural" else Path(world).name
     out = []
+    drifts = settings.get("odometry", "perfect") != "perfect"
     for p, (i, j) in enumerate(robot_pairs(len(snaps)).tolist()):
         truth: Rigid2D = raw.true_transform(i, j)
+        extra: dict[str, Any] = {"true_coverage": float(a["true_coverage"]), "robots": [i, j]}
+        if drifts:
+            extra.update(current_truth(raw.robots[i], raw.robots[j]))
         out.append(MapPair(
             pair_id=first_id + p, map_a=snaps[i].topomap, map_b=snaps[j].topomap,
             grid_a=grids[i], grid_b=grids[j], transform=truth,
             overlap=pair_overlap(raw.oracle.swept[i], raw.oracle.swept[j]), world_id=world_id,
             seed=seed, explorer=settings["explorer"], step=step, episode=episode, snapshot=k,
-            extra={"true_coverage": float(a["true_coverage"]), "robots": [i, j]},
+            extra=extra,
         ))
     return out
+
+
+def current_truth(robot_a: Any, robot_b: Any) -> dict[str, list]:
+    """A drifting pair's truth at the robots' current places (``extra`` keys): the transform
+    from B's map frame onto A's that is right where the robots are now
+    (``envs.explore.drift.drift_aware_truth``, ``[theta, tx, ty]``) and the robots' current
+    odometry positions (A's in A's frame, B's in B's; ``[[x, y], [x, y]]``), where
+    ``fusion.evaluation --truth current`` judges a merge. Why: a bent map has no one rigid
+    truth; the start-frame one misjudges merges that are right where the team is."""
+    from envs.explore.drift import drift_aware_truth
+
+    t = drift_aware_truth(robot_a, robot_b)
+    return {"current_transform": [t.theta, float(t.T[0]), float(t.T[1])],
+            "current_places": [[float(v) for v in robot_a.odometry[:2]],
+                               [float(v) for v in robot_b.odometry[:2]]]}
 
 
 def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, Any]) -> int:

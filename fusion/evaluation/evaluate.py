@@ -29,9 +29,9 @@ Pairs come from :func:`fusion.evaluation.synthetic.generate_pairs` (``--syntheti
 ``--noise``
 level, with the true correspondences so the oracle can be computed) or from a map-pair dataset
 folder or several evaluated as one set (:func:`load_pair_dir`; the :mod:`fusion.evaluation.pairs`
-format
-that ``agents.dataset`` writes: it
-stores no node correspondences, so the oracle column is empty).
+format that ``agents.dataset`` writes: it stores no node correspondences, so the oracle column
+is empty; ``--truth current`` judges pairs made with drifting odometry at the robots' current
+places).
 
 The pair and record types, the success criteria and the summaries are
 :mod:`fusion.evaluation.results`.
@@ -98,15 +98,26 @@ def synthetic_pairs(n: int, seed: int = 0, noise_levels: Sequence[float] = (0.05
     return out
 
 
-def load_pair_dir(path: str | Path) -> list[EvalPair]:
+TRUTHS = ("start", "current")
+"""What a dataset pair's merge is judged against: the start-frame truth, or (drifting
+odometry) the truth at the robots' current places."""
+
+
+def load_pair_dir(path: str | Path, truth: str = "start") -> list[EvalPair]:
     """The pairs of a map-pair dataset folder (:func:`fusion.evaluation.pairs.load_pairs`, the
-    format
-    ``agents.dataset`` writes). Pairs with zero overlap count as no-overlap pairs.
+    format ``agents.dataset`` writes). Pairs with zero overlap count as no-overlap pairs.
+    ``truth``: ``"start"`` judges merges against the pair's transform (the robots' start
+    frames); ``"current"`` against the transform right at the robots' current places where a
+    pair has one (``extra["current_transform"]``, datasets made with drifting odometry; the
+    two are the same without drift). Why: a bent map has no one rigid truth.
 
     Raises:
         FileNotFoundError: ``path`` is not a folder.
+        ValueError: ``truth`` is not one of :data:`TRUTHS`.
         fusion.evaluation.pairs.DatasetError: a missing manifest, foreign or corrupt file (named).
     """
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {list(TRUTHS)}, got {truth!r}")
     path = Path(path)
     if not path.is_dir():
         raise FileNotFoundError(f"PAIRS_DIR {str(path)!r} is not a folder")
@@ -115,7 +126,11 @@ def load_pair_dir(path: str | Path) -> list[EvalPair]:
     out = []
     for p in load_pairs(path):
         kind = "overlap" if p.overlap > 0 else "no_overlap"
-        out.append(EvalPair(f"pair_{p.pair_id:06d}", p.map_a, p.map_b, p.transform, None,
+        transform = p.transform
+        current = (p.extra or {}).get("current_transform")
+        if truth == "current" and current is not None:
+            transform = Rigid2D(float(current[0]), (float(current[1]), float(current[2])))
+        out.append(EvalPair(f"pair_{p.pair_id:06d}", p.map_a, p.map_b, transform, None,
                             float(p.overlap), kind, None, (p.grid_a, p.grid_b)))
     return out
 
@@ -429,6 +444,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fusion.MergeConfig fields as a JSON object, e.g. '{\"eps\": 0.6}'")
     p.add_argument("--for-noise", action="store_true",
                    help="merge each synthetic noise level with MergeConfig.for_noise(level)")
+    p.add_argument("--truth", choices=TRUTHS, default="start",
+                   help="judge dataset merges against the start-frame truth or, for datasets "
+                        "made with drifting odometry, the truth at the robots' current places")
     p.add_argument("--out", type=Path, default=Path("out/fusion_eval"),
                    help="output folder for results.json and the plots")
     p.add_argument("--no-plots", action="store_true", help="write results.json only")
@@ -482,7 +500,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             pairs = []
             for folder in args.pairs_dir:
-                loaded = load_pair_dir(folder)
+                loaded = load_pair_dir(folder, args.truth)
                 if len(args.pairs_dir) > 1:
                     loaded = [dataclasses.replace(p, name=f"{folder.name}/{p.name}")
                               for p in loaded]

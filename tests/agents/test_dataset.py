@@ -187,6 +187,9 @@ def test_cli_too_small_world_is_one_line_and_writes_nothing(tmp_path):
         (["--address", "auto"], "error: --address: address is only used with backend='ray'"),
         (["--explorer", "spiral"], r"error: --explorer: explorer must be one of \["),
         (["--world", "/nowhere/map.yaml"], "error: --world: world must be 'procedural' or an"),
+        (["--odometry", "wobbly"], "error: --odometry: odometry must be 'perfect', "
+                                   "'pioneer3dx' or a noise level such as '0.02', got 'wobbly'"),
+        (["--odometry", "-0.1"], r"error: --odometry: robot.odometry_noise\[0\] must be >= 0"),
     ],
 )
 def test_cli_bad_settings(tmp_path, capsys, flags, match):
@@ -478,3 +481,34 @@ def test_cli_parse_error_on_the_command_line_is_one_line(tmp_path):
     assert run.stderr == ("python -m agents.dataset generate: error: value error: Error parsing "
                           "--pairs: invalid literal for int() with base 10: 'abc'\n")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------ drifting odometry
+def test_drifting_pairs_hold_the_truth_at_the_robots_current_places(tmp_path_factory,
+                                                                   reference):
+    """With drifting odometry a pair keeps its start-frame truth and adds the one right where
+    the robots are now; without drift the two are the same; evaluation reads either."""
+    from fusion.evaluation.evaluate import load_pair_dir
+
+    out, pairs = made(tmp_path_factory, "drift", 2, {**KW, "odometry": "pioneer3dx"})
+    assert json.loads((out / "dataset.json").read_text())["settings"]["odometry"] == "pioneer3dx"
+    _, still = made(tmp_path_factory, "still", 2, {**KW, "odometry": "0"})
+    for p, q in zip(pairs, still, strict=True):
+        theta, tx, ty = p.extra["current_transform"]
+        current = Rigid2D(theta, (tx, ty))
+        assert not current.allclose(p.transform, atol=1e-3)  # the maps drifted apart
+        assert len(p.extra["current_places"]) == 2
+        theta, tx, ty = q.extra["current_transform"]
+        assert Rigid2D(theta, (tx, ty)).allclose(q.transform, atol=1e-9)
+    start, now = load_pair_dir(out), load_pair_dir(out, truth="current")
+    for p, a, b in zip(pairs, start, now, strict=True):
+        assert a.transform.allclose(p.transform, atol=0.0)
+        assert b.transform.allclose(Rigid2D(p.extra["current_transform"][0],
+                                            p.extra["current_transform"][1:]), atol=1e-12)
+    with pytest.raises(ValueError, match=r"truth must be one of \['start', 'current'\], got 'x'"):
+        load_pair_dir(out, truth="x")
+    # a perfect-odometry dataset stores no second truth: "current" reads the start frames'
+    ref_out, ref_pairs = reference
+    assert "current_transform" not in ref_pairs[0].extra
+    for p, e in zip(ref_pairs, load_pair_dir(ref_out, truth="current"), strict=True):
+        assert e.transform.allclose(p.transform, atol=0.0)
