@@ -305,9 +305,11 @@ def current_truth(robot_a: Any, robot_b: Any) -> dict[str, list]:
     """A drifting pair's truth at the robots' current places (``extra`` keys): the transform
     from B's map frame onto A's that is right where the robots are now
     (``envs.explore.drift.drift_aware_truth``, ``[theta, tx, ty]``) and the robots' current
-    odometry positions (A's in A's frame, B's in B's; ``[[x, y], [x, y]]``), where
-    ``fusion.evaluation --truth current`` judges a merge. Why: a bent map has no one rigid
-    truth; the start-frame one misjudges merges that are right where the team is."""
+    odometry positions (A's in A's frame, B's in B's; ``[[x, y], [x, y]]``: where the env's
+    ``envs.explore.drift.drift_aware_error`` measures a merge's translation error).
+    ``fusion.evaluation --truth current`` judges merges against the transform. Why: a bent
+    map has no one rigid truth; the start-frame one misjudges merges that are right where the
+    team is."""
     from envs.explore.drift import drift_aware_truth
 
     t = drift_aware_truth(robot_a, robot_b)

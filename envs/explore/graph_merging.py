@@ -25,12 +25,12 @@ aligned against
   can explain it).
 
 The pose graph keeps each pair's pairwise-consistent links (at least two), optimises each
-component of robots, and a robot's **fused map** is its component's patches composed at
+component of robots, and a robot's **fused map** is the patches of its component it has
+received (:meth:`GraphMerging.received`: a teammate's as of their last contact) composed at
 ``corrections(robot, frame=i)``. Its teammates' places in it (``frames``) are the rigid
 transforms right at the robots' newest anchors: ``C_i⁻¹ · C_j`` of the two newest anchors'
-corrections, of the patches it has received (``received``: a teammate's as of their last
-contact). This slice's simplification: the graph's estimates are the team's, whatever the
-robots' contacts (a link found while ``r`` was out of contact still moves ``r``'s map).
+corrections. This slice's simplification: the graph's estimates are the team's, whatever the
+robots' contacts (a link found while a robot was out of contact still moves its map).
 """
 
 from __future__ import annotations
