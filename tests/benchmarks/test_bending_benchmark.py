@@ -2,7 +2,6 @@
 often even a perfect window aligner's link is wrong) is zero for rigid maps and not for bent
 ones."""
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -13,18 +12,9 @@ import pytest
 from fusion import Rigid2D
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # as when run: its shared helpers (_timing)
 
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-bil = _load("bending_in_loop")
+import bending_in_loop as bil  # noqa: E402
 
 
 def _graph(turn_per_anchor_deg: float, anchors: int = 12, window: int = 4):
