@@ -161,6 +161,8 @@ class PoseGraph:
         self._agreement: dict[tuple[int, int], float] = {}  # PCM's χ² of two links, by id
         self._estimate: dict[Anchor, Rigid2D] = {}  # in the component's reference frame
         self._groups: list[frozenset[int]] = []  # the components at the last optimise
+        self._bound = self.config.chi2_bound
+        self._factors: dict[object, object] = {}  # GTSAM factors, by edge or measurement id
         self._dirty = True
 
     # ----------------------------------------------------------------- building
@@ -193,7 +195,7 @@ class PoseGraph:
             raise ValueError("a loop closure joins two anchors of one robot")
         d = self._chain_relative(robot, a, b)
         pos_var, rot_var = self._chain_var(robot, a, b)
-        if _chi2(m.relative, d, pos_var + m.pos_var, rot_var + m.rot_var) > self.config.chi2_bound:
+        if _chi2(m.relative, d, pos_var + m.pos_var, rot_var + m.rot_var) > self._bound:
             return False
         self._loops.append(m)
         self._dirty = True
@@ -343,7 +345,7 @@ class PoseGraph:
         links = sorted(links, key=lambda m: -m.confidence)[: self.config.max_links_per_pair]
         graph = nx.Graph()
         graph.add_nodes_from(range(len(links)))
-        bound = self.config.chi2_bound
+        bound = self._bound
         for u in range(len(links)):
             for v in range(u + 1, len(links)):
                 key = (id(links[u]), id(links[v]))
@@ -416,11 +418,7 @@ class PoseGraph:
             for k, pose in enumerate(chain.poses):
                 values.insert(_key(gtsam, r, k), _pose2(gtsam, frames[r] @ pose))
                 if k:
-                    d = chain.poses[k - 1].inverse() @ pose
-                    s = np.maximum(np.asarray(chain.sigmas[k]), MIN_SIGMA)
-                    graph.add(gtsam.BetweenFactorPose2(_key(gtsam, r, k - 1), _key(gtsam, r, k),
-                                                       _pose2(gtsam, d),
-                                                       noise.Diagonal.Sigmas(s)))
+                    graph.add(self._odometry_factor(gtsam, r, k))
         graph.add(gtsam.PriorFactorPose2(_key(gtsam, ref, 0),
                                          _pose2(gtsam, self._chains[ref].poses[0]),
                                          noise.Diagonal.Sigmas(np.full(3, MIN_SIGMA))))
@@ -429,22 +427,41 @@ class PoseGraph:
             if set(pair) <= robots:
                 robust += self._used(pair)
         for m in robust:
-            model = noise.Robust.Create(huber, noise.Diagonal.Sigmas(np.asarray(m.sigmas)))
-            graph.add(gtsam.BetweenFactorPose2(_key(gtsam, *m.a), _key(gtsam, *m.b),
-                                               _pose2(gtsam, m.relative), model))
+            factor = self._factors.get(id(m))
+            if factor is None:  # measurements never change: one factor each
+                model = noise.Robust.Create(huber, noise.Diagonal.Sigmas(np.asarray(m.sigmas)))
+                factor = gtsam.BetweenFactorPose2(_key(gtsam, *m.a), _key(gtsam, *m.b),
+                                                  _pose2(gtsam, m.relative), model)
+                self._factors[id(m)] = factor
+            graph.add(factor)
         return gtsam.LevenbergMarquardtOptimizer(graph, values,
                                                  gtsam.LevenbergMarquardtParams()).optimize()
 
+    def _odometry_factor(self, gtsam, robot: int, k: int):
+        """The odometry edge from anchor ``k - 1`` to ``k`` of ``robot`` as a GTSAM factor
+        (made once: a chain's anchors never change)."""
+        factor = self._factors.get((robot, k))
+        if factor is None:
+            chain = self._chains[robot]
+            d = chain.poses[k - 1].inverse() @ chain.poses[k]
+            s = np.maximum(np.asarray(chain.sigmas[k]), MIN_SIGMA)
+            factor = gtsam.BetweenFactorPose2(_key(gtsam, robot, k - 1), _key(gtsam, robot, k),
+                                              _pose2(gtsam, d), gtsam.noiseModel.Diagonal.Sigmas(s))
+            self._factors[(robot, k)] = factor
+        return factor
+
     def _worst_link(self, gtsam, robots: frozenset[int], values) -> Measurement | None:
         """The used link the optimum explains worst, if it is beyond the consistency bound."""
-        worst, worst_chi2 = None, self.config.chi2_bound
+        worst, worst_chi2 = None, self._bound
         for pair in sorted(self._kept):
             if not set(pair) <= robots:
                 continue
             for m in self._used(pair):
-                xa = _rigid(values.atPose2(_key(gtsam, *m.a)))
-                xb = _rigid(values.atPose2(_key(gtsam, *m.b)))
-                value = _chi2(m.relative, xa.inverse() @ xb, m.pos_var, m.rot_var)
+                # the residual d⁻¹ z of _chi2, in GTSAM (d: the optimum's relative pose)
+                d = values.atPose2(_key(gtsam, *m.a)).between(values.atPose2(_key(gtsam, *m.b)))
+                e = d.between(self._factors[id(m)].measured())
+                value = ((e.x() ** 2 + e.y() ** 2) / max(m.pos_var, 1e-12)
+                         + e.theta() ** 2 / max(m.rot_var, 1e-12))
                 if value > worst_chi2:
                     worst, worst_chi2 = m, value
         return worst
