@@ -168,7 +168,8 @@ class GraphMerging:
         in its map searches its teammates first (**joining**: one candidate per teammate in
         contact, taken in turn), then its own loop closures; a robot already joined to some
         alternates, merge step by merge step, between joining the rest and the searches
-        **near** its estimate (its loop closures, then its joined teammates' windows)."""
+        **near** its estimate: its loop closures and its joined teammates' windows, which of
+        the two first changing every other turn (neither starves the other)."""
         w = self.config.window_anchors
         stride = max(1, w // 2)
         self._poses = {}  # corrected poses by (robot, frame), as the graph is now
@@ -195,7 +196,7 @@ class GraphMerging:
             if joining:  # teammates in turn
                 k = self._joins[i] % len(joining)
                 joining = joining[k:] + joining[:k]
-            near = loops + joined
+            near = loops + joined if self._turns[i] % 4 < 2 else joined + loops
             if len(component) > 1 and joining and near and self._turns[i] % 2:
                 order = near + joining
             else:
