@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
             "fused_ate_m", "own_ate_m", "fused_wall_share", "own_wall_share", "links_kept",
-            "links_kept_wrong", "loops_kept", "window_searches", "floor_pairs",
+            "links_kept_wrong", "loops_kept", "loops_kept_wrong", "window_searches", "floor_pairs",
             "floor_mid_wrong", "floor_last_wrong")
     print(" | ".join(keys), flush=True)
     for seed in range(args.first_seed, args.first_seed + args.worlds):
@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> None:
     print()
     print("setting | merged episodes | median first right | right / merged steps | "
           "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
-          "links kept wrong | bend floor: ideal window links wrong (middle / newest anchors) | "
+          "links kept wrong | loops kept wrong | "
+          "bend floor: ideal window links wrong (middle / newest anchors) | "
           "step ms | mapping + merging, merging alone: share of a step")
     for setting in args.settings:
         sel = [r for r in rows if r["graph"] == (setting == "on")]
@@ -226,14 +227,15 @@ def main(argv: list[str] | None = None) -> None:
                    f"({statistics.median(r['own_ate_m'] for r in sel):.2f})")
             wall = (f"{statistics.median(r['fused_wall_share'] for r in sel):.2f} "
                     f"({statistics.median(r['own_wall_share'] for r in sel):.2f})")
-            kept = (f"{sum(r['links_kept_wrong'] for r in sel):.0f} / "
-                    f"{sum(r['links_kept'] for r in sel):.0f}")
+            kept = " | ".join(f"{sum(r[k + '_wrong'] for r in sel):.0f} / "
+                              f"{sum(r[k] for r in sel):.0f}" for k in ("links_kept", "loops_kept"))
             pairs = sum(r["floor_pairs"] for r in sel)
             floor = " / ".join(
                 f"{sum(r[k] * r['floor_pairs'] for r in sel if r['floor_pairs']) / pairs:.3f}"
                 if pairs else "-" for k in ("floor_mid_wrong", "floor_last_wrong"))
         else:
-            ate = wall = kept = floor = "-"
+            ate = wall = floor = "-"
+            kept = "- | -"
         cpu = [r["cpu_step_s"] * r["steps"] for r in sel]
         share = " ".join(f"{sum(r[k] * c for r, c in zip(sel, cpu, strict=True)) / sum(cpu):.0%}"
                          for k in ("mapping_share", "merging_share"))

@@ -299,6 +299,11 @@ class PoseGraph:
         ids = {id(m) for m in kept}
         return kept, [m for m in self._links.get(pair, []) if id(m) not in ids]
 
+    def loops(self, robot: int) -> list[Measurement]:
+        """``robot``'s loop closures in use: those :meth:`add_loop` kept."""
+        r = self._robot(robot, "robot")
+        return [m for m in self._loops if m.a[0] == r]
+
     # ---------------------------------------------------------------- internals
     def _robot(self, robot: object, name: str) -> int:
         r = check_int(robot, name, low=0)

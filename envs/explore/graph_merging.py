@@ -349,8 +349,9 @@ class GraphMerging:
                 ) -> dict[str, float]:
         """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
         its own uncorrected map: ATE of the anchors (m), the share of occupied cells within
-        0.2 m of a true wall; and the links the graph keeps, with how many of them are more
-        than 5° or 1 m off at their own anchors. For metrics only."""
+        0.2 m of a true wall; and the links and loop closures the graph keeps in that map,
+        with how many of them are more than 5° or 1 m off at their own anchors. For metrics
+        only."""
         from fusion.evaluation.bending import ate_rms, wall_share, world_alignment
 
         comp = sorted(self.graph.component(0))
@@ -363,6 +364,9 @@ class GraphMerging:
                 for m in self.graph.links(i, j)[0]]
         errors = [self._error(m.a, m.b, m.relative) for m in kept]
         wrong = sum(rot > 5.0 or trans > 1.0 for rot, trans in errors)
+        loops = [m for r in comp for m in self.graph.loops(r)]
+        wrong_loops = sum(rot > 5.0 or trans > 1.0
+                          for rot, trans in (self._error(m.a, m.b, m.relative) for m in loops))
         return {
             "fused_robots": float(len(comp)),
             "fused_ate_m": ate_rms(est, truth),
@@ -374,7 +378,8 @@ class GraphMerging:
             "links_kept": float(len(kept)),
             "links_kept_wrong": float(wrong),
             "links_accepted": float(sum(r.i != r.j for r in self.records)),
-            "loops_kept": float(sum(r.taken and r.i == r.j for r in self.records)),
+            "loops_kept": float(len(loops)),
+            "loops_kept_wrong": float(wrong_loops),
             "window_searches": float(self.searches),
         }
 

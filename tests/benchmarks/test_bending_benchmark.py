@@ -51,6 +51,6 @@ def test_a_tiny_run_prints_both_tables(capsys):
     pytest.importorskip("gtsam")
     bil.main(["--worlds", "1", "--steps", "40", "--size", "10", "--settings", "on", "off"])
     out = capsys.readouterr().out
-    assert "bend floor: ideal window links wrong (middle / newest anchors)" in out
+    assert "loops kept wrong | bend floor: ideal window links wrong (middle / newest anchors)" in out
     rows = [line for line in out.splitlines() if line.startswith(("on |", "off |"))]
     assert len(rows) == 2 and rows[0].split(" | ")[1] == "0/1"

@@ -56,7 +56,7 @@ def test_an_episode_runs_and_anchors_start_on_schedule(stepped):
     assert len(trace) == STEPS
     state = env.merge_state()
     assert {"fused_ate_m", "own_ate_m", "fused_wall_share", "own_wall_share",
-            "links_kept"} <= set(state.bending)
+            "links_kept", "loops_kept", "loops_kept_wrong"} <= set(state.bending)
     assert all(np.isfinite(v) or k.endswith("wall_share") for k, v in state.bending.items())
 
 

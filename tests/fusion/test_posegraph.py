@@ -70,6 +70,7 @@ def test_a_loop_closure_unbends_a_drifting_map():
     # back at the start: the last anchor is where the first was
     assert graph.add_loop(0, 0, len(odom) - 1, Rigid2D(), LINK_SIGMAS)
     fixed = ate_rms(graph.trajectory(0), xy(truth))
+    assert [(m.a, m.b) for m in graph.loops(0)] == [((0, 0), (0, len(odom) - 1))]
     assert raw > 0.4
     assert fixed < raw / 3
 
@@ -79,6 +80,7 @@ def test_a_loop_closure_the_odometry_cannot_explain_is_refused():
     graph = PoseGraph(1)
     add_robot(graph, 0, odom)
     assert not graph.add_loop(0, 0, len(odom) - 1, Rigid2D(0.0, (15.0, 0.0)), LINK_SIGMAS)
+    assert graph.loops(0) == []
     np.testing.assert_allclose(graph.trajectory(0)[:, :2], xy(odom), atol=1e-6)
 
 
