@@ -44,7 +44,7 @@ import numpy as np
 from envs.explore.comm import TeamViews
 from envs.explore.config import MappingConfig, RobotConfig
 from envs.explore.mapping import RobotMap
-from envs.explore.submaps import RobotSubmaps, ScanSettings, compose
+from envs.explore.submaps import PatchCache, RobotSubmaps, ScanSettings, compose
 from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.local_align import align_near
 from fusion.posegraph import PoseGraph
@@ -120,6 +120,7 @@ class GraphMerging:
         self._windows: dict[tuple[int, int, int], object] = {}
         self._poses: dict[tuple[int, int], list[Rigid2D]] = {}
         self._grid_cfg = GridMergeConfig()
+        self._drawn = PatchCache()  # closed patches drawn into fused maps, by (r, m, anchor)
 
     # ----------------------------------------------------------------- per step
     def before_scans(self, steps: int, odometry: Sequence[np.ndarray],
@@ -293,14 +294,18 @@ class GraphMerging:
     # ----------------------------------------------------------------- fused maps
     def fused_log_odds(self, r: int, maps: Sequence[RobotMap], views: TeamViews) -> np.ndarray:
         """Robot ``r``'s fused map: its component's patches that ``r`` has received
-        (:meth:`received`) composed at their corrections into ``r``'s frame, float64 log-odds
-        of ``r``'s grid geometry."""
+        (:meth:`received`) composed at their corrections into ``r``'s frame (closed patches
+        drawn again only once their correction moves them, :class:`PatchCache`), float64
+        log-odds of ``r``'s grid geometry."""
         dst = maps[r].geometry
         acc = np.zeros(dst.shape, dtype=np.float64)
         for m in sorted(self.graph.component(r)):
             patches = self.received(r, m, maps, views)
             corrections = self.graph.corrections(m, frame=r)[:len(patches)]
-            compose(patches, corrections, maps[m].geometry, dst, acc)
+            closed = len(self.submaps[m].patches)  # the newest (live) patch still changes
+            keys = [(r, m, k) if k < closed else None for k in range(len(patches))]
+            compose(patches, corrections, maps[m].geometry, dst, acc, cache=self._drawn,
+                    keys=keys)
         return acc
 
     def received(self, r: int, m: int, maps: Sequence[RobotMap], views: TeamViews) -> list:

@@ -175,58 +175,127 @@ def _patch(delta: np.ndarray) -> Patch:
     return Patch(r0, c0, delta[r0:r1, c0:c1].copy())
 
 
-def compose(patches: list[Patch], corrections: list[Rigid2D], src: Geometry, dst: Geometry,
-            out: np.ndarray | None = None) -> np.ndarray:
-    """Add up ``patches`` (cells of a grid of geometry ``src``, their robot's odometry frame),
-    each moved by its correction (that frame → the target frame, a grid of geometry ``dst``),
-    nearest-cell resampled with ``scipy.ndimage.affine_transform``; into ``out`` (float64
-    log-odds of ``dst``'s shape, added to) or a fresh zero grid. Returns the log-odds
-    (``topo.SensorModel.classify`` turns them into states).
+SNAP_CELLS = 0.1
+"""A kept patch is drawn again (:class:`PatchCache`) once its correction moves some corner of
+it by more than this many cells since it was drawn: every optimisation of the pose graph moves
+every anchor a little, and nearest-cell resampling hardly changes for less."""
 
-    Raises:
-        ValueError: ``patches`` and ``corrections`` differ in length, or the two geometries'
-            resolutions differ.
-    """
-    if len(patches) != len(corrections):
-        raise ValueError(f"patches and corrections must be as many, got {len(patches)} and "
-                         f"{len(corrections)}")
-    if src.resolution != dst.resolution:
-        raise ValueError(f"src and dst must have the same resolution, got {src.resolution} "
-                         f"and {dst.resolution}")
-    acc = np.zeros(dst.shape, dtype=np.float64) if out is None else out
+
+@dataclass(frozen=True, slots=True)
+class _Moved:
+    """A patch drawn into a target grid at ``correction``: ``values`` to add at rows
+    ``r0 …`` and columns ``c0 …`` of the target (``None``: it falls outside)."""
+
+    correction: Rigid2D
+    r0: int
+    c0: int
+    values: np.ndarray | None
+
+
+class PatchCache:
+    """Patches that never change (closed anchors'), drawn into a target grid and kept across
+    compositions under a caller's key: :func:`compose` draws such a patch again only when
+    its correction has moved it by more than :data:`SNAP_CELLS` cells. Why: a fused map is
+    recomposed on every merge step from all its patches, and most of them barely move."""
+
+    def __init__(self) -> None:
+        self._moved: dict[object, _Moved] = {}
+
+    def moved(self, key: object, patch: Patch, corr: Rigid2D, src: Geometry,
+              dst: Geometry) -> _Moved:
+        """``patch`` drawn into ``dst`` at ``corr``: the kept drawing under ``key`` if its
+        correction is within :data:`SNAP_CELLS` cells of ``corr`` over the patch, else a
+        new one (kept)."""
+        kept = self._moved.get(key)
+        if kept is not None and _shift_cells(kept.correction, corr, patch, src) <= SNAP_CELLS:
+            return kept
+        kept = _move(patch, corr, src, dst)
+        self._moved[key] = kept
+        return kept
+
+
+def _corners(patch: Patch, src: Geometry) -> np.ndarray:
+    """The metric corners of ``patch``'s bounding box in ``src``'s frame, ``(4, 2)``."""
+    ph, pw = patch.delta.shape
+    cells = np.array([[patch.c0, patch.r0], [patch.c0 + pw, patch.r0],
+                      [patch.c0, patch.r0 + ph], [patch.c0 + pw, patch.r0 + ph]],
+                     dtype=np.float64)
+    return cells * src.resolution + np.array(src.origin)
+
+
+def _shift_cells(a: Rigid2D, b: Rigid2D, patch: Patch, src: Geometry) -> float:
+    """How far (cells) the two corrections put ``patch``'s points apart at most (a rigid
+    motion's largest displacement over a box is at a corner)."""
+    corners = _corners(patch, src)
+    return float(np.max(np.linalg.norm(a.apply(corners) - b.apply(corners), axis=1))
+                 / src.resolution)
+
+
+def _move(patch: Patch, corr: Rigid2D, src: Geometry, dst: Geometry) -> _Moved:
+    """``patch`` (cells of ``src``) moved by ``corr`` into ``dst``, nearest-cell resampled with
+    ``scipy.ndimage.affine_transform``, cut to the target cells it can reach."""
+    ph, pw = patch.delta.shape
+    if not ph:
+        return _Moved(corr, 0, 0, None)
+    if src == dst and corr.allclose(Rigid2D.identity(), atol=1e-9):
+        return _Moved(corr, patch.r0, patch.c0, patch.delta)
     res = dst.resolution
     s_org, d_org = np.array(src.origin), np.array(dst.origin)
     # cell centres in cells: x / res = origin / res + col + 0.5
     sx, sy = s_org / res + 0.5
     dx, dy = d_org / res + 0.5
     h, w = dst.shape
-    same = src == dst
-    for patch, corr in zip(patches, corrections, strict=True):
-        ph, pw = patch.delta.shape
-        if not ph:
-            continue
-        if same and corr.allclose(Rigid2D.identity(), atol=1e-9):
-            acc[patch.r0:patch.r0 + ph, patch.c0:patch.c0 + pw] += patch.delta
-            continue
-        # the moved patch's target cells: its corners through the correction, a cell of margin
-        corners = np.array([[patch.c0, patch.r0], [patch.c0 + pw, patch.r0],
-                            [patch.c0, patch.r0 + ph], [patch.c0 + pw, patch.r0 + ph]],
-                           dtype=np.float64)
-        moved = (corr.apply(corners * res + s_org) - d_org) / res
-        c0 = max(int(math.floor(moved[:, 0].min())) - 1, 0)
-        c1 = min(int(math.ceil(moved[:, 0].max())) + 1, w)
-        r0 = max(int(math.floor(moved[:, 1].min())) - 1, 0)
-        r1 = min(int(math.ceil(moved[:, 1].max())) + 1, h)
-        if r0 >= r1 or c0 >= c1:
-            continue
-        inv = corr.inverse()
-        rot, t = inv.R, inv.T / res
-        # (row, col) in the patch under each target cell centre: the inverse correction
-        matrix = np.array([[rot[1, 1], rot[1, 0]], [rot[0, 1], rot[0, 0]]])
-        u, v = c0 + dx, r0 + dy  # target cell (r0, c0)'s centre, in cells
-        offset = np.array([rot[1, 0] * u + rot[1, 1] * v + t[1] - sy - patch.r0,
-                           rot[0, 0] * u + rot[0, 1] * v + t[0] - sx - patch.c0])
-        acc[r0:r1, c0:c1] += ndimage.affine_transform(
-            patch.delta, matrix, offset=offset, output_shape=(r1 - r0, c1 - c0), order=0,
-            mode="grid-constant", cval=0.0)
+    # the moved patch's target cells: its corners through the correction, a cell of margin
+    moved = (corr.apply(_corners(patch, src)) - d_org) / res
+    c0 = max(int(math.floor(moved[:, 0].min())) - 1, 0)
+    c1 = min(int(math.ceil(moved[:, 0].max())) + 1, w)
+    r0 = max(int(math.floor(moved[:, 1].min())) - 1, 0)
+    r1 = min(int(math.ceil(moved[:, 1].max())) + 1, h)
+    if r0 >= r1 or c0 >= c1:
+        return _Moved(corr, 0, 0, None)
+    inv = corr.inverse()
+    rot, t = inv.R, inv.T / res
+    # (row, col) in the patch under each target cell centre: the inverse correction
+    matrix = np.array([[rot[1, 1], rot[1, 0]], [rot[0, 1], rot[0, 0]]])
+    u, v = c0 + dx, r0 + dy  # target cell (r0, c0)'s centre, in cells
+    offset = np.array([rot[1, 0] * u + rot[1, 1] * v + t[1] - sy - patch.r0,
+                       rot[0, 0] * u + rot[0, 1] * v + t[0] - sx - patch.c0])
+    return _Moved(corr, r0, c0, ndimage.affine_transform(
+        patch.delta, matrix, offset=offset, output_shape=(r1 - r0, c1 - c0), order=0,
+        mode="grid-constant", cval=0.0))
+
+
+def compose(patches: list[Patch], corrections: list[Rigid2D], src: Geometry, dst: Geometry,
+            out: np.ndarray | None = None, *, cache: PatchCache | None = None,
+            keys: list[object] | None = None) -> np.ndarray:
+    """Add up ``patches`` (cells of a grid of geometry ``src``, their robot's odometry frame),
+    each moved by its correction (that frame → the target frame, a grid of geometry ``dst``),
+    nearest-cell resampled with ``scipy.ndimage.affine_transform``; into ``out`` (float64
+    log-odds of ``dst``'s shape, added to) or a fresh zero grid. With ``cache``, the patches
+    whose ``keys`` entry is not ``None`` (patches that never change under that key) are drawn
+    through it (:class:`PatchCache`: again only once their correction moved them more than
+    :data:`SNAP_CELLS` cells). Returns the log-odds (``topo.SensorModel.classify`` turns them
+    into states).
+
+    Raises:
+        ValueError: ``patches``, ``corrections`` (and ``keys``) differ in length, or the two
+            geometries' resolutions differ.
+    """
+    if len(patches) != len(corrections):
+        raise ValueError(f"patches and corrections must be as many, got {len(patches)} and "
+                         f"{len(corrections)}")
+    if keys is not None and len(keys) != len(patches):
+        raise ValueError(f"keys and patches must be as many, got {len(keys)} and "
+                         f"{len(patches)}")
+    if src.resolution != dst.resolution:
+        raise ValueError(f"src and dst must have the same resolution, got {src.resolution} "
+                         f"and {dst.resolution}")
+    acc = np.zeros(dst.shape, dtype=np.float64) if out is None else out
+    for k, (patch, corr) in enumerate(zip(patches, corrections, strict=True)):
+        key = None if cache is None or keys is None else keys[k]
+        moved = _move(patch, corr, src, dst) if key is None else cache.moved(
+            key, patch, corr, src, dst)
+        if moved.values is not None:
+            h, w = moved.values.shape
+            acc[moved.r0:moved.r0 + h, moved.c0:moved.c0 + w] += moved.values
     return acc

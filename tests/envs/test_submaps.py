@@ -11,7 +11,9 @@ import pytest
 from envs.explore.config import MappingConfig
 from envs.explore.mapping import Geometry, RobotMap
 from envs.explore.submaps import (
+    SNAP_CELLS,
     Patch,
+    PatchCache,
     RobotSubmaps,
     ScanSettings,
     compose,
@@ -79,6 +81,30 @@ def test_a_rigid_correction_moves_a_whole_map():
     np.testing.assert_array_equal(rmap.grid.model.classify(lo), expected.states())
 
 
+def test_a_cached_patch_is_drawn_again_only_once_its_correction_moves_it():
+    rmap, sub = _drive(120, 25)
+    patches, g = sub.patches, rmap.geometry
+    keys = [("robot", k) for k in range(len(patches))]
+    cache = PatchCache()
+    first = Rigid2D(math.radians(30), (0.7, -0.4))
+    lo = compose(patches, [first] * len(patches), g, g, cache=cache, keys=keys)
+    np.testing.assert_array_equal(lo, compose(patches, [first] * len(patches), g, g))
+    # a nudge just under SNAP_CELLS: the kept drawings, not new ones (which differ)
+    nudged = Rigid2D(first.theta, first.T + (0.9 * SNAP_CELLS * g.resolution, 0.0))
+    again = compose(patches, [nudged] * len(patches), g, g, cache=cache, keys=keys)
+    np.testing.assert_array_equal(again, lo)
+    assert not np.array_equal(again, compose(patches, [nudged] * len(patches), g, g))
+    # a cell's move: every patch drawn afresh; a patch without a key always is
+    moved = Rigid2D(first.theta, first.T + (g.resolution, 0.0))
+    fresh = compose(patches, [moved] * len(patches), g, g)
+    np.testing.assert_array_equal(
+        compose(patches, [moved] * len(patches), g, g, cache=cache, keys=keys), fresh)
+    np.testing.assert_array_equal(
+        compose(patches, [nudged] * len(patches), g, g, cache=cache,
+                keys=[None] * len(patches)),
+        compose(patches, [nudged] * len(patches), g, g))
+
+
 def test_window_grid_rebuilds_the_scans():
     rmap, sub = _drive(120, 25)
     scan = ScanSettings(ANGLES, 0.2, 5.0, math.radians(7.5), rmap.grid.model)
@@ -91,6 +117,8 @@ def test_compose_refuses_mismatched_input():
     g = Geometry((0.0, 0.0), 0.1, (10, 10))
     with pytest.raises(ValueError, match="patches and corrections must be as many, got 1 and 0"):
         compose([Patch(0, 0, np.ones((1, 1)))], [], g, g)
+    with pytest.raises(ValueError, match="keys and patches must be as many, got 0 and 1"):
+        compose([Patch(0, 0, np.ones((1, 1)))], [Rigid2D()], g, g, cache=PatchCache(), keys=[])
     with pytest.raises(ValueError, match="same resolution, got 0.1 and 0.2"):
         compose([], [], g, Geometry((0.0, 0.0), 0.2, (10, 10)))
 
