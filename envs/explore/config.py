@@ -349,7 +349,8 @@ class MappingConfig:
         grid_merge_every: with ``"hybrid"``, the (slower) occupancy-grid alignment
             runs on merge steps that are multiples of this: to find a merge, and once one is in
             use to re-examine it (replace or drop it, see the env's manual); ``0`` never. A
-            multiple of ``merge_every`` (unused when ``merge_every`` is 0).
+            multiple of ``merge_every`` (unused when ``merge_every`` is 0 and with
+            ``pose_graph``).
         topo_growth: an extraction due waits until the robot's map knows this fraction more
             cells than at its last extraction (the same map gives the same graph; a structural
             merge of two unchanged graphs is skipped likewise). ``0`` extracts on schedule.
@@ -423,8 +424,8 @@ class MappingConfig:
         _check_choice(self.merge_method, "mapping.merge_method", MERGE_METHODS)
         _set(self, "grid_merge_every", check_int(self.grid_merge_every,
                                                  "mapping.grid_merge_every", low=0))
-        if self.grid_merge_every and self.merge_every and (
-                self.grid_merge_every % self.merge_every):
+        if self.grid_merge_every and self.merge_every and not self.pose_graph and (
+                self.grid_merge_every % self.merge_every):  # the pose graph aligns no grids
             raise ValueError(f"mapping.grid_merge_every must be 0 or a multiple of "
                              f"mapping.merge_every ({self.merge_every}), got "
                              f"{self.grid_merge_every}")

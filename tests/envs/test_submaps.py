@@ -147,3 +147,11 @@ def test_bad_pose_graph_settings_are_named(field, value, match):
 def test_pose_graph_needs_merge_steps():
     with pytest.raises(ValueError, match="mapping.merge_every must be > 0 with it, got 0"):
         MappingConfig(pose_graph=True, merge_every=0)
+
+
+def test_pose_graph_takes_any_merge_cadence():
+    # the grid alignments' cadence must divide by merge_every only where grids are aligned
+    assert MappingConfig(pose_graph=True, merge_every=7).merge_every == 7
+    with pytest.raises(ValueError, match=r"mapping.grid_merge_every must be 0 or a multiple of "
+                                         r"mapping.merge_every \(7\), got 100"):
+        MappingConfig(merge_every=7)
