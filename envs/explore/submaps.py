@@ -196,8 +196,9 @@ class PatchCache:
     """Patches that never change (closed anchors'), drawn into a target grid and kept across
     compositions under a caller's key — one key per patch and target grid: :func:`compose`
     draws such a patch again only when its correction has moved it by more than
-    :data:`SNAP_CELLS` cells. Why: a fused map is recomposed on every merge step from all its
-    patches, and most of them barely move."""
+    :data:`SNAP_CELLS` cells. It holds one drawing per key for the episode: a few times the
+    patches' own memory for each target grid read. Why: a fused map is recomposed on every
+    merge step from all its patches, and most of them barely move."""
 
     def __init__(self) -> None:
         self._moved: dict[object, _Moved] = {}
