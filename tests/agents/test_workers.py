@@ -44,7 +44,9 @@ def written(out: Path) -> list[str]:
 def test_workers_die_with_a_killed_run_and_write_nothing_more(tmp_path):
     out = tmp_path / "d"
     run = subprocess.Popen(
-        [sys.executable, "-m", "agents.dataset", "generate", "--pairs", "20", "--out", str(out),
+        # far more pairs than get written before the kill: the run is still busy then (20
+        # pairs took 5 s on 2 CPUs, and the check came 3 s after the pool started)
+        [sys.executable, "-m", "agents.dataset", "generate", "--pairs", "400", "--out", str(out),
          "--workers", "2", "--max-cycles", "400", "--world-size", "10", "10", "--no-progress"],
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
