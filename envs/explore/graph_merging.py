@@ -367,11 +367,11 @@ class GraphMerging:
         fused = maps[0].grid.model.classify(self.fused_log_odds(0, maps, views)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
-        errors = [self._error(m.a, m.b, m.relative) for m in kept]
-        wrong = sum(rot > 5.0 or trans > 1.0 for rot, trans in errors)
         loops = [m for r in comp for m in self.graph.loops(r)]
-        wrong_loops = sum(rot > 5.0 or trans > 1.0
-                          for rot, trans in (self._error(m.a, m.b, m.relative) for m in loops))
+
+        def wrong(measurements: list) -> float:  # more than 5° or 1 m off at their anchors
+            return float(sum(rot > 5.0 or trans > 1.0 for rot, trans in
+                             (self._error(m.a, m.b, m.relative) for m in measurements)))
         return {
             "fused_robots": float(len(comp)),
             "fused_ate_m": ate_rms(est, truth),
@@ -381,10 +381,10 @@ class GraphMerging:
             "own_wall_share": wall_share(_centres(maps[0].grid.occupied_mask(), maps[0]),
                                          world_alignment(odo, own_truth), segments),
             "links_kept": float(len(kept)),
-            "links_kept_wrong": float(wrong),
+            "links_kept_wrong": wrong(kept),
             "links_accepted": float(sum(r.i != r.j for r in self.records)),
             "loops_kept": float(len(loops)),
-            "loops_kept_wrong": float(wrong_loops),
+            "loops_kept_wrong": wrong(loops),
             "window_searches": float(self.searches),
         }
 
