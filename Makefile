@@ -78,6 +78,10 @@ calibrate: $(VENV)/.deps-base
 	$(PY) -m fusion.calibration fit --model structural --cache $(CALIBRATION)/structural_rows.json --write
 	$(PY) -m fusion.calibration fit --model grid --write
 	$(PY) -m fusion.calibration fit --model grid --drift --extend --write
+	$(PY) benchmarks/bending_in_loop.py --settings on --first-seed 0 --worlds 24 --rows $(CALIBRATION)/near_pioneer.jsonl
+	$(PY) benchmarks/bending_in_loop.py --settings on --first-seed 0 --worlds 12 --odometry-noise 0.02 --rows $(CALIBRATION)/near_sigma.jsonl
+	$(PY) benchmarks/bending_in_loop.py --settings on --first-seed 0 --worlds 8 --robots 4 --rows $(CALIBRATION)/near_team.jsonl
+	$(PY) -m fusion.calibration fit --model window_near --rows $(CALIBRATION)/near_pioneer.jsonl $(CALIBRATION)/near_sigma.jsonl $(CALIBRATION)/near_team.jsonl --split dev --write
 
 bench: $(VENV)/.deps-bench
 	$(PY) benchmarks/icp_speed.py

@@ -4,7 +4,7 @@
     python benchmarks/bending_in_loop.py [--worlds 5] [--first-seed 100] [--size 20]
         [--steps 3000] [--explorer frontier] [--odometry-alphas pioneer3dx]
         [--odometry-noise S] [--settings on off] [--oracle [--oracle-at-last]]
-        [--anchor-every N] [--window-anchors W] [--window-searches K]
+        [--anchor-every N] [--window-anchors W] [--window-searches K] [--rows FILE]
 
 For each seed (from 100: worlds the method was not developed on) one episode per setting,
 a scripted team (``agents.registry``), ``robot.odometry_model="rot_trans_rot"`` with the
@@ -27,12 +27,18 @@ anchor positions come within ``ORACLE_MEET_M`` (and nothing elsewhere): the ceil
 window aligner with these anchors, windows and searches (``--oracle-at-last``: the links at
 the windows' newest anchors instead of their middle ones). The summary
 gives, per setting, the episodes merged, the median first right step (never: ``steps + 1``),
-the pooled right share of merged steps, median ATE and wall share, and the mean step time.
+the pooled right share of merged steps, median ATE and wall share, and the mean step time;
+then how calibrated the near searches' confidences are (model ``"window_near"``: their mean
+against the share right within 5° and 1 m at their anchors, pooled and by confidence bin).
+``--rows FILE`` writes every near search's row (features, confidence, errors at its anchors;
+split ``dev`` for seeds below 100, else ``test``) as JSON lines: what ``python -m
+fusion.calibration fit --model window_near --rows FILE --split dev`` fits on.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import time
 
@@ -45,6 +51,7 @@ from agents.registry import EXPLORERS, make_team
 from envs import multi_robot_explore_v0, two_robot_explore_v0
 from envs.explore.graph_merging import GraphMerging
 from fusion import Rigid2D
+from topo.fileio import atomic_write_json_lines
 
 RIGHT_DEG, RIGHT_M = 5.0, 0.5
 WRONG_DEG, WRONG_M = 5.0, 1.0
@@ -151,7 +158,45 @@ def episode(seed: int, explorer: str, steps: int, size: float, robot: dict,
     if pose_graph:
         row.update(env.unwrapped.merge_state().bending)
         row.update(bend_floor(env.unwrapped._graph))
+        odometry = (f"sigma{robot['odometry_noise'][0]:g}" if "odometry_noise" in robot
+                    else robot.get("odometry_alphas", "perfect"))
+        row["near_rows"] = near_rows(env.unwrapped._graph, seed, f"bending/{odometry}/{robots}")
     return row
+
+
+def near_rows(graph: GraphMerging, seed: int, name: str) -> list[dict]:
+    """Every near search the graph recorded (``LinkRecord.features`` set) as a calibration row
+    of model ``"window_near"``: its features and confidence, its errors at its own anchors, and
+    ``right`` (within 5° and 1 m there); ``set`` ``name``, ``world`` the seed, split ``dev``
+    below seed 100."""
+    out = []
+    for rec, (rot, trans) in zip(graph.records, graph.link_errors(), strict=True):
+        if rec.features is None:
+            continue
+        out.append({"set": name, "world": f"bending:{seed}", "seed": seed,
+                    "split": "dev" if seed < 100 else "test", "way": "ab", "overlap": 1.0,
+                    "loop": rec.i == rec.j, "features": rec.features,
+                    "confidence": rec.confidence, "rot_err_deg": rot, "trans_err_m": trans,
+                    "right": bool(rot <= WRONG_DEG and trans <= WRONG_M)})
+    return out
+
+
+def calibration_lines(rows: list[dict]) -> list[str]:
+    """How calibrated the near rows' confidences are: pooled and per bin, mean confidence
+    against the share right."""
+    if not rows:
+        return ["near searches: none"]
+    p = np.array([r["confidence"] for r in rows])
+    y = np.array([r["right"] for r in rows], dtype=float)
+    out = [f"near searches: {len(rows)}, mean confidence {p.mean():.3f}, right {y.mean():.3f}",
+           "confidence | near searches | mean confidence | right"]
+    edges = (0.0, 0.7, 0.8, 0.85, 0.9, 0.95, 1.0 + 1e-9)
+    for lo, hi in itertools.pairwise(edges):
+        m = (p >= lo) & (p < hi)
+        if m.any():
+            out.append(f"{lo:.2f}–{min(hi, 1.0):.2f} | {int(m.sum())} | {p[m].mean():.3f} | "
+                       f"{y[m].mean():.3f}")
+    return out
 
 
 def _fmt(v) -> str:
@@ -182,6 +227,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--window-searches", type=int, default=None)
     parser.add_argument("--window-anchors", type=int, default=None)
     parser.add_argument("--anchor-every", type=int, default=None)
+    parser.add_argument("--rows", default=None,
+                        help="write the near searches' calibration rows (JSON lines) here")
     args = parser.parse_args(argv)
     if args.oracle:
         GraphMerging._align = oracle_align
@@ -208,6 +255,9 @@ def main(argv: list[str] | None = None) -> None:
                           mapping, args.robots)
             rows.append(row)
             print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
+            if args.rows:  # rewritten whole after each episode: a crash keeps those done
+                atomic_write_json_lines(args.rows, [n for r in rows
+                                                    for n in r.get("near_rows", ())])
     print()
     print("setting | merged episodes | median first right | right / merged steps | "
           "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
@@ -241,6 +291,12 @@ def main(argv: list[str] | None = None) -> None:
                          for k in ("mapping_share", "merging_share"))
         print(f"{setting} | {merged}/{len(sel)} | {first} | {right:.2f} | {wrong:.2f} | {ate} | "
               f"{wall} | {kept} | {floor} | {ms:.1f} | {share}")
+    near = [n for r in rows for n in r.get("near_rows", ())]
+    if "on" in args.settings:
+        print()
+        print("\n".join(calibration_lines(near)))
+    if args.rows:
+        print(f"wrote {len(near)} rows to {args.rows}")
 
 
 if __name__ == "__main__":

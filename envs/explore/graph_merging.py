@@ -45,8 +45,9 @@ from envs.explore.comm import TeamViews
 from envs.explore.config import MappingConfig, RobotConfig
 from envs.explore.mapping import RobotMap
 from envs.explore.submaps import PatchCache, RobotSubmaps, ScanSettings, compose
+from fusion.grid_layers import LayerCache
 from fusion.grid_merge import GridMergeConfig, merge_grids
-from fusion.local_align import align_near
+from fusion.local_align import align_near, near_features
 from fusion.posegraph import PoseGraph
 from fusion.rigid import Rigid2D
 
@@ -69,12 +70,26 @@ NEAR_M = 8.0
 if their centres lie this close (metres) in the current estimate."""
 
 
+NEAR_MODEL = "window_near"
+"""The calibrated model (``fusion/calibration.json``) of a near search's confidence: fitted
+on development worlds' near searches, labelled right within 5° and 1 m at their anchors
+(``python -m fusion.calibration fit --model window_near``)."""
+
+
+def _near_model():
+    from fusion.calibration import load_model
+
+    return load_model(NEAR_MODEL)
+
+
 @dataclass(frozen=True, slots=True)
 class LinkRecord:
     """An accepted window alignment added to the graph: robots and anchors (``i == j``: a
-    loop closure), the relative pose, its confidence (the grid alignment's calibrated one for a
-    global search, 1 for a search near the estimate, which has none) and whether the graph
-    took it (loops only; a link's fate is decided with its pair's others)."""
+    loop closure), the relative pose, its calibrated confidence (of being within 5° and 1 m at
+    its anchors: the grid alignment's for a global search, model ``"window_near"`` on
+    ``features``, ``fusion.local_align.near_features``, for a search near the estimate),
+    whether the graph took it (loops only; a link's fate is decided with its pair's others)
+    and the near search's features (``None`` for a global search)."""
 
     i: int
     a: int
@@ -83,6 +98,7 @@ class LinkRecord:
     relative: Rigid2D
     confidence: float
     taken: bool
+    features: dict[str, float] | None = None
 
 
 class GraphMerging:
@@ -222,9 +238,10 @@ class GraphMerging:
         if first is None:
             first = end - self.config.window_anchors + 1
         key = (r, first, end)
-        if key not in self._windows:
-            self._windows[key] = self.submaps[r].window_grid(
-                first, end, self.submaps[r].geometry.resolution, self.scan)
+        if key not in self._windows:  # a window never changes: its layers are found once
+            grid = self.submaps[r].window_grid(first, end, self.submaps[r].geometry.resolution,
+                                               self.scan)
+            self._windows[key] = None if grid is None else LayerCache.of(grid)
         return self._windows[key]
 
     def _predicted(self, i: int, a: int, j: int, b: int) -> Rigid2D:
@@ -239,23 +256,32 @@ class GraphMerging:
         self.searches += 1
         half = self.config.window_anchors // 2
         a, b = ei - half, ej - half
+        features = None
         if i == j or j in self.graph.component(i):  # known: search near the estimate
-            transform = align_near(grid_a, grid_b, self._predicted(i, a, j, b), self._grid_cfg,
+            estimate = self._predicted(i, a, j, b)
+            transform = align_near(grid_a, grid_b, estimate, self._grid_cfg,
                                    max_deg=NEAR_DEG, reach_m=NEAR_REACH_M)
             if transform is None:
                 return False
-            confidence = 1.0  # no calibrated model for a local search: the graph judges it
+            features = near_features(grid_a, grid_b, estimate, transform, self._grid_cfg,
+                                     loop=i == j)
         else:
             result = merge_grids(grid_a, grid_b, self._grid_cfg)
             if not result.accepted:
                 return False
-            transform, confidence = result.transform, float(result.confidence)
+            transform = result.transform
         if i != j:
             at = self._at_anchor(i, ei, j, ej, transform)
             if at is not None:
-                a, b, transform = at
+                a, b, moved = at
+                if features is not None:
+                    features["anchor_shift_deg"] = math.degrees(moved.rotation_error(transform))
+                transform = moved
+        confidence = (float(result.confidence) if features is None
+                      else _near_model()(features))
         xa, xb = self.submaps[i].poses[a], self.submaps[j].poses[b]
-        return self.add_alignment(i, a, j, b, xa.inverse() @ transform @ xb, confidence)
+        return self.add_alignment(i, a, j, b, xa.inverse() @ transform @ xb, confidence,
+                                  features)
 
     def _at_anchor(self, i: int, ei: int, j: int, ej: int, transform: Rigid2D):
         """The window alignment ``transform`` (``j``'s odometry frame → ``i``'s) made right
@@ -277,18 +303,19 @@ class GraphMerging:
         return ei, b, local.inverse()
 
     def add_alignment(self, i: int, a: int, j: int, b: int, relative: Rigid2D,
-                      confidence: float) -> bool:
+                      confidence: float, features: dict[str, float] | None = None) -> bool:
         """Anchor ``b`` of robot ``j`` placed in anchor ``a``'s frame of robot ``i``
         (``relative``) into the graph: a loop closure if ``i == j`` (``True`` if the graph
         took it), else a link (``True``; its fate is decided with its pair's others), and
-        recorded (:attr:`records`). What every accepted window alignment becomes — and what a
-        benchmark's oracle aligner calls with the truth."""
+        recorded (:attr:`records`, with the near search's ``features`` if it was one). What
+        every accepted window alignment becomes — and what a benchmark's oracle aligner calls
+        with the truth."""
         if i == j:
             taken = self.graph.add_loop(i, a, b, relative, LINK_SIGMAS, confidence)
         else:
             self.graph.add_link((i, a), (j, b), relative, LINK_SIGMAS, confidence)
             taken = True
-        self.records.append(LinkRecord(i, a, j, b, relative, confidence, taken))
+        self.records.append(LinkRecord(i, a, j, b, relative, confidence, taken, features))
         return taken
 
     # ----------------------------------------------------------------- fused maps

@@ -5,6 +5,8 @@
         [--write] [--table FILE] [--plot PNG] [--held-out DIR ...]
     python -m fusion.calibration fit --model grid_real --rows FILE [FILE ...] [--split dev]
         [--free] [--write]
+    python -m fusion.calibration fit --model window_near --rows FILE [FILE ...] [--split dev]
+        [--write]
 
 Run it from the repository root after ``benchmarks/env_pairs.py`` has made the tuning pairs
 (``make calibrate`` chains both), whenever what the models read changes: the topological map
@@ -21,6 +23,8 @@ noise-free weights and fit only the drift terms, with ``--drift`` adding the dri
 (``--rows``: JSON lines or a JSON list, any rows of the ``"grid"`` features; ``--split``
 keeps those of one split; env rows from ``--cache`` may be added to fit both together),
 cross-validated leaving one building out (``--free``: its weights fitted freely instead).
+``--model window_near`` the confidence of the pose graph's near window searches from the rows
+``benchmarks/bending_in_loop.py --rows`` wrote, cross-validated leaving one world out.
 Each prints the cross-validated calibration, the threshold table and the threshold rule's
 choice; ``--write`` stores the model (with the date, commit and data) in
 ``fusion/calibration.json`` (or ``--table``). ``--cache`` keeps the rows (a JSON file, read
@@ -73,7 +77,8 @@ def parser() -> argparse.ArgumentParser:
                      help="JSON file of the rows (read if it exists, else written)")
     fit.add_argument("--rows", type=Path, nargs="*", default=(),
                      help="rows files (JSON lines or a JSON list) to fit on, besides --cache "
-                          "(grid_real: benchmarks/real_maps.py's OUT/grid.jsonl)")
+                          "(grid_real: benchmarks/real_maps.py's OUT/grid.jsonl; window_near: "
+                          "benchmarks/bending_in_loop.py --rows)")
     fit.add_argument("--split", default=None,
                      help="keep only the --rows whose 'split' is this (e.g. dev)")
     fit.add_argument("--free", action="store_true",
@@ -119,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         cli.error("--free refits grid_real only")
     if args.model == "grid_real" and not args.rows:
         cli.error("--model grid_real fits on --rows (benchmarks/real_maps.py's grid.jsonl)")
+    if args.model == "window_near" and not args.rows:
+        cli.error("--model window_near fits on --rows (benchmarks/bending_in_loop.py --rows)")
     dirs = list(args.pairs or default_dirs(args.data))
     if args.drift:
         dirs += default_dirs(args.data / "drift")
@@ -127,7 +134,9 @@ def main(argv: list[str] | None = None) -> int:
                  if args.split is None or r.get("split") == args.split]
     except ValueError as exc:
         cli.error(str(exc))
-    if args.model == "grid_real":
+    if args.model == "window_near":
+        rows = []
+    elif args.model == "grid_real":
         rows = json.loads(args.cache.read_text()) if args.cache is not None else []
     elif args.cache is not None and args.cache.exists():
         rows = json.loads(args.cache.read_text())

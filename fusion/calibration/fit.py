@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from fusion.calibration import Calibrator, brier_score, extend_logistic, fit_logistic
+from fusion.local_align import NEAR_FEATURES
 from fusion.structural import CALIBRATION_FEATURES
 
 L2 = 2.0
@@ -45,12 +46,19 @@ MODEL_FEATURES = BASE_FEATURES + DRIFT_FEATURES
 scores of the candidates tried): ``docs/notes/fusion.md`` and ``docs/notes/drift.md``."""
 
 MODELS = {"grid": MODEL_FEATURES, "structural": CALIBRATION_FEATURES,
-          "grid_real": MODEL_FEATURES}
+          "grid_real": MODEL_FEATURES, "window_near": NEAR_FEATURES}
 """The features of each calibrated model. ``"grid_real"`` (:data:`fusion.decision.
 REAL_MAP_MODEL`, the grid alignment's confidence on real sensor maps) is the ``"grid"`` model
 recalibrated on real map pairs (:func:`recalibrated`, :func:`fit_model`): its features and
 their weighting are the grid model's, at most the scale and shift of its log-odds are fitted
-on the real rows, and its accept threshold is chosen on them."""
+on the real rows, and its accept threshold is chosen on them. ``"window_near"`` is the
+confidence of a pose graph's window alignment searched near its estimate
+(``fusion.local_align.near_features``; ``envs.explore.graph_merging``), fitted on the rows
+``benchmarks/bending_in_loop.py --rows`` writes."""
+
+DEDUP_FEATURE = {"grid": "log_score", "grid_real": "log_score", "structural": "score",
+                 "window_near": "corr_deg"}
+"""The feature :func:`unique_rows` tells repeated alignments apart by, per model."""
 
 THRESHOLDS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 """The accept thresholds the rule chooses from."""
@@ -268,7 +276,7 @@ def fit_model(name: str, rows: Sequence[dict], *, l2: float = L2,
         raise ValueError(f"recalibrate rescales the grid model for grid_real only, got "
                          f"name={name!r}, features {list(recalibrate.names)}")
     names = MODELS[name]
-    unique = unique_rows(rows, "log_score" if name.startswith("grid") else "score")
+    unique = unique_rows(rows, DEDUP_FEATURE[name])
     kept = False
     if recalibrate is not None:
         p = cross_validated_recalibration(unique, recalibrate, l2)

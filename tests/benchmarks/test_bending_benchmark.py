@@ -54,3 +54,17 @@ def test_a_tiny_run_prints_both_tables(capsys):
     assert "loops kept wrong | bend floor: ideal window links wrong (middle / newest anchors)" in out
     rows = [line for line in out.splitlines() if line.startswith(("on |", "off |"))]
     assert len(rows) == 2 and rows[0].split(" | ")[1] == "0/1"
+
+
+def test_rows_are_written_and_their_calibration_printed(tmp_path, capsys):
+    pytest.importorskip("gtsam")
+    path = tmp_path / "near.jsonl"
+    bil.main(["--worlds", "1", "--steps", "40", "--size", "10", "--settings", "on",
+              "--rows", str(path)])
+    assert "near searches: none" in capsys.readouterr().out
+    assert path.read_text() == ""  # no window closes in 40 steps: no rows, but the file
+    lines = bil.calibration_lines([{"confidence": 0.92, "right": True},
+                                   {"confidence": 0.91, "right": False},
+                                   {"confidence": 0.6, "right": True}])
+    assert lines[0] == "near searches: 3, mean confidence 0.810, right 0.667"
+    assert "0.90–0.95 | 2 | 0.915 | 0.500" in lines

@@ -17,6 +17,7 @@ from conftest import SMALL
 from agents.scripted import Frontier
 from envs import multi_robot_explore_v0, two_robot_explore_v0
 from fusion.evaluation.bending import wall_share
+from fusion.local_align import NEAR_FEATURES
 
 FAST = {"merge_every": 5, "grid_merge_every": 10, "topo_every": 5}
 """Merge steps every 5 steps, grid alignments every 10: early merges on small buildings."""
@@ -113,6 +114,10 @@ def test_pose_graph_fuses_the_teammate_onto_the_true_walls(graph):
     errors = graph._graph.link_errors()
     assert errors and max(rot for rot, _ in errors) < 5.0
     assert max(trans for _, trans in errors) < 0.5
+    # searches near the estimate carry their evidence and a calibrated confidence, not 1
+    near = [rec for rec in graph._graph.records if rec.features is not None]
+    assert near and all(tuple(rec.features) == NEAR_FEATURES and 0 < rec.confidence < 1
+                        for rec in near)
     # on a merge step robot 0's shared map is recomposed: the same cells
     assert graph.steps % GRAPH["merge_every"] == 0
     np.testing.assert_array_equal(graph.fused_map("robot_0").known_mask(), graph.shared.ever)

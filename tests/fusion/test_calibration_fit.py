@@ -176,7 +176,7 @@ def test_fit_refuses_what_it_cannot_do(tmp_path):
     with pytest.raises(SystemExit):
         main(["fit", "--model", "grid", "--data", str(tmp_path)])  # no pairs there
     with pytest.raises(ValueError, match=r"name must be one of \['grid', 'structural', "
-                                         r"'grid_real'\], got "
+                                         r"'grid_real', 'window_near'\], got "
                                          r"'ranking'"):
         cf.fit_model("ranking", [])
     with pytest.raises(ValueError, match=r"weights must be finite"):

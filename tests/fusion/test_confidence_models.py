@@ -79,12 +79,28 @@ def test_recalibration_rescales_the_grid_models_log_odds():
         fit_model("grid", [], recalibrate=base)
 
 
-def test_the_fit_command_refits_grid_real_from_rows(tmp_path):
+def _fit_from_rows(tmp_path, model: str, rows: list[dict]):
+    """``python -m fusion.calibration fit --model MODEL --rows F --split dev --write`` on
+    ``rows``, after checking it refuses to run without rows; the stored model."""
     import json
 
     from fusion.calibration import read_table
     from fusion.calibration.__main__ import main
 
+    path = tmp_path / f"{model}.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    with pytest.raises(SystemExit):
+        main(["fit", "--model", model])  # no rows given
+    table = tmp_path / "t.json"
+    assert main(["fit", "--model", model, "--rows", str(path), "--split", "dev",
+                 "--table", str(table), "--write"]) == 0
+    fitted = read_table(table)[model]
+    assert fitted.meta["alignments"] == sum(r["split"] == "dev" for r in rows)
+    assert fitted.meta["script"].endswith(f"--rows {path} --split dev")
+    return fitted
+
+
+def test_the_fit_command_refits_grid_real_from_rows(tmp_path):
     base = load_model("grid")
     rng = np.random.default_rng(1)
     X = rng.uniform(base.low, base.high, size=(300, len(base.names)))
@@ -95,14 +111,28 @@ def test_the_fit_command_refits_grid_real_from_rows(tmp_path):
              "right": bool(r),
              "features": {"log_score": k / 7, **dict(zip(base.names, x, strict=True))}}
             for k, (x, r) in enumerate(zip(X.tolist(), right, strict=True))]
-    path = tmp_path / "grid.jsonl"
-    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
-    with pytest.raises(SystemExit):
-        main(["fit", "--model", "grid_real"])  # no rows given
-    table = tmp_path / "t.json"
-    assert main(["fit", "--model", "grid_real", "--rows", str(path), "--split", "dev",
-                 "--table", str(table), "--write"]) == 0
-    model = read_table(table)["grid_real"]
-    assert model.meta["alignments"] == sum(r["split"] == "dev" for r in rows)
-    assert model.meta["script"].endswith(f"--rows {path} --split dev")
+    model = _fit_from_rows(tmp_path, "grid_real", rows)
     assert 0 < model.meta["accept_threshold"] <= 1 and model.meta["scale"] > 0
+
+
+def test_the_fit_command_fits_the_near_model_from_bending_rows(tmp_path):
+    """``--model window_near`` fits on the rows ``benchmarks/bending_in_loop.py --rows``
+    writes, leaving one world out, and refuses to run without them."""
+    from fusion.local_align import NEAR_FEATURES
+
+    rng = np.random.default_rng(2)
+    rows = []
+    for k in range(240):
+        corr = float(rng.uniform(0.0, 4.0))
+        feats = dict.fromkeys(NEAR_FEATURES, 0.0) | {
+            "corr_deg": corr, "wall_agreement": float(rng.uniform(0.7, 1.0)),
+            "loop": float(k % 2)}
+        rows.append({"set": "bending/pioneer3dx/2", "world": f"bending:{k % 8}",
+                     "split": "dev" if k % 8 < 6 else "test", "way": "ab", "overlap": 1.0,
+                     "features": feats, "right": bool(rng.random() < 1 - corr / 5)})
+    model = _fit_from_rows(tmp_path, "window_near", rows)
+    assert tuple(model.names) == NEAR_FEATURES
+    zero = dict.fromkeys(NEAR_FEATURES, 0.0)
+    low = model(zero | {"corr_deg": 3.5, "wall_agreement": 0.85})
+    high = model(zero | {"corr_deg": 0.2, "wall_agreement": 0.85})
+    assert low < high
