@@ -121,14 +121,16 @@ def near_features(grid_a: Any, grid_b: Any, estimate: Rigid2D, transform: Rigid2
     (``fusion.grid_merge.grid_agreement``: wall agreement, conflict, ``log1p`` of the wall hits;
     at the grids' own cells, the share deep in A's free space), whether both grids are one
     robot's (``loop``) and how far a second alignment at one anchor turned it
-    (``anchor_shift_deg``, 0 if none). Why: the graph weighs and ranks its measurements by
-    their calibrated confidence, and a search near an estimate has no margin over rivals to
+    (``anchor_shift_deg``, 0 if none). Why: a pose graph ranks its measurements by their
+    calibrated confidence, and a search near an estimate has no margin over rivals to
     judge it by.
 
     Raises:
+        TypeError, ValueError: malformed grids or config (as :func:`align_near`).
         TypeError: ``estimate`` or ``transform`` is not a :class:`fusion.Rigid2D`.
         ValueError: ``anchor_shift_deg`` negative or not finite.
     """
+    check_grid_inputs(grid_a, grid_b, config)
     for name, t in (("estimate", estimate), ("transform", transform)):
         if not isinstance(t, Rigid2D):
             raise TypeError(f"{name} must be a fusion.Rigid2D, got {type(t).__name__}")

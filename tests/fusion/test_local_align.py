@@ -88,3 +88,9 @@ def test_the_stored_near_model_reads_these_features_and_says_a_probability():
     good = model(near_features(a, b, truth, truth))
     far = model(near_features(a, b, _off(truth, 3.0, 0.5, 0.0), truth, anchor_shift_deg=4.0))
     assert 0.0 < far < good < 1.0
+
+
+def test_near_features_check_the_grids_as_align_near_does():
+    a, _, truth = overlapping_views(0.0)
+    with pytest.raises((TypeError, ValueError), match="grid_b"):
+        near_features(a, "not a grid", truth, truth)
