@@ -279,6 +279,23 @@ class OccupancyGrid:
         self.log_odds.fill(0.0)
         self._states.fill(CellState.UNKNOWN)
 
+    def assign(self, log_odds: Any) -> None:
+        """Replace the evidence with ``log_odds`` (``(H, W)``, this grid's shape), clamped to
+        ``±model.clamp``, and the states with theirs, in place (views of :meth:`states` stay
+        valid). Why: a map whose parts a pose graph moves is recomposed whole.
+
+        Raises:
+            ValueError: ``log_odds`` is not of this grid's shape or not finite.
+        """
+        values = np.asarray(log_odds)
+        if values.shape != self.shape:
+            raise ValueError(f"log_odds must have the grid's shape {self.shape}, got "
+                             f"{values.shape}")
+        if not np.isfinite(values).all():
+            raise ValueError("log_odds must be finite")
+        np.clip(values, -self.model.clamp, self.model.clamp, out=self.log_odds, casting="unsafe")
+        self._states[:] = self._classify(self.log_odds)
+
     def empty_like(self) -> OccupancyGrid:
         out = self.copy()
         out.reset()

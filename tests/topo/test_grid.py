@@ -259,3 +259,20 @@ def test_update_valid_is_update_without_the_checks(seed):
         b.update_valid(pose, ranges, angles, 5.0, math.radians(7.5))
     np.testing.assert_array_equal(a.log_odds, b.log_odds)
     np.testing.assert_array_equal(a.states(), b.states())
+
+
+def test_assign_replaces_the_evidence_clamped_and_keeps_state_views():
+    grid = OccupancyGrid(0.1, (0.0, 0.0, 1.0, 1.0))
+    view = grid.states()
+    values = np.zeros(grid.shape)
+    values[0, 0], values[1, 1], values[2, 2] = 10.0, -10.0, 0.1
+    grid.assign(values)
+    clamp = grid.model.clamp
+    assert grid.log_odds[0, 0] == clamp and grid.log_odds[1, 1] == -clamp
+    assert view[0, 0] == CellState.OCCUPIED and view[1, 1] == CellState.FREE
+    assert view[2, 2] == CellState.UNKNOWN
+    with pytest.raises(ValueError, match=r"log_odds must have the grid's shape \(10, 10\), "
+                                         r"got \(3, 3\)"):
+        grid.assign(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="log_odds must be finite"):
+        grid.assign(np.full(grid.shape, np.nan))
