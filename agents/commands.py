@@ -179,8 +179,8 @@ def _fusion_summary(out: Path, log: str) -> list[str]:
 
 
 def _bending_summary(out: Path, log: str) -> list[str]:
-    lines = [m[0].rstrip() for m in _rows(r"^(maps that bend, .*|  (?:robot 0's own map|its "
-                                          r"fused map) .*)$", log)]
+    lines = [m[0].rstrip() for m in _rows(r"^(maps that bend, .*|  (?:robot 0's map as "
+                                          r"scanned|its working map|its fused map) .*)$", log)]
     return lines + [f"figure: {out / 'bending.png'}"]
 
 

@@ -245,7 +245,8 @@ def main(argv: list[str] | None = None) -> None:
         robot = {"odometry_model": "rot_trans_rot", "odometry_alphas": args.odometry_alphas}
     rows = []
     keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
-            "fused_ate_m", "own_ate_m", "fused_wall_share", "own_wall_share", "links_kept",
+            "fused_ate_m", "own_ate_m", "working_ate_m", "fused_wall_share", "own_wall_share",
+            "working_wall_share", "links_kept",
             "links_kept_wrong", "loops_kept", "loops_kept_wrong", "window_searches", "floor_pairs",
             "floor_mid_wrong", "floor_last_wrong")
     print(" | ".join(keys), flush=True)
@@ -260,7 +261,8 @@ def main(argv: list[str] | None = None) -> None:
                                                     for n in r.get("near_rows", ())])
     print()
     print("setting | merged episodes | median first right | right / merged steps | "
-          "wrong / merged steps | median fused ATE (own) m | median wall share fused (own) | "
+          "wrong / merged steps | median fused ATE (own; working) m | "
+          "median wall share fused (own; working) | "
           "links kept wrong | loops kept wrong | "
           "bend floor: ideal window links wrong (middle / newest anchors) | "
           "step ms | mapping + merging, merging alone: share of a step")
@@ -273,10 +275,10 @@ def main(argv: list[str] | None = None) -> None:
         wrong = sum(r["wrong"] for r in sel) / msteps if msteps else float("nan")
         ms = 1000 * statistics.mean(r["step_s"] for r in sel)
         if setting == "on":
-            ate = (f"{statistics.median(r['fused_ate_m'] for r in sel):.2f} "
-                   f"({statistics.median(r['own_ate_m'] for r in sel):.2f})")
-            wall = (f"{statistics.median(r['fused_wall_share'] for r in sel):.2f} "
-                    f"({statistics.median(r['own_wall_share'] for r in sel):.2f})")
+            ate, wall = (f"{statistics.median(r['fused_' + k] for r in sel):.2f} "
+                         f"({statistics.median(r['own_' + k] for r in sel):.2f}; "
+                         f"{statistics.median(r['working_' + k] for r in sel):.2f})"
+                         for k in ("ate_m", "wall_share"))
             kept = " | ".join(f"{sum(r[k + '_wrong'] for r in sel):.0f} / "
                               f"{sum(r[k] for r in sel):.0f}" for k in ("links_kept", "loops_kept"))
             pairs = sum(r["floor_pairs"] for r in sel)

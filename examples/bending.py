@@ -2,12 +2,15 @@
 explore a 20 m building of ``two_robot_explore_v0`` and merge through the pose graph
 (``mapping.pose_graph=True``, needs the ``slam`` extra: GTSAM).
 
-Each robot's own map bends with its odometry; robot 0's fused map
-(``env.fused_map("robot_0")``) is its own and robot 1's submaps, each moved by its anchor's
-correction. Prints when the pair merged and how far each map is from the truth
-(``merge_state().bending``: the anchors' ATE after one best rigid fit, the share of occupied
-cells within 0.2 m of a true wall), and writes the raw maps beside the fused one to
-``out/bending.png`` (true walls drawn from robot 0's start, where its frame begins).
+Each robot's map as scanned (``env.scanned_map``) bends with its odometry; the pose graph
+straightens it into the robot's working map (``env.robot_map``: its submaps at their
+corrections, right where the robot is) and robot 0's fused map (``env.fused_map("robot_0")``)
+is its own and robot 1's submaps, each moved by its anchor's correction. Prints when the pair
+merged and how far each map is from the truth (``merge_state().bending``: the anchors' ATE
+after one best rigid fit, the share of occupied cells within 0.2 m of a true wall), and writes
+the maps as scanned beside robot 0's working and fused maps to ``out/bending.png`` (true walls
+drawn from each robot's start, where its frame begins; on the working map from where the
+robot is now).
 
     python examples/bending.py [--out out] [--seed 102] [--steps 2000]
 """
@@ -79,35 +82,48 @@ def main(argv: list[str] | None = None) -> None:
     out = run_episode(env, make_team("frontier"), seed=args.seed, callback=watch)
     bend = env.merge_state().bending
     fused = env.fused_map("robot_0")
-    own = [env.robot_map(a).grid for a in env.possible_agents]
     when = f"fused from step {merged_at[0]}" if merged_at else "never merged"
     print(f"maps that bend, seed {args.seed}: {env.world.name}, {out['steps']} steps, "
           f"Pioneer 3-DX odometry; robots {list(fused.robots)} {when}")
-    print(f"  robot 0's own map   ATE {bend['own_ate_m']:.2f} m, walls within 0.2 m of true "
-          f"walls {bend['own_wall_share']:.0%}")
-    print(f"  its fused map       ATE {bend['fused_ate_m']:.2f} m, walls within 0.2 m of true "
-          f"walls {bend['fused_wall_share']:.0%} ({bend['links_kept']:.0f} links kept, "
-          f"{bend['links_kept_wrong']:.0f} of them off at their anchors)")
+    lines = {"own": "robot 0's map as scanned", "working": "its working map",
+             "fused": "its fused map"}
+    for key, name in lines.items():
+        print(f"  {name:25s} ATE {bend[key + '_ate_m']:.2f} m, walls within 0.2 m of true "
+              f"walls {bend[key + '_wall_share']:.0%}")
+    print(f"  ({bend['links_kept']:.0f} links kept, {bend['links_kept_wrong']:.0f} of them off "
+          f"at their anchors)")
 
-    fig, axes = plt.subplots(1, 3, figsize=(17, 6.2), layout="constrained")
-    for i, (ax, grid) in enumerate(zip(axes[:2], own, strict=True)):
-        walls = _walls_in(env, i)
-        title = f"robot_{i}'s own map, its frame (bent by its odometry)"
+    fig, axes = plt.subplots(2, 2, figsize=(13, 12), layout="constrained")
+    for i, ax in enumerate(axes[0]):
+        snap = env.scanned_map(f"robot_{i}")
+        title = f"robot_{i}'s map as scanned (bent by its odometry)"
         if i == 0:
             title += (f"\nATE {bend['own_ate_m']:.2f} m, walls within 0.2 m of true walls "
                       f"{bend['own_wall_share']:.0%}")
-        draw(ax, grid.states(), grid.origin, grid.resolution, walls, title)
-    draw(axes[2], fused.states, fused.origin, fused.resolution, _walls_in(env, 0),
-         f"robot_0's fused map, its frame (robots {', '.join(map(str, fused.robots))})\n"
+        draw(ax, snap.states, snap.origin, snap.resolution, _walls_in(env, i), title)
+    work = env.robot_map("robot_0").grid
+    draw(axes[1, 0], work.states(), work.origin, work.resolution, _walls_here(env, 0),
+         f"robot_0's working map (straightened by the graph)\nATE "
+         f"{bend['working_ate_m']:.2f} m, walls within 0.2 m of true walls "
+         f"{bend['working_wall_share']:.0%}")
+    draw(axes[1, 1], fused.states, fused.origin, fused.resolution, _walls_in(env, 0),
+         f"robot_0's fused map (robots {', '.join(map(str, fused.robots))})\n"
          f"ATE {bend['fused_ate_m']:.2f} m, walls within 0.2 m of true walls "
          f"{bend['fused_wall_share']:.0%}")
     fig.suptitle(f"Maps that bend (pose graph, Pioneer 3-DX odometry): seed {args.seed}, "
-                 f"step {fused.step}, {when}; red: the true walls placed at each robot's "
-                 f"true start", fontsize=11)
+                 f"step {fused.step}, {when}; red: the true walls", fontsize=11)
     png = save_figure(fig, args.out / "bending.png")
     plt.close(fig)
     print(f"  wrote {png}")
     env.close()
+
+
+def _walls_here(env, i: int) -> np.ndarray:
+    """The world's walls in robot ``i``'s odometry frame as it is where the robot is now
+    (its true pose against its odometry): where its working map is right."""
+    to_map = env.robots[i].odometry_frame().inverse()
+    seg = env.world.segments
+    return np.hstack([to_map.apply(seg[:, :2]), to_map.apply(seg[:, 2:])])
 
 
 def _walls_in(env, i: int) -> np.ndarray:

@@ -164,7 +164,9 @@ truth, drift-aware with odometry noise; 0.0 when not valid; in a team, the large
 0's fused teammates. (g) ``MERGE_METHODS[code]`` (0: none) and ``MERGE_SOURCES[code]`` (1
 structural, 2 grid, 3 known), constants of this module; in a team, pair (robot_0, robot_1)'s.
 Maps are read through the env: ``env.unwrapped.robot_map(agent)`` and ``fused_map(agent)``
-(read-only snapshots of its own and its fused map) and ``merge_state()`` (:class:`MergeState`).
+(read-only snapshots of its own and its fused map; ``scanned_map(agent)``: its own as scanned,
+which differs from its own map only with ``mapping.pose_graph``) and ``merge_state()``
+(:class:`MergeState`).
 
 ## State
 
@@ -307,8 +309,9 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
     manual.
 
     Snapshots for explorers and datasets: :meth:`robot_map`, :meth:`fused_map`,
-    :meth:`teammate_map`, :meth:`merge_state`; ground truth: :meth:`true_transform`; the
-    global state for centralised critics: :meth:`state`, :attr:`state_space`.
+    :meth:`scanned_map`, :meth:`teammate_map`, :meth:`merge_state`; ground truth:
+    :meth:`true_transform`; the global state for centralised critics: :meth:`state`,
+    :attr:`state_space`.
 
     Live internals for metrics, tests and rendering (valid after ``reset``, changed in place by
     every step; read, never modify): ``world``
@@ -456,7 +459,9 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
     def robot_map(self, agent: str) -> RobotMapSnapshot:
         """``agent``'s own maps now: a read-only
         :class:`~envs.explore.mapping.RobotMapSnapshot` (a copy of its occupancy
-        grid, its topological map, odometry) that later steps never change.
+        grid, its topological map, odometry) that later steps never change. With
+        ``mapping.pose_graph`` the grid is its working map: its submaps at the graph's
+        corrections, pinned at its newest anchor (:meth:`scanned_map`: as scanned).
 
         What map-planning explorers read (manual, Infos); the copy is taken on the first call
         of a step and shared by that step's later calls.
@@ -491,6 +496,23 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
                                        sorted(self._merging.frames[i]), self.steps)
             self._fused_snapshots[i] = snap
         return snap
+
+    def scanned_map(self, agent: str) -> FusedMapSnapshot:
+        """``agent``'s map as its scans made it, at its odometry, uncorrected: a read-only
+        :class:`~envs.explore.mapping.FusedMapSnapshot` holding only itself. With
+        ``mapping.pose_graph`` its submaps added up without the graph's corrections — under
+        drift the bent map its working map (:meth:`robot_map`) is straightened from; without,
+        its own map. For comparison and figures; reading it changes nothing.
+
+        Raises:
+            ValueError: ``agent`` is not one of ``possible_agents``.
+        """
+        self._require_reset()
+        i = self._index(agent, "agent")
+        own = self.maps[i]
+        states = (own.states.copy() if self._graph is None else
+                  own.grid.model.classify(self._graph.scanned_log_odds(i, self.maps)))
+        return FusedMapSnapshot.of(states, own.geometry, [i], self.steps)
 
     def _index(self, agent: str, name: str) -> int:
         try:

@@ -250,14 +250,17 @@ class EpisodeHooks:
 
     def _fuse_graph(self) -> None:
         """``mapping.pose_graph`` (issue 41): on merge steps, window alignments into the pose
-        graph, every robot's fused frames from it, and robot 0's fused map recomposed from
-        the submaps (its own grid, added to step by step, while it holds only itself)."""
+        graph, every robot's fused frames and working map (its own grid, straightened) from
+        it, and robot 0's fused map recomposed from the submaps (its own grid, added to step
+        by step, while it holds only itself)."""
         if self.steps % self.config.mapping.merge_every:
             return
         graph = self._graph
         graph.step(self.views)
         for r in range(self.n_robots):
             self._merging.frames[r] = graph.frames(r)
+            if graph.straighten(r, self.maps):  # its topological map follows at the next chance
+                self._extracted_at[r] = 0
         trivial = graph.trivial(0)
         if trivial and not self._shared_incremental:
             self._shared_delta += self.shared.rebuild({0: self.maps[0]}, {})

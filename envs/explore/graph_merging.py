@@ -27,10 +27,12 @@ aligned against
 The pose graph keeps each pair's pairwise-consistent links (at least two), optimises each
 component of robots, and a robot's **fused map** is the patches of its component it has
 received (:meth:`GraphMerging.received`: a teammate's as of their last contact) composed at
-``corrections(robot, frame=i)``. Its teammates' places in it (``frames``) are the rigid
-transforms right at the robots' newest anchors: ``C_i⁻¹ · C_j`` of the two newest anchors'
-corrections. This slice's simplification: the graph's estimates are the team's, whatever the
-robots' contacts (a link found while a robot was out of contact still moves its map).
+``corrections(robot, frame=i)``; its own grid, the **working map** it explores on, is its own
+patches at their corrections pinned at its newest anchor (:meth:`GraphMerging.straighten`).
+Its teammates' places in that working map (``frames``) are the rigid transforms right at the
+robots' newest anchors: ``C_i⁻¹ · C_j`` of the two newest anchors' corrections. This
+slice's simplification: the graph's estimates are the team's, whatever the robots' contacts
+(a link found while a robot was out of contact still moves its map).
 """
 
 from __future__ import annotations
@@ -44,7 +46,13 @@ import numpy as np
 from envs.explore.comm import TeamViews
 from envs.explore.config import MappingConfig, RobotConfig
 from envs.explore.mapping import RobotMap
-from envs.explore.submaps import PatchCache, RobotSubmaps, ScanSettings, compose
+from envs.explore.submaps import (
+    PatchCache,
+    RobotSubmaps,
+    ScanSettings,
+    compose,
+    shift_cells,
+)
 from fusion.grid_layers import LayerCache
 from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.local_align import align_near, near_features
@@ -64,6 +72,11 @@ ANCHOR_DEG = 4.0
 """A link's anchor alignment (robot ``i``'s newest anchor's scans on ``j``'s window) is searched
 this close (degrees; and :data:`NEAR_REACH_M`) to the windows' alignment: about the heading
 a window bends inside."""
+
+STRAIGHTEN_CELLS = 1.0
+"""A robot's working map is recomposed (:meth:`GraphMerging.straighten`) once the graph has
+moved some patch of it by more than this many cells since it was drawn: each recomposition
+costs a whole grid and a new topological map, and a cell's move changes little for either."""
 
 NEAR_M = 8.0
 """A window is searched against another (after a pair is joined, or for a loop closure) only
@@ -136,7 +149,10 @@ class GraphMerging:
         self._windows: dict[tuple[int, int, int], object] = {}
         self._poses: dict[tuple[int, int], list[Rigid2D]] = {}
         self._grid_cfg = GridMergeConfig()
-        self._drawn = PatchCache()  # closed patches drawn into fused maps, by (r, m, anchor)
+        self._drawn = PatchCache()  # closed patches drawn into fused maps, by (r, m, anchor),
+        # and into working maps, by ("own", r, anchor)
+        self._straightened = [False] * self.n  # working maps recomposed while non-trivial
+        self._pinned: list[list[Rigid2D]] = [[] for _ in range(self.n)]  # as last drawn
 
     # ----------------------------------------------------------------- per step
     def before_scans(self, steps: int, odometry: Sequence[np.ndarray],
@@ -318,6 +334,57 @@ class GraphMerging:
         self.records.append(LinkRecord(i, a, j, b, relative, confidence, taken, features))
         return taken
 
+    # ----------------------------------------------------------------- working maps
+    def straighten(self, r: int, maps: Sequence[RobotMap]) -> bool:
+        """Robot ``r``'s own grid (its **working map**: what it explores, observes and
+        extracts its topological map from) recomposed from its own patches at the graph's
+        corrections, **pinned at its newest anchor** — the anchor the robot is driving from
+        keeps its odometry pose, so the robot's odometry stays right where it is and the
+        older parts of its map move to where the graph puts them; the newest anchor's patch so
+        far stays as scanned. Returns whether the grid was recomposed: while ``r`` has no
+        teammate and no loop closure (every correction the identity) and was not recomposed
+        before, it is left as scanned. Patches stay what each anchor's scans added in the
+        odometry frame, so fused maps are unchanged by it. Why: under drift the robot's own
+        map bends as its fused map did, and the explorers and the topological map read the
+        own map."""
+        sub = self.submaps[r]
+        if not sub.patches or (self.trivial(r) and not self._straightened[r]):
+            return False
+        corrections = self.graph.corrections(r)
+        pin = corrections[-1].inverse()
+        closed = len(sub.patches)
+        pinned = [pin @ c for c in corrections[:closed]]
+        drawn = self._pinned[r] + [Rigid2D()] * (closed - len(self._pinned[r]))
+        geom = maps[r].geometry
+        if all(shift_cells(d, p, patch, geom) <= STRAIGHTEN_CELLS
+               for d, p, patch in zip(drawn, pinned, sub.patches, strict=True)):
+            return False  # nothing moved by more than a cell since it was drawn
+        grid = maps[r].grid
+        live = grid.log_odds.astype(np.float64) - sub.base
+        base = compose(sub.patches, pinned, geom, geom, cache=self._drawn,
+                       keys=[("own", r, k) for k in range(closed)])
+        self._pinned[r] = pinned
+        # clamped and rounded as the grid is (float32): the newest anchor's patch is then the
+        # scans' change alone, not the clamp's or the rounding's over the whole map
+        base = np.clip(base, -grid.model.clamp, grid.model.clamp).astype(grid.log_odds.dtype)
+        base = base.astype(np.float64)
+        grid.assign(base + live)
+        sub.rebase(base)
+        known = grid.known_mask()
+        rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+        if len(rows):  # moved cells stay inside the box its topological map is read from
+            maps[r].widen(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+        self._straightened[r] = not self.trivial(r)
+        return True
+
+    def scanned_log_odds(self, r: int, maps: Sequence[RobotMap]) -> np.ndarray:
+        """Robot ``r``'s map as its scans made it, at its odometry: its patches added up
+        without corrections (float64 log-odds of its grid) — the bent map the graph
+        straightens, for comparison (``env.scanned_map``)."""
+        patches = self.submaps[r].all_patches(maps[r].grid.log_odds)
+        return compose(patches, [Rigid2D()] * len(patches), maps[r].geometry,
+                       maps[r].geometry)
+
     # ----------------------------------------------------------------- fused maps
     def fused_log_odds(self, r: int, maps: Sequence[RobotMap], views: TeamViews) -> np.ndarray:
         """Robot ``r``'s fused map: its component's patches that ``r`` has received
@@ -380,18 +447,23 @@ class GraphMerging:
     def bending(self, maps: Sequence[RobotMap], segments: np.ndarray, views: TeamViews
                 ) -> dict[str, float]:
         """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
-        its own uncorrected map: ATE of the anchors (m), the share of occupied cells within
-        0.2 m of a true wall; and the links and loop closures the graph keeps in that map,
-        with how many of them are more than 5° or 1 m off at their own anchors. For metrics
-        only."""
+        its own map uncorrected (``own_*``: its patches as scanned, at its odometry) and as its
+        working map (``working_*``: :meth:`straighten`'s): ATE of the anchors (m), the share
+        of occupied cells within 0.2 m of a true wall; and the links and loop closures the
+        graph keeps in that map, with how many of them are more than 5° or 1 m off at their
+        own anchors. For metrics only."""
         from fusion.evaluation.bending import ate_rms, wall_share, world_alignment
 
         comp = sorted(self.graph.component(0))
         est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])
         truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
-        odo = np.array([[p.T[0], p.T[1]] for p in self.submaps[0].poses])
-        own_truth = np.array(self.submaps[0].truths)
-        fused = maps[0].grid.model.classify(self.fused_log_odds(0, maps, views)) == 2
+        sub, model = self.submaps[0], maps[0].grid.model
+        odo = np.array([[p.T[0], p.T[1]] for p in sub.poses])
+        own_truth = np.array(sub.truths)
+        pin = self.graph.correction(0, -1).inverse()
+        working = np.array([(pin @ p).T for p in self.graph.corrected_poses(0)])
+        fused = model.classify(self.fused_log_odds(0, maps, views)) == 2
+        raw = model.classify(self.scanned_log_odds(0, maps)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
         loops = [m for r in comp for m in self.graph.loops(r)]
@@ -403,10 +475,13 @@ class GraphMerging:
             "fused_robots": float(len(comp)),
             "fused_ate_m": ate_rms(est, truth),
             "own_ate_m": ate_rms(odo, own_truth),
+            "working_ate_m": ate_rms(working, own_truth),
             "fused_wall_share": wall_share(_centres(fused, maps[0]),
                                            world_alignment(est, truth), segments),
-            "own_wall_share": wall_share(_centres(maps[0].grid.occupied_mask(), maps[0]),
+            "own_wall_share": wall_share(_centres(raw, maps[0]),
                                          world_alignment(odo, own_truth), segments),
+            "working_wall_share": wall_share(_centres(maps[0].grid.occupied_mask(), maps[0]),
+                                             world_alignment(working, own_truth), segments),
             "links_kept": float(len(kept)),
             "links_kept_wrong": wrong(kept),
             "links_accepted": float(sum(r.i != r.j for r in self.records)),

@@ -168,14 +168,18 @@ class RobotMap:
         n = int(counts[0])
         if n:
             self.n_ever += n
-            r0, r1, c0, c1 = counts[1:5].tolist()
-            if self.bbox is None:
-                self.bbox = [r0, r1, c0, c1]
-            else:
-                b = self.bbox
-                b[0], b[1] = min(b[0], r0), max(b[1], r1)
-                b[2], b[3] = min(b[2], c0), max(b[3], c1)
+            self.widen(*counts[1:5].tolist())
         return counts
+
+    def widen(self, r0: int, r1: int, c0: int, c1: int) -> None:
+        """Grow :attr:`bbox` to cover rows ``r0 … r1 - 1`` and columns ``c0 … c1 - 1``: cells
+        scanned, or moved there when the map is recomposed (``GraphMerging.straighten``)."""
+        if self.bbox is None:
+            self.bbox = [r0, r1, c0, c1]
+        else:
+            b = self.bbox
+            b[0], b[1] = min(b[0], r0), max(b[1], r1)
+            b[2], b[3] = min(b[2], c0), max(b[3], c1)
 
     def copy(self) -> RobotMap:
         """An independent copy (grid, known cells, topological map): what a teammate keeps of

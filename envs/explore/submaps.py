@@ -139,6 +139,18 @@ class RobotSubmaps:
         self.scans[-1].append((np.array(odometry, dtype=np.float64),
                                np.array(ranges, dtype=np.float64)))
 
+    @property
+    def base(self) -> np.ndarray:
+        """The log-odds the newest anchor's patch is counted from (float64; read-only view)."""
+        view = self._base.view()
+        view.flags.writeable = False
+        return view
+
+    def rebase(self, base: np.ndarray) -> None:
+        """Count the newest anchor's patch from ``base`` on: the grid was recomposed
+        (``GraphMerging.straighten``) as ``base`` plus that patch so far."""
+        self._base = np.array(base, dtype=np.float64)
+
     def live_patch(self, log_odds: np.ndarray) -> Patch:
         """The newest anchor's patch so far."""
         return _patch(np.asarray(log_odds, dtype=np.float64) - self._base)
@@ -209,7 +221,7 @@ class PatchCache:
         correction is within :data:`SNAP_CELLS` cells of ``corr`` over the patch, else a
         new one (kept)."""
         kept = self._moved.get(key)
-        if kept is not None and _shift_cells(kept.correction, corr, patch, src) <= SNAP_CELLS:
+        if kept is not None and shift_cells(kept.correction, corr, patch, src) <= SNAP_CELLS:
             return kept
         kept = _move(patch, corr, src, dst)
         self._moved[key] = kept
@@ -225,7 +237,7 @@ def _corners(patch: Patch, src: Geometry) -> np.ndarray:
     return cells * src.resolution + np.array(src.origin)
 
 
-def _shift_cells(a: Rigid2D, b: Rigid2D, patch: Patch, src: Geometry) -> float:
+def shift_cells(a: Rigid2D, b: Rigid2D, patch: Patch, src: Geometry) -> float:
     """How far (cells) the two corrections put ``patch``'s points apart at most (a rigid
     motion's largest displacement over a box is at a corner)."""
     corners = _corners(patch, src)

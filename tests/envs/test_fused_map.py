@@ -279,3 +279,24 @@ def test_pose_graph_fused_map_holds_only_the_submaps_received(graph):
     assert abs(int(never.sum()) - int(own.sum())) < 0.05 * own.sum()  # its own map, corrected
     assert len(g.received(0, 1, maps, Apart(2 * GRAPH["anchor_every"]))) == 2
     assert g.received(0, 1, maps, Apart(-1)) == []
+
+
+def test_with_perfect_odometry_the_working_map_stays_as_scanned(graph):
+    """Robot 0 has a teammate, so its working map is straightened on merge steps; with
+    perfect odometry every correction is (nearly) the identity and the map stays the one its
+    scans made (``scanned_map``)."""
+    work = graph.robot_map("robot_0").grid
+    scanned = graph.scanned_map("robot_0")
+    assert scanned.robots == (0,) and scanned.states.shape == work.shape
+    known = scanned.known_mask() | work.known_mask()
+    differ = np.count_nonzero(scanned.states != work.states())
+    assert differ <= 0.01 * np.count_nonzero(known)
+
+
+def test_without_the_pose_graph_the_scanned_map_is_the_own_map(rigid):
+    for agent in rigid.possible_agents:
+        np.testing.assert_array_equal(rigid.scanned_map(agent).states,
+                                      rigid.robot_map(agent).grid.states())
+    with pytest.raises(ValueError, match=r"agent must be one of \['robot_0', 'robot_1'\], "
+                                         r"got 'robot_9'"):
+        rigid.scanned_map("robot_9")

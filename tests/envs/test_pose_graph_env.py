@@ -111,3 +111,45 @@ def test_each_robot_has_its_own_search_budget(budget):
     assert {i for _, i in calls} == {0, 1, 2, 3}
     first = min(step for step, _ in calls)
     assert {i for step, i in calls if step == first} == {0, 1, 2, 3}
+
+
+def test_a_loop_closure_straightens_the_working_map_and_leaves_fused_maps_alone():
+    """``GraphMerging.straighten``: a loop closure that turns robot 0's older anchors moves
+    them in its own grid (its working map) and keeps the newest anchor's cells where they
+    were scanned; fused maps, made of the unchanged patches, do not move; the next closed
+    patch holds only what its scans added (but where evidence saturates)."""
+    from fusion import Rigid2D
+
+    env = two_robot_explore_v0.parallel_env(
+        robot=PIONEER, world={"size": (10.0, 10.0)}, max_cycles=400,
+        mapping={"pose_graph": True, "anchor_every": 20, "merge_every": 5})
+    env.reset(seed=1)
+    for act in _actions(100, seed=1):
+        env.step(act)
+    graph, rmap = env._graph, env.maps[0]
+    sub = graph.submaps[0]
+    assert not graph.straighten(0, env.maps)  # no loop closure yet: left as scanned
+    odo = sub.poses[4].inverse() @ sub.poses[0]
+    assert graph.add_alignment(0, 4, 0, 0, odo @ Rigid2D.from_degrees(6.0), 1.0)
+    fused = graph.fused_log_odds(0, env.maps, env.views)
+    live = sub.live_patch(rmap.grid.log_odds)
+    before = rmap.grid.states().copy()
+    assert graph.straighten(0, env.maps)
+    after = rmap.grid.states()
+    assert np.count_nonzero(before != after) > 20  # the older anchors' cells moved
+    moved_live = sub.live_patch(rmap.grid.log_odds)
+    assert (moved_live.r0, moved_live.c0) == (live.r0, live.c0)
+    assert moved_live.delta.shape == live.delta.shape
+    differ = ~np.isclose(moved_live.delta, live.delta, atol=1e-5)
+    h, w = live.delta.shape
+    at = rmap.grid.log_odds[live.r0:live.r0 + h, live.c0:live.c0 + w]
+    assert np.all(np.abs(at[differ]) >= rmap.grid.model.clamp - 1e-5)  # only where it clamps
+    moved_fused = graph.fused_log_odds(0, env.maps, env.views)
+    assert np.count_nonzero(~np.isclose(moved_fused, fused, atol=1e-5)) <= np.count_nonzero(differ)
+    assert not graph.straighten(0, env.maps)  # nothing moved since: not drawn again
+    closed = len(sub.patches)
+    for act in _actions(25, seed=2):
+        env.step(act)
+    assert len(sub.patches) > closed
+    delta = sub.patches[closed].delta  # the scans' change, no rounding residue of the rest
+    assert delta.any() and not np.any((delta != 0) & (np.abs(delta) < 1e-3))

@@ -22,6 +22,7 @@ def test_bending_example_writes_the_figure_and_summarises(tmp_path, capsys):
     data = (tmp_path / "bending.png").read_bytes()
     assert data.startswith(b"\x89PNG") and len(data) > 10_000
     lines = _bending_summary(tmp_path, out)
-    assert len(lines) == 4 and lines[0].startswith("maps that bend, seed 102")
-    assert "own map   ATE" in lines[1] and "fused map       ATE" in lines[2]
-    assert lines[3] == f"figure: {tmp_path / 'bending.png'}"
+    assert len(lines) == 5 and lines[0].startswith("maps that bend, seed 102")
+    assert "map as scanned  ATE" in lines[1] and "working map           ATE" in lines[2]
+    assert "fused map             ATE" in lines[3]
+    assert lines[4] == f"figure: {tmp_path / 'bending.png'}"
