@@ -25,10 +25,11 @@ import numpy as np
 LEVELS = (0.50, 0.85, 0.95)
 
 EPISODE_INFO_KEYS = ("true_coverage", "shared_coverage", "overlap", "merges", "contacts",
-                     "fused_robots")
-"""Robot 0's infos that training logs at episode ends under ``explore/`` (both backends); the
-last two only a team of more than two robots has (``multi_robot_explore_v0``: robots in
-contact with it, robots in its fused map)."""
+                     "fused_robots", "fused_ate_m", "fused_wall_share")
+"""Robot 0's infos that training logs at episode ends under ``explore/`` (both backends), those
+the env has: ``contacts`` and ``fused_robots`` only a team of more than two robots
+(``multi_robot_explore_v0``: robots in contact with it, robots in its fused map), the fused
+map's ATE and wall share only ``mapping.pose_graph``."""
 
 
 @dataclass

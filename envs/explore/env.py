@@ -158,11 +158,16 @@ Small, numeric and comparable (no NaN, no wall clock, no live objects). Per robo
 | ``merges`` / ``merge_drops`` | int | merge calls so far / transforms the grids refuted (Maps) |
 | ``pose`` / ``odometry`` | (3,) f64 | true world ``x, y, θ`` (metrics only) / own-frame odometry |
 | ``contacts`` / ``fused_robots`` | int | teammates in contact / robots in its fused map (teams) |
+| ``fused_ate_m`` / ``fused_wall_share`` | float | robot 0's fused map: ATE, m / wall share (h) |
 
 (d) from true poses and ranges: dropped echoes and drift do not count. (f) against ground
 truth, drift-aware with odometry noise; 0.0 when not valid; in a team, the largest over robot
 0's fused teammates. (g) ``MERGE_METHODS[code]`` (0: none) and ``MERGE_SOURCES[code]`` (1
 structural, 2 grid, 3 known), constants of this module; in a team, pair (robot_0, robot_1)'s.
+(h) only with ``mapping.pose_graph``, for metrics: against the truth as of the last merge
+step (``fusion.evaluation.bending``): the RMS error of its anchors after one best rigid fit, and
+the share of its occupied cells within 0.2 m of a true wall (0.0 before any is mapped);
+``merge_state().bending`` has more.
 Maps are read through the env: ``env.unwrapped.robot_map(agent)`` and ``fused_map(agent)``
 (read-only snapshots of its own and its fused map; ``scanned_map(agent)``: its own as scanned,
 which differs from its own map only with ``mapping.pose_graph``) and ``merge_state()``

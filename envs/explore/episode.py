@@ -41,6 +41,7 @@ from envs.explore.sonar import Sonar
 from envs.explore.starts import check_start_poses
 from envs.explore.submaps import ScanSettings
 from envs.explore.worlds import World, load_world, procedural_world
+from fusion.evaluation.bending import WallIndex
 from fusion.rigid import Rigid2D
 
 
@@ -143,10 +144,12 @@ class EpisodeHooks:
         self.views = TeamViews(self.maps, cfg.comm)
         self._graph = None  # mapping.pose_graph (issue 41): merging as a pose graph
         self._shared_incremental = True
+        self._fused_truth = (0.0, 0.0)  # pose graph: robot 0's fused ATE, wall share (infos)
         if cfg.mapping.pose_graph:
             self._graph = GraphMerging(self.maps, cfg.mapping, cfg.robot, ScanSettings(
                 self.sonars[0].angles, self.sonars[0].mount_radius, cfg.sonar.max_range,
                 math.radians(cfg.sonar.cone) / 2.0, model))
+            self._walls = WallIndex(world.segments)
         self._extracted_at = [0] * n  # known cells of each map at its last extraction
         self.steps = 0
         self._snapshots = [None] * n
@@ -262,16 +265,20 @@ class EpisodeHooks:
             if graph.straighten(r, self.maps):  # its topological map follows at the next chance
                 self._extracted_at[r] = 0
         trivial = graph.trivial(0)
+        lo = self.maps[0].grid.log_odds  # robot 0's fused map: its own grid while trivial
         if trivial and not self._shared_incremental:
             self._shared_delta += self.shared.rebuild({0: self.maps[0]}, {})
         elif not trivial:
-            known = graph.fused_known(0, self.maps, self.views)
+            lo = graph.fused_log_odds(0, self.maps, self.views)
+            known = self.maps[0].grid.model.classify(lo) != 0
             count = int(np.count_nonzero(known))
             self.shared.ever[...] = known
             self._shared_delta += count - self.shared.count
             self.shared.count = count
         self.shared.members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
         self._shared_incremental = trivial
+        ate, wall = graph.fused_truth(self.maps, self.views, self._walls, lo)
+        self._fused_truth = (ate, 0.0 if math.isnan(wall) else wall)
 
     def _fused_states(self, r: int) -> np.ndarray:
         """Robot ``r``'s fused map now (``fused_map``): ``(H, W)`` int8 cell states on its own
@@ -371,4 +378,5 @@ class EpisodeHooks:
         errors = self.merge_errors() if self.shared.members else (0.0, 0.0)
         return step_infos(self.agents, self.possible_agents, self.robots, self.maps,
                           self.oracle, self.shared, self._world_area, self._merging,
-                          self.views, errors, not self.two_robot)
+                          self.views, errors, not self.two_robot,
+                          None if self._graph is None else self._fused_truth)

@@ -414,10 +414,6 @@ class GraphMerging:
         seen = int(views.seen[r, m])
         return [] if seen < 0 else sub.patches[:seen // self.config.anchor_every]
 
-    def fused_known(self, r: int, maps: Sequence[RobotMap], views: TeamViews) -> np.ndarray:
-        """``(H, W)`` bool known cells of robot ``r``'s fused map."""
-        return maps[r].grid.model.classify(self.fused_log_odds(r, maps, views)) != 0
-
     def frames(self, r: int) -> dict[int, tuple[Rigid2D, Rigid2D]]:
         """``{j: (to_r, from_r)}`` for each robot ``j`` of ``r``'s component: robot ``j``'s
         odometry frame → robot ``r``'s, right at the two robots' newest anchors."""
@@ -444,6 +440,24 @@ class GraphMerging:
         return abs(math.degrees(err.theta)), float(np.hypot(*err.T))
 
     # ----------------------------------------------------------------- truth
+    def fused_truth(self, maps: Sequence[RobotMap], views: TeamViews, walls,
+                    log_odds: np.ndarray | None = None) -> tuple[float, float]:
+        """Robot 0's fused map against the truth now: the ATE (m) of its component's anchors
+        in its frame (:func:`fusion.evaluation.bending.ate_rms`) and the share of its occupied
+        cells within ``walls.tolerance`` of a true wall (``walls``: a
+        :class:`fusion.evaluation.bending.WallIndex`; NaN without occupied cells) once put in
+        the world by the anchors' best rigid fit. ``log_odds``: its fused log-odds if the
+        caller has them (else composed here). For metrics only."""
+        from fusion.evaluation.bending import ate_rms, world_alignment
+
+        comp = sorted(self.graph.component(0))
+        est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])
+        truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
+        lo = self.fused_log_odds(0, maps, views) if log_odds is None else log_odds
+        occupied = maps[0].grid.model.classify(lo) == 2
+        return (ate_rms(est, truth),
+                walls.share(_centres(occupied, maps[0]), world_alignment(est, truth)))
+
     def bending(self, maps: Sequence[RobotMap], segments: np.ndarray, views: TeamViews
                 ) -> dict[str, float]:
         """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
@@ -452,36 +466,33 @@ class GraphMerging:
         of occupied cells within 0.2 m of a true wall; and the links and loop closures the
         graph keeps in that map, with how many of them are more than 5° or 1 m off at their
         own anchors. For metrics only."""
-        from fusion.evaluation.bending import ate_rms, wall_share, world_alignment
+        from fusion.evaluation.bending import WallIndex, ate_rms, world_alignment
 
-        comp = sorted(self.graph.component(0))
-        est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])
-        truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
+        walls = WallIndex(segments)
+        fused_ate, fused_wall = self.fused_truth(maps, views, walls)
         sub, model = self.submaps[0], maps[0].grid.model
         odo = np.array([[p.T[0], p.T[1]] for p in sub.poses])
         own_truth = np.array(sub.truths)
         pin = self.graph.correction(0, -1).inverse()
         working = np.array([(pin @ p).T for p in self.graph.corrected_poses(0)])
-        fused = model.classify(self.fused_log_odds(0, maps, views)) == 2
         raw = model.classify(self.scanned_log_odds(0, maps)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
-        loops = [m for r in comp for m in self.graph.loops(r)]
+        loops = [m for r in sorted(self.graph.component(0)) for m in self.graph.loops(r)]
 
         def wrong(measurements: list) -> float:  # more than 5° or 1 m off at their anchors
             return float(sum(rot > 5.0 or trans > 1.0 for rot, trans in
                              (self._error(m.a, m.b, m.relative) for m in measurements)))
         return {
-            "fused_robots": float(len(comp)),
-            "fused_ate_m": ate_rms(est, truth),
+            "fused_robots": float(len(self.graph.component(0))),
+            "fused_ate_m": fused_ate,
             "own_ate_m": ate_rms(odo, own_truth),
             "working_ate_m": ate_rms(working, own_truth),
-            "fused_wall_share": wall_share(_centres(fused, maps[0]),
-                                           world_alignment(est, truth), segments),
-            "own_wall_share": wall_share(_centres(raw, maps[0]),
-                                         world_alignment(odo, own_truth), segments),
-            "working_wall_share": wall_share(_centres(maps[0].grid.occupied_mask(), maps[0]),
-                                             world_alignment(working, own_truth), segments),
+            "fused_wall_share": fused_wall,
+            "own_wall_share": walls.share(_centres(raw, maps[0]),
+                                          world_alignment(odo, own_truth)),
+            "working_wall_share": walls.share(_centres(maps[0].grid.occupied_mask(), maps[0]),
+                                              world_alignment(working, own_truth)),
             "links_kept": float(len(kept)),
             "links_kept_wrong": wrong(kept),
             "links_accepted": float(sum(r.i != r.j for r in self.records)),

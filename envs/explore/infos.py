@@ -54,7 +54,8 @@ def merge_errors(members: Mapping[int, tuple[Rigid2D, Rigid2D]], robots: Sequenc
 def step_infos(agents: Sequence[str], possible_agents: Sequence[str], robots: Sequence[Robot],
                maps: Sequence[RobotMap], oracle: OracleCoverage, shared: SharedMap,
                world_area: float, merging: TeamMerging, views: TeamViews,
-               errors: tuple[float, float], team: bool) -> dict[str, dict[str, Any]]:
+               errors: tuple[float, float], team: bool,
+               fused_truth: tuple[float, float] | None = None) -> dict[str, dict[str, Any]]:
     """One step's infos (manual, Infos): ``{agent: {key: value}}`` for each live agent.
 
     Args:
@@ -67,6 +68,9 @@ def step_infos(agents: Sequence[str], possible_agents: Sequence[str], robots: Se
             otherwise: the infos then say 0.0 and ``merge_errors_valid`` False).
         team: the ``multi_robot_explore_v0`` layout (adds ``contacts`` and
             ``fused_robots``).
+        fused_truth: with ``mapping.pose_graph``, robot 0's fused map's anchor ATE (m) and
+            wall share as of the last merge step (adds ``fused_ate_m`` and
+            ``fused_wall_share``); ``None`` otherwise.
     """
     in_use = bool(shared.members)
     rot_err, trans_err = errors if in_use else (0.0, 0.0)
@@ -85,6 +89,8 @@ def step_infos(agents: Sequence[str], possible_agents: Sequence[str], robots: Se
         "merges": merging.calls,
         "merge_drops": merging.drops,
     }
+    if fused_truth is not None:
+        common["fused_ate_m"], common["fused_wall_share"] = fused_truth
     out = {}
     for i, a in enumerate(possible_agents):
         if a not in agents:

@@ -52,30 +52,53 @@ def ate_rms(estimated: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((moved - _xy(truth, "truth")) ** 2, axis=1))))
 
 
+class WallIndex:
+    """True walls made searchable once: points along every segment, spaced well below the
+    tolerance, in a KD-tree. :meth:`share` is :func:`wall_share` for these walls. Why: a map
+    judged on every merge step of an episode is judged against the same walls.
+
+    Args:
+        segments: ``(M, 4)`` rows ``x0, y0, x1, y1`` (world frame), ``M ≥ 1``.
+        tolerance: an occupied cell within this many metres of a wall counts as on it (> 0).
+
+    Raises:
+        ValueError: ``segments`` is not ``(M, 4)`` with ``M ≥ 1``, or ``tolerance <= 0``.
+    """
+
+    def __init__(self, segments: np.ndarray, tolerance: float = WALL_TOLERANCE_M) -> None:
+        seg = np.asarray(segments, dtype=np.float64)
+        if seg.ndim != 2 or seg.shape[1] != 4 or not len(seg):
+            raise ValueError(f"segments must be (M, 4) rows x0, y0, x1, y1 with M >= 1, got "
+                             f"shape {seg.shape}")
+        if not tolerance > 0:
+            raise ValueError(f"tolerance must be > 0, got {tolerance}")
+        self.tolerance = float(tolerance)
+        self._step = self.tolerance / 4
+        samples = []
+        for x0, y0, x1, y1 in seg:
+            n = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / self._step)) + 1)
+            s = np.linspace(0.0, 1.0, n)[:, None]
+            samples.append(np.array([x0, y0]) * (1 - s) + np.array([x1, y1]) * s)
+        self._tree = cKDTree(np.vstack(samples))
+
+    def share(self, occupied_xy: np.ndarray, to_world: Rigid2D) -> float:
+        """The share of ``occupied_xy`` (``(N, 2)`` map-frame centres of occupied cells) within
+        :attr:`tolerance` of a wall once moved by ``to_world``; NaN without occupied cells."""
+        pts = np.asarray(occupied_xy, dtype=np.float64).reshape(-1, 2)
+        if not len(pts):
+            return float("nan")
+        dist, _ = self._tree.query(to_world.apply(pts),
+                                   distance_upper_bound=self.tolerance + self._step)
+        return float(np.mean(dist <= self.tolerance))
+
+
 def wall_share(occupied_xy: np.ndarray, to_world: Rigid2D, segments: np.ndarray,
                tolerance: float = WALL_TOLERANCE_M) -> float:
     """The share of ``occupied_xy`` (``(N, 2)`` map-frame centres of occupied cells) that lie
     within ``tolerance`` metres of a true wall (``segments``: ``(M, 4)`` rows
-    ``x0, y0, x1, y1``, world frame) once moved by ``to_world``; NaN without occupied cells.
+    ``x0, y0, x1, y1``, world frame) once moved by ``to_world``; NaN without occupied cells
+    (:class:`WallIndex` keeps the walls for many calls).
 
     Raises:
         ValueError: ``segments`` is not ``(M, 4)`` with ``M ≥ 1``, or ``tolerance <= 0``."""
-    seg = np.asarray(segments, dtype=np.float64)
-    if seg.ndim != 2 or seg.shape[1] != 4 or not len(seg):
-        raise ValueError(f"segments must be (M, 4) rows x0, y0, x1, y1 with M >= 1, got shape "
-                         f"{seg.shape}")
-    if not tolerance > 0:
-        raise ValueError(f"tolerance must be > 0, got {tolerance}")
-    pts = np.asarray(occupied_xy, dtype=np.float64).reshape(-1, 2)
-    if not len(pts):
-        return float("nan")
-    # points along every wall, spaced well below the tolerance
-    step = tolerance / 4
-    samples = []
-    for x0, y0, x1, y1 in seg:
-        n = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / step)) + 1)
-        s = np.linspace(0.0, 1.0, n)[:, None]
-        samples.append(np.array([x0, y0]) * (1 - s) + np.array([x1, y1]) * s)
-    dist, _ = cKDTree(np.vstack(samples)).query(to_world.apply(pts),
-                                                distance_upper_bound=tolerance + step)
-    return float(np.mean(dist <= tolerance))
+    return WallIndex(segments, tolerance).share(occupied_xy, to_world)

@@ -84,6 +84,22 @@ def test_setting_off_builds_no_graph():
     env.reset(seed=4)
     assert env._graph is None
     assert env.merge_state().bending == {}
+    _, _, _, _, infos = env.step(_actions(1)[0])
+    assert "fused_ate_m" not in infos["robot_0"] and "fused_wall_share" not in infos["robot_1"]
+
+
+def test_infos_carry_the_fused_maps_truth_as_of_the_last_merge_step(stepped):
+    """``fused_ate_m`` / ``fused_wall_share`` (pose graph only): robot 0's fused map against
+    the truth, what ``merge_state().bending`` says at a merge step, the same for every
+    agent."""
+    env, _ = stepped
+    assert env.steps % env.config.mapping.merge_every == 0
+    infos = env._infos()
+    bending = env.merge_state().bending
+    for agent in env.agents:
+        assert infos[agent]["fused_ate_m"] == pytest.approx(bending["fused_ate_m"])
+        assert infos[agent]["fused_wall_share"] == pytest.approx(bending["fused_wall_share"])
+    assert 0.0 < infos["robot_0"]["fused_wall_share"] <= 1.0
 
 
 @pytest.mark.parametrize("budget", [1, 2])
