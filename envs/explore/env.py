@@ -549,7 +549,7 @@ class MultiRobotExploreEnv(EpisodeHooks, ReplayCopies, ParallelEnv):
         state = self._merging.state(self.views, self.shared.transform)
         if self._graph is not None:
             state = dataclasses.replace(state, bending=self._graph.bending(
-                self.maps, self._world.segments, self.views))
+                self.maps, self._walls, self.views))
         return state
 
     def state(self) -> np.ndarray:

@@ -53,7 +53,7 @@ from envs.explore.submaps import (
     compose,
     shift_cells,
 )
-from fusion.grid_layers import LayerCache
+from fusion.grid_layers import LayerCache, known_box
 from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.local_align import align_near, near_features
 from fusion.posegraph import PoseGraph
@@ -370,10 +370,10 @@ class GraphMerging:
         base = base.astype(np.float64)
         grid.assign(base + live)
         sub.rebase(base)
-        known = grid.known_mask()
-        rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-        if len(rows):  # moved cells stay inside the box its topological map is read from
-            maps[r].widen(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+        box = known_box(grid.states())
+        if box is not None:  # moved cells stay inside the box its topological map is read from
+            r0, r1, c0, c1 = box
+            maps[r].widen(r0, r1 + 1, c0, c1 + 1)
         self._straightened[r] = not self.trivial(r)
         return True
 
@@ -458,17 +458,16 @@ class GraphMerging:
         return (ate_rms(est, truth),
                 walls.share(_centres(occupied, maps[0]), world_alignment(est, truth)))
 
-    def bending(self, maps: Sequence[RobotMap], segments: np.ndarray, views: TeamViews
-                ) -> dict[str, float]:
+    def bending(self, maps: Sequence[RobotMap], walls, views: TeamViews) -> dict[str, float]:
         """Robot 0's fused map against the truth (:mod:`fusion.evaluation.bending`), beside
         its own map uncorrected (``own_*``: its patches as scanned, at its odometry) and as its
         working map (``working_*``: :meth:`straighten`'s): ATE of the anchors (m), the share
         of occupied cells within 0.2 m of a true wall; and the links and loop closures the
         graph keeps in that map, with how many of them are more than 5° or 1 m off at their
-        own anchors. For metrics only."""
-        from fusion.evaluation.bending import WallIndex, ate_rms, world_alignment
+        own anchors (``walls``: the world's :class:`fusion.evaluation.bending.WallIndex`).
+        For metrics only."""
+        from fusion.evaluation.bending import ate_rms, world_alignment
 
-        walls = WallIndex(segments)
         fused_ate, fused_wall = self.fused_truth(maps, views, walls)
         sub, model = self.submaps[0], maps[0].grid.model
         odo = np.array([[p.T[0], p.T[1]] for p in sub.poses])
@@ -478,13 +477,14 @@ class GraphMerging:
         raw = model.classify(self.scanned_log_odds(0, maps)) == 2
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
-        loops = [m for r in sorted(self.graph.component(0)) for m in self.graph.loops(r)]
+        comp = sorted(self.graph.component(0))
+        loops = [m for r in comp for m in self.graph.loops(r)]
 
         def wrong(measurements: list) -> float:  # more than 5° or 1 m off at their anchors
             return float(sum(rot > 5.0 or trans > 1.0 for rot, trans in
                              (self._error(m.a, m.b, m.relative) for m in measurements)))
         return {
-            "fused_robots": float(len(self.graph.component(0))),
+            "fused_robots": float(len(comp)),
             "fused_ate_m": fused_ate,
             "own_ate_m": ate_rms(odo, own_truth),
             "working_ate_m": ate_rms(working, own_truth),
