@@ -15,8 +15,10 @@ snapshots of a team of ``robots`` robots (``two_robot_explore_v0`` for 2, the de
 the two robots' true sweeps that the other also swept, and ``extra["robots"]`` is ``[i, j]``
 (pairs written before this key existed are (0, 1)). With drifting odometry (``--odometry``)
 the pair's transform is still the start-frame truth, and ``extra`` also holds the truth at the
-robots' current places (:func:`current_truth`). Snapshot ``k`` is taken the first time the
-true coverage reaches
+robots' current places (:func:`current_truth`) and both robots' trajectories so far, as mapped
+and as driven (``trajectory_a``, ``trajectory_b``: :func:`trajectory_row` from the start, every
+:data:`TRAJECTORY_EVERY` steps and at each snapshot; ``fusion.evaluation`` judges a merge by the
+ATE of the fused map it makes). Snapshot ``k`` is taken the first time the true coverage reaches
 ``coverage_levels[k]`` (spread over 15–85 % so that overlaps vary) or, for an explorer too slow
 to get there, at step ``(k + 1) / snapshots · max_cycles``, whichever comes first (so the
 snapshots of an episode are taken at distinct moments); an episode that terminates early gives
@@ -270,8 +272,10 @@ def pair_overlap(swept_a: np.ndarray, swept_b: np.ndarray) -> float:
 
 
 def _snapshot(env: Any, infos: dict, first_id: int, episode: int, k: int, seed: int,
-              step: int, settings: dict[str, Any]) -> list[MapPair]:
-    """Every robot pair of one snapshot (module docstring), ids from ``first_id`` on."""
+              step: int, settings: dict[str, Any],
+              trails: list[list[list[float]]] | None = None) -> list[MapPair]:
+    """Every robot pair of one snapshot (module docstring), ids from ``first_id`` on;
+    ``trails``: each robot's :func:`trajectory_row` so far (drifting odometry)."""
     raw = env.unwrapped
     a = infos["robot_0"]
     snaps = [raw.robot_map(agent) for agent in raw.possible_agents]
@@ -291,6 +295,9 @@ def _snapshot(env: Any, infos: dict, first_id: int, episode: int, k: int, seed: 
         extra: dict[str, Any] = {"true_coverage": float(a["true_coverage"]), "robots": [i, j]}
         if drifts:
             extra.update(current_truth(raw.robots[i], raw.robots[j]))
+            if trails is not None:
+                extra["trajectory_a"] = [list(r) for r in trails[i]]
+                extra["trajectory_b"] = [list(r) for r in trails[j]]
         out.append(MapPair(
             pair_id=first_id + p, map_a=snaps[i].topomap, map_b=snaps[j].topomap,
             grid_a=grids[i], grid_b=grids[j], transform=truth,
@@ -318,6 +325,23 @@ def current_truth(robot_a: Any, robot_b: Any) -> dict[str, list]:
                                [float(v) for v in robot_b.odometry[:2]]]}
 
 
+TRAJECTORY_EVERY = 25
+"""With drifting odometry, each robot's pose is kept every this many steps (and at each
+snapshot) for its pairs' ``extra["trajectory_a"]`` / ``["trajectory_b"]``
+(:func:`trajectory_row`): a 3000-step episode's trajectory is 120 rows."""
+
+
+def trajectory_row(robot: Any) -> list[float]:
+    """A robot's pose now, ``[x, y, θ, true x, true y, true θ]``: its odometry (the frame its
+    map is drawn in) and its true pose in its start frame (where that map would be without
+    drift). Why: a dataset pair's two trajectories judge a rigid merge of bent maps by the
+    fused map's ATE (``fusion.evaluation.bending.PairTrajectories``)."""
+    from envs.explore.robot import start_frame_pose
+
+    truth = start_frame_pose(robot.start, robot.true_pose())
+    return [float(v) for v in (*robot.odometry, *truth)]
+
+
 def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, Any]) -> int:
     """Run episode ``episode`` and write its pairs (ids ``episode · snapshots + k`` below
     ``n_pairs``) into dataset ``root``. Returns how many pairs it wrote. Top-level and
@@ -338,23 +362,38 @@ def generate_episode(root: str, episode: int, n_pairs: int, settings: dict[str, 
     deadlines = [math.ceil((k + 1) / snapshots * settings["max_cycles"]) for k in range(len(ids))]
     taken: list[list[MapPair]] = []
     state = {"infos": None, "step": 0}
+    drifts = settings.get("odometry", "perfect") != "perfect"
+    # every robot starts at the origin of its map frame and of its start frame
+    trails: list[list[list[float]]] = [[[0.0] * 6] for _ in range(n_agents)]
+    sampled = [0]  # the last step the trails were sampled at
+
+    def sample(step: int) -> None:  # each robot's pose now, as mapped and as it truly is
+        if drifts and sampled[0] != step:
+            sampled[0] = step
+            for trail, robot in zip(trails, env.unwrapped.robots, strict=True):
+                trail.append(trajectory_row(robot))
 
     def callback(step: int, _obs: dict, _rew: dict, infos: dict) -> None:
         if len(infos) < n_agents:
             return
         state["infos"], state["step"] = infos, step
+        if step % TRAJECTORY_EVERY == 0:
+            sample(step)
         cov = float(infos["robot_0"]["true_coverage"])
         while len(taken) < len(ids) and (cov >= levels[len(taken)]
                                          or step >= deadlines[len(taken)]):
             k = len(taken)
-            taken.append(_snapshot(env, infos, ids[k], episode, k, seed, step, settings))
+            sample(step)
+            taken.append(_snapshot(env, infos, ids[k], episode, k, seed, step, settings,
+                                   trails))
 
     try:
         run_episode(env, team, seed=seed, callback=callback)
         while len(taken) < len(ids) and state["infos"] is not None:
             k = len(taken)
+            sample(state["step"])
             taken.append(_snapshot(env, state["infos"], ids[k], episode, k, seed,
-                                   state["step"], settings))
+                                   state["step"], settings, trails))
     finally:
         env.close()
     pairs = [pair for snapshot in taken for pair in snapshot if pair.pair_id < n_pairs]

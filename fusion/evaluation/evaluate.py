@@ -31,7 +31,10 @@ level, with the true correspondences so the oracle can be computed) or from a ma
 folder or several evaluated as one set (:func:`load_pair_dir`; the :mod:`fusion.evaluation.pairs`
 format that ``agents.dataset`` writes: it stores no node correspondences, so the oracle column
 is empty; ``--truth current`` judges pairs made with drifting odometry at the robots' current
-places).
+places). Pairs made with drifting odometry also hold both robots' trajectories: each merge's
+record then has the ATE of the fused map it makes and the floor no rigid merge beats on those
+bent maps (:class:`fusion.evaluation.bending.PairTrajectories`), and the summary a table of
+both.
 
 The pair and record types, the success criteria and the summaries are
 :mod:`fusion.evaluation.results`.
@@ -51,6 +54,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from fusion.evaluation.bending import PairTrajectories
 from fusion.evaluation.results import (
     ORACLE,
     OVERLAP_BINS,
@@ -127,12 +131,33 @@ def load_pair_dir(path: str | Path, truth: str = "start") -> list[EvalPair]:
     for p in load_pairs(path):
         kind = "overlap" if p.overlap > 0 else "no_overlap"
         transform = p.transform
-        current = (p.extra or {}).get("current_transform")
+        extra = p.extra or {}
+        current = extra.get("current_transform")
         if truth == "current" and current is not None:
             transform = Rigid2D(float(current[0]), (float(current[1]), float(current[2])))
         out.append(EvalPair(f"pair_{p.pair_id:06d}", p.map_a, p.map_b, transform, None,
-                            float(p.overlap), kind, None, (p.grid_a, p.grid_b)))
+                            float(p.overlap), kind, None, (p.grid_a, p.grid_b),
+                            _trajectories(p)))
     return out
+
+
+def _trajectories(pair: Any) -> PairTrajectories | None:
+    """A dataset pair's trajectories (``extra["trajectory_a"]`` / ``["trajectory_b"]``,
+    written with drifting odometry), ``None`` without them.
+
+    Raises:
+        fusion.evaluation.pairs.DatasetError: malformed trajectories (names the pair)."""
+    extra = pair.extra or {}
+    if "trajectory_a" not in extra or "trajectory_b" not in extra:
+        return None
+    from fusion.evaluation.pairs import DatasetError
+
+    try:
+        return PairTrajectories.from_start_frames(extra["trajectory_a"], extra["trajectory_b"],
+                                                  pair.transform)
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"pair {pair.pair_id}: extra trajectory_a / trajectory_b: {exc}"
+                           ) from None
 
 
 # ------------------------------------------------------------------------------ evaluation
@@ -141,12 +166,15 @@ def _record(pair: EvalPair, method: str, transform: Rigid2D | None, accepted: bo
             confidence: float | None = None, gated: bool = True) -> Record:
     errors = transform_errors(transform, pair) if transform is not None else None
     good = pair.kind == "overlap" and is_success(errors)
+    bent = pair.trajectories is not None and transform is not None
     return Record(
         pair.name, method, pair.kind, pair.overlap, pair.noise,
         None if pair.transform is None else pair.transform.degrees, bool(accepted),
         None if errors is None else errors[0], None if errors is None else errors[1],
         bool(accepted and good), float(time_s), score, reason, pair.map_a.n_nodes,
-        pair.map_b.n_nodes, confidence, bool(gated))
+        pair.map_b.n_nodes, confidence, bool(gated),
+        pair.trajectories.ate(transform) if bent else None,
+        pair.trajectories.floor() if bent else None)
 
 
 def _confidence(result: Any) -> tuple[float | None, bool]:

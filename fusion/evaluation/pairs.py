@@ -38,7 +38,11 @@ world_id, seed, explorer, step, episode, snapshot, each grid's resolution and or
 In a team's dataset (``python -m agents.dataset generate --robots N``) every robot pair
 ``i < j`` of a snapshot is a pair: ``extra["robots"] = [i, j]``, map A is robot i's, map B
 robot j's and the transform takes j's frame onto i's; a pair without that key is robots
-``(0, 1)``.
+``(0, 1)``. Pairs made with drifting odometry (``--odometry``) also hold in ``extra`` the truth
+at the robots' current places (``current_transform``, ``current_places``) and both robots'
+trajectories (``trajectory_a``, ``trajectory_b``: rows ``[x, y, θ, true x, true y, true θ]``,
+odometry in the robot's map frame, truth in its start frame), which
+``fusion.evaluation.bending.PairTrajectories`` reads.
 
 Every file is written to a temporary name in the same folder and renamed into place, so a pair
 file either exists whole or not at all; anything else in ``pairs/`` is an error naming the file

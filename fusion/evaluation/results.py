@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from fusion.evaluation.bending import PairTrajectories
 from fusion.icp import rigid_fit
 from fusion.rigid import Rigid2D
 from topo.graph import TopoMap
@@ -55,6 +56,9 @@ class EvalPair:
         noise: node noise std the pair was made with (``None`` if unknown).
         grids: the two occupancy grids (dataset pairs), for the grid methods; ``None`` for
             synthetic pairs.
+        trajectories: both robots' trajectories as mapped and as driven (dataset pairs made
+            with drifting odometry), which judge a merge by its fused map's ATE; else
+            ``None``.
     """
 
     name: str
@@ -66,11 +70,15 @@ class EvalPair:
     kind: str
     noise: float | None
     grids: tuple[Any, Any] | None = None
+    trajectories: PairTrajectories | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class Record:
-    """One method on one pair (a row of ``results.json``)."""
+    """One method on one pair (a row of ``results.json``). ``ate_m``: the ATE (m) of the fused
+    map its transform makes, ``ate_floor_m`` the least any rigid merge makes
+    (:class:`fusion.evaluation.bending.PairTrajectories`; ``None`` for pairs without
+    trajectories or without a transform)."""
 
     pair: str
     method: str
@@ -89,6 +97,8 @@ class Record:
     nodes_b: int
     confidence: float | None = None
     gated: bool = True
+    ate_m: float | None = None
+    ate_floor_m: float | None = None
 
 
 def oracle_transform(pair: EvalPair) -> Rigid2D | None:
@@ -171,9 +181,20 @@ def summarise(records: Sequence[Record]) -> dict[str, Any]:
                 "false_accept_rate": (100.0 * sum(r.accepted for r in none) / len(none)
                                       if none else None),
                 "no_overlap_pairs": len(none),
+                **_ate_summary(overlap),
             }
         out[key] = level
     return out
+
+
+def _ate_summary(overlap: list[Record]) -> dict[str, Any]:
+    """Fused-map ATE of a method's accepted merges on overlapping pairs with trajectories:
+    median ATE and median floor on the same pairs; empty if there are none."""
+    judged = [r for r in overlap if r.accepted and r.ate_m is not None]
+    if not judged:
+        return {}
+    return {"ate_pairs": len(judged), "median_ate_m": _median(r.ate_m for r in judged),
+            "median_ate_floor_m": _median(r.ate_floor_m for r in judged)}
 
 
 def _fmt(v: float | None, spec: str = ".1f") -> str:
@@ -208,6 +229,14 @@ def format_tables(summary: dict[str, Any]) -> str:
                 f"{_fmt(s['median_translation_error_m'], '.2f'):>9}"
                 f"{_fmt(s['median_time_ms'], '.2f'):>10}{_fmt(s['accepted_overlap']):>8}"
                 f"{fa_text:>13}")
+        judged = {m: s for m, s in level["methods"].items() if "ate_pairs" in s}
+        if judged:
+            lines += ["fused-map ATE of accepted merges (pairs with trajectories: drifting "
+                      "odometry); floor: the least any rigid merge reaches on the same pairs",
+                      f"{'method':<16}{'pairs':>7}{'med ATE m':>11}{'med floor m':>13}"]
+            for m, s in judged.items():
+                lines.append(f"{m:<16}{s['ate_pairs']:>7}{_fmt(s['median_ate_m'], '.2f'):>11}"
+                             f"{_fmt(s['median_ate_floor_m'], '.2f'):>13}")
     return "\n".join(lines)
 
 

@@ -14,6 +14,7 @@ from scipy import ndimage
 
 import agents.dataset as dataset
 from agents.dataset import (
+    TRAJECTORY_EVERY,
     GenerateArgs,
     SettingsError,
     coverage_levels,
@@ -487,12 +488,14 @@ def test_cli_parse_error_on_the_command_line_is_one_line(tmp_path):
 def test_drifting_pairs_hold_the_truth_at_the_robots_current_places(tmp_path_factory,
                                                                    reference):
     """With drifting odometry a pair keeps its start-frame truth and adds the one right where
-    the robots are now; without drift the two are the same; evaluation reads either."""
-    from fusion.evaluation.evaluate import load_pair_dir
+    the robots are now and both robots' trajectories; without drift the two truths are the
+    same and the trajectories exact; evaluation reads either truth and judges a merge by the
+    fused map's ATE."""
+    from fusion.evaluation.evaluate import evaluate, load_pair_dir
 
     out, pairs = made(tmp_path_factory, "drift", 2, {**KW, "odometry": "pioneer3dx"})
     assert json.loads((out / "dataset.json").read_text())["settings"]["odometry"] == "pioneer3dx"
-    _, still = made(tmp_path_factory, "still", 2, {**KW, "odometry": "0"})
+    still_out, still = made(tmp_path_factory, "still", 2, {**KW, "odometry": "0"})
     for p, q in zip(pairs, still, strict=True):
         theta, tx, ty = p.extra["current_transform"]
         current = Rigid2D(theta, (tx, ty))
@@ -507,8 +510,32 @@ def test_drifting_pairs_hold_the_truth_at_the_robots_current_places(tmp_path_fac
                                             p.extra["current_transform"][1:]), atol=1e-12)
     with pytest.raises(ValueError, match=r"truth must be one of \['start', 'current'\], got 'x'"):
         load_pair_dir(out, truth="x")
+    # both robots' trajectories, as mapped and as driven, from the start to the snapshot
+    for p, q, e in zip(pairs, still, start, strict=True):
+        rows = np.array(p.extra["trajectory_a"])
+        # the start, every TRAJECTORY_EVERY steps, and each snapshot so far
+        assert rows.shape[1] == 6
+        assert 1 + p.step // TRAJECTORY_EVERY <= len(rows) <= 1 + p.step // TRAJECTORY_EVERY + 2
+        assert rows[0].tolist() == [0.0] * 6
+        assert len(p.extra["trajectory_b"]) == len(rows)
+        assert not np.allclose(rows[:, :3], rows[:, 3:], atol=1e-3)  # odometry drifted
+        still_rows = np.array(q.extra["trajectory_b"])
+        assert np.allclose(still_rows[:, :3], still_rows[:, 3:], atol=1e-9)
+        # the truth's merge of bent maps is no better than the best rigid one
+        traj = e.trajectories
+        assert traj.floor() <= traj.ate(p.transform) + 1e-12
+        assert traj.ate(traj.best_merge()) == pytest.approx(traj.floor(), abs=1e-9)
+    # the evaluation judges each merge found by the fused map it makes
+    records = evaluate(start, ["grid"], progress=False)
+    assert records and all(r.ate_m is not None and r.ate_floor_m <= r.ate_m + 1e-9
+                           for r in records if r.rotation_error_deg is not None)
+    for q, e in zip(still, load_pair_dir(still_out), strict=True):  # no drift: exact
+        assert e.trajectories.ate(q.transform) < 1e-6
+        assert e.trajectories.floor() < 1e-6
     # a perfect-odometry dataset stores no second truth: "current" reads the start frames'
     ref_out, ref_pairs = reference
     assert "current_transform" not in ref_pairs[0].extra
+    assert "trajectory_a" not in ref_pairs[0].extra
+    assert load_pair_dir(ref_out)[0].trajectories is None
     for p, e in zip(ref_pairs, load_pair_dir(ref_out, truth="current"), strict=True):
         assert e.transform.allclose(p.transform, atol=0.0)

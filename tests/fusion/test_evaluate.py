@@ -217,3 +217,24 @@ def test_cli_evaluates_several_folders_as_one_set(tmp_path, capsys):
     data = json.loads((out / "results.json").read_text())
     assert [r["pair"] for r in data["records"]] == ["one/pair_000000", "two/pair_000000"]
     assert str(tmp_path / "two") in data["source"]
+
+
+def test_merges_of_bent_maps_are_summarised_by_their_fused_map_ate():
+    """Records with a fused-map ATE (pairs with trajectories): the summary gives the median
+    over accepted merges on overlapping pairs beside the floor on the same pairs, and the
+    table prints both; without trajectories neither appears."""
+    from dataclasses import replace
+
+    from fusion.evaluation.results import format_tables
+
+    records = [replace(_rec("p0", 0.9, True), ate_m=0.3, ate_floor_m=0.2),
+               replace(_rec("p1", 0.9, False), ate_m=2.0, ate_floor_m=0.4),
+               replace(_rec("p2", 0.9, True), ate_m=0.5, ate_floor_m=0.5),
+               replace(_rec("p3", 0.2, True), ate_m=9.0, ate_floor_m=0.1),  # not accepted
+               _rec("p4", 0.9, True)]  # no trajectories
+    s = summarise(records)["unknown"]["methods"]["m"]
+    assert (s["ate_pairs"], s["median_ate_m"], s["median_ate_floor_m"]) == (3, 0.5, 0.4)
+    table = format_tables(summarise(records))
+    assert "fused-map ATE of accepted merges" in table
+    assert "m                     3       0.50         0.40" in table
+    assert "fused-map ATE" not in format_tables(summarise([_rec("p4", 0.9, True)]))
