@@ -6,8 +6,8 @@ every rotation and translation (:func:`fusion.grid_merge.merge_grids`) is both w
 drawn to look-alikes far away. :func:`align_near` searches only near the estimate — B's wall
 cells scored on A's wall likelihood field (a Gaussian of the distance to A's nearest wall
 cell, as in correlative scan matching, Olson 2009) over a small box of rotations and
-translations — then refines the best pose on the walls and keeps it only if the grids agree
-with it (:func:`fusion.grid_merge.check_with_grids`). :func:`near_features` is the evidence the
+translations — and keeps the best pose only if the grids agree with it
+(:func:`fusion.grid_merge.check_with_grids`). :func:`near_features` is the evidence the
 calibrated confidence of such an alignment reads (model ``"window_near"``,
 :mod:`fusion.calibration`).
 """
@@ -43,12 +43,14 @@ them and a few hundred already pin a pose."""
 
 def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
                config: GridMergeConfig | None = None, *, max_deg: float = 3.0,
-               step_deg: float = 1.0, reach_m: float = 0.5) -> Rigid2D | None:
+               step_deg: float = 1.0, reach_m: float = 0.5,
+               refine: bool = False) -> Rigid2D | None:
     """Grid B's alignment onto grid A (B → A) within ``max_deg`` degrees and ``reach_m``
-    metres of ``estimate`` (rotations about B's wall centroid in ``step_deg`` steps,
-    translations on A's cells), refined on the walls; ``None`` when either grid has fewer
-    than 10 wall cells or the grids do not agree with the best pose (too little overlap, B's
-    walls off A's walls or in A's free space: ``config``'s gates).
+    metres of ``estimate``: the best pose of the search box (rotations about B's wall
+    centroid in ``step_deg`` steps, translations on A's cells), refined on the walls if
+    ``refine``; ``None`` when either grid has fewer than 10 wall cells or the grids do not
+    agree with the pose (too little overlap, B's walls off A's walls or in A's free space:
+    ``config``'s gates).
 
     Args:
         grid_a, grid_b: occupancy grids (``topo.OccupancyGrid`` or anything
@@ -57,6 +59,12 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
         config: the gates and refinement settings (:class:`fusion.grid_merge.GridMergeConfig`).
         max_deg, step_deg, reach_m: the search box (``max_deg`` and ``reach_m`` ≥ 0,
             ``step_deg`` > 0; at most :data:`MAX_TRANSLATIONS` translations).
+        refine: polish the box's best pose by ICP of B's wall cells onto A's
+            (:func:`fusion.grid_merge.refine_with_grids`). Off by default: on the env's sonar
+            windows the likelihood field's best pose is already as precise as the grids
+            (about 1° with perfect odometry), and least squares on smeared or bent walls
+            moves some poses more than 5° off (``docs/notes/bending.md``); crisp laser maps
+            may gain from it.
 
     Raises:
         TypeError, ValueError: malformed grids or config (as ``merge_grids``), ``estimate``
@@ -100,7 +108,9 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
     k, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
     theta = estimate.theta + float(turns[k])
     t = anchor + np.array([ox[j], oy[j]]) - Rigid2D(theta).R @ centre
-    best = refine_with_grids(grid_a, grid_b, Rigid2D(theta, (float(t[0]), float(t[1]))), cfg)
+    best = Rigid2D(theta, (float(t[0]), float(t[1])))
+    if refine:
+        best = refine_with_grids(grid_a, grid_b, best, cfg)
     return best if check_with_grids(grid_a, grid_b, best, cfg) is None else None
 
 

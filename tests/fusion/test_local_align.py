@@ -25,6 +25,23 @@ def test_recovers_the_truth_from_an_estimate_within_the_box(deg, dx, dy):
     assert found.translation_error(truth, at=centre) < 0.15
 
 
+def test_the_box_best_pose_is_kept_unless_refined_on_the_walls():
+    """Without ``refine`` the answer is a pose of the search box (a whole number of
+    ``step_deg`` from the estimate); with it, ICP on the walls moves it off the lattice, and
+    both find the truth."""
+    a, b, truth = overlapping_views(37.0, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
+    estimate = _off(truth, -2.5, -0.4, 0.4)
+    boxed = align_near(a, b, estimate)
+    turn = math.degrees(boxed.theta - estimate.theta)
+    assert turn == pytest.approx(round(turn), abs=1e-9)
+    refined = align_near(a, b, estimate, refine=True)
+    centre = np.array([12.0, 5.0])
+    for found in (boxed, refined):
+        assert math.degrees(found.rotation_error(truth)) < 1.0
+        assert found.translation_error(truth, at=centre) < 0.15
+    assert not refined.allclose(boxed, atol=1e-6)
+
+
 def test_an_estimate_far_outside_the_box_is_not_pulled_to_the_truth():
     a, b, truth = overlapping_views(0.0)
     found = align_near(a, b, _off(truth, 25.0, 3.0, -3.0))
