@@ -6,8 +6,8 @@ every rotation and translation (:func:`fusion.grid_merge.merge_grids`) is both w
 drawn to look-alikes far away. :func:`align_near` searches only near the estimate — B's wall
 cells scored on A's wall likelihood field (a Gaussian of the distance to A's nearest wall
 cell, as in correlative scan matching, Olson 2009) over a small box of rotations and
-translations — and keeps the best pose only if the grids agree with it
-(:func:`fusion.grid_merge.check_with_grids`). :func:`near_features` is the evidence the
+translations — then refines the best pose on the walls and keeps it only if the grids agree
+with it (:func:`fusion.grid_merge.check_with_grids`). :func:`near_features` is the evidence the
 calibrated confidence of such an alignment reads (model ``"window_near"``,
 :mod:`fusion.calibration`).
 """
@@ -43,15 +43,12 @@ them and a few hundred already pin a pose."""
 
 def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
                config: GridMergeConfig | None = None, *, max_deg: float = 3.0,
-               step_deg: float = 1.0, reach_m: float = 0.5,
-               refine: bool = False) -> Rigid2D | None:
+               step_deg: float = 1.0, reach_m: float = 0.5) -> Rigid2D | None:
     """Grid B's alignment onto grid A (B → A) within ``max_deg`` degrees and ``reach_m``
-    metres of ``estimate``: the best pose of the search box (rotations about B's wall
-    centroid in ``step_deg`` steps, translations on A's cells) moved to the score's peak
-    between its neighbours (a parabola per axis), refined on the walls if ``refine``;
-    ``None`` when either grid has fewer than 10 wall cells or the grids do not
-    agree with the pose (too little overlap, B's walls off A's walls or in A's free space:
-    ``config``'s gates).
+    metres of ``estimate`` (rotations about B's wall centroid in ``step_deg`` steps,
+    translations on A's cells), refined on the walls; ``None`` when either grid has fewer
+    than 10 wall cells or the grids do not agree with the best pose (too little overlap, B's
+    walls off A's walls or in A's free space: ``config``'s gates).
 
     Args:
         grid_a, grid_b: occupancy grids (``topo.OccupancyGrid`` or anything
@@ -60,12 +57,6 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
         config: the gates and refinement settings (:class:`fusion.grid_merge.GridMergeConfig`).
         max_deg, step_deg, reach_m: the search box (``max_deg`` and ``reach_m`` ≥ 0,
             ``step_deg`` > 0; at most :data:`MAX_TRANSLATIONS` translations).
-        refine: polish the pose by ICP of B's wall cells onto A's
-            (:func:`fusion.grid_merge.refine_with_grids`). Off by default: on the env's sonar
-            windows the likelihood field's peak is already as precise as the grids (0.8°
-            median with perfect odometry), and least squares on smeared or bent walls moves
-            some poses more than 5° off (``docs/notes/bending.md``); crisp laser maps may
-            gain from it.
 
     Raises:
         TypeError, ValueError: malformed grids or config (as ``merge_grids``), ``estimate``
@@ -93,7 +84,6 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
     field = cached(grid_a, "likelihood_field", lambda: _likelihood_field(walls_a))
     origin = np.asarray(grid_a.origin, dtype=np.float64)
     offsets = np.arange(-reach_m, reach_m + 1e-9, res)
-    side = len(offsets)
     ox, oy = (v.ravel() for v in np.meshgrid(offsets, offsets))
     centre = walls_b.mean(axis=0)
     anchor = estimate.apply(centre[None])[0]  # where the estimate puts B's wall centroid
@@ -108,15 +98,9 @@ def align_near(grid_a: Any, grid_b: Any, estimate: Rigid2D,
         scores[k] = ndimage.map_coordinates(field, at, order=0, mode="constant",
                                             cval=0.0).reshape(len(ox), -1).mean(axis=1)
     k, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
-    box = scores.reshape(len(turns), side, side)  # [turn, y offset, x offset]
-    iy, ix = divmod(int(j), side)
-    dk = _peak(box[k - 1:k + 2, iy, ix])  # the peak between the box's poses, per axis
-    dy, dx = _peak(box[k, iy - 1:iy + 2, ix]), _peak(box[k, iy, ix - 1:ix + 2])
-    theta = estimate.theta + float(turns[k]) + math.radians(dk * step_deg)
-    t = anchor + np.array([ox[j] + dx * res, oy[j] + dy * res]) - Rigid2D(theta).R @ centre
-    best = Rigid2D(theta, (float(t[0]), float(t[1])))
-    if refine:
-        best = refine_with_grids(grid_a, grid_b, best, cfg)
+    theta = estimate.theta + float(turns[k])
+    t = anchor + np.array([ox[j], oy[j]]) - Rigid2D(theta).R @ centre
+    best = refine_with_grids(grid_a, grid_b, Rigid2D(theta, (float(t[0]), float(t[1]))), cfg)
     return best if check_with_grids(grid_a, grid_b, best, cfg) is None else None
 
 
@@ -166,17 +150,6 @@ def near_features(grid_a: Any, grid_b: Any, estimate: Rigid2D, transform: Rigid2
             "native_deep": deep,
             "wall_agreement": 0.0 if agreement is None else agreement.wall_agreement,
             "log_wall_hits": math.log1p(hits)}
-
-
-def _peak(scores: np.ndarray) -> float:
-    """Where a parabola through three neighbouring scores (the best in the middle) peaks, in
-    steps from the middle (within ±0.5); 0 at the box's edge (fewer than three) or without a
-    peak."""
-    if len(scores) < 3:
-        return 0.0
-    low, mid, high = (float(v) for v in scores)
-    curve = low - 2.0 * mid + high
-    return 0.0 if curve >= 0.0 else float(np.clip(0.5 * (low - high) / curve, -0.5, 0.5))
 
 
 def _likelihood_field(walls: np.ndarray) -> np.ndarray:

@@ -25,25 +25,6 @@ def test_recovers_the_truth_from_an_estimate_within_the_box(deg, dx, dy):
     assert found.translation_error(truth, at=centre) < 0.15
 
 
-@pytest.mark.parametrize("deg, dx, dy", [(1.5, 0.05, -0.05), (-1.4, 0.23, 0.17),
-                                          (0.6, -0.12, 0.04)])
-def test_the_peak_lies_between_the_box_poses_and_icp_polishes_it(deg, dx, dy):
-    """An estimate off the search lattice: the score's peak between the box's poses is closer
-    to the truth than any pose of the box (0.5° and half a cell away at worst); ``refine``
-    polishes it further on these crisp grids."""
-    a, b, truth = overlapping_views(37.0, Rigid2D.from_degrees(20.0, (3.0, 2.0)), (12.0, 5.0))
-    estimate = _off(truth, deg, dx, dy)
-    centre = np.array([12.0, 5.0])
-    peak = align_near(a, b, estimate)
-    turn = math.degrees(peak.theta - estimate.theta)
-    assert abs(turn - round(turn)) > 0.05  # not a pose of the box
-    assert math.degrees(peak.rotation_error(truth)) < 0.3
-    assert peak.translation_error(truth, at=centre) < 0.05
-    polished = align_near(a, b, estimate, refine=True)
-    assert math.degrees(polished.rotation_error(truth)) < 0.15
-    assert polished.translation_error(truth, at=centre) < 0.03
-
-
 def test_an_estimate_far_outside_the_box_is_not_pulled_to_the_truth():
     a, b, truth = overlapping_views(0.0)
     found = align_near(a, b, _off(truth, 25.0, 3.0, -3.0))
