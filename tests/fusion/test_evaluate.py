@@ -160,6 +160,23 @@ def test_reads_a_map_pair_dataset(tmp_path):
     assert [r.method for r in records] == ["auto", "auto"]  # no oracle without correspondences
 
 
+def test_malformed_trajectories_of_a_dataset_pair_are_named(tmp_path):
+    import fusion.evaluation.pairs as pairs_mod
+
+    grid = pairs_mod.GridSnapshot(np.zeros((2, 2), np.int8), 0.1, (0.0, 0.0))
+    atomic_write_json(tmp_path / "dataset.json",
+                      {"format": pairs_mod.FORMAT, "version": pairs_mod.FORMAT_VERSION})
+    p = make_pair(np.random.default_rng(0), overlap=0.8, kind="overlap", nodes=(25, 25))
+    bad = {"trajectory_a": [[0.0] * 6, [1.0] * 6], "trajectory_b": [[0.0] * 5]}
+    pairs_mod.write_pair(tmp_path, pairs_mod.MapPair(
+        3, p.map_a, p.map_b, grid, grid, p.transform, p.overlap, "w", 0, "test", 0, 0, 0,
+        extra=bad))
+    with pytest.raises(pairs_mod.DatasetError,
+                       match=r"pair 3: extra trajectory_a / trajectory_b: rows_b must be "
+                             r"\(K, 6\) rows .* got shape \(1, 5\)"):
+        load_pair_dir(tmp_path)
+
+
 def test_grid_methods_need_grids():
     from fusion.evaluation.evaluate import evaluate, parse_methods, synthetic_pairs
 
