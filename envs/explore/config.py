@@ -387,10 +387,10 @@ class MappingConfig:
             window that is aligned as one rigid grid.
         window_searches: with ``pose_graph``, window alignments each robot tries per merge
             step (each a ``fusion.grid_merge.merge_grids`` or a search near the graph's
-            estimate): the team's cost grows with its size, each robot's does not. Two: the
-            graph averages its alignments' noise, so with drifting odometry two a step make
-            straighter fused maps than one (about 12 % more time a step); perfect odometry
-            merges the same.
+            estimate): a budget per robot, so the pairs still to join do not starve a
+            robot's loop closures. Two: the graph averages its alignments' noise, so with
+            drifting odometry two a step make straighter fused maps than one (about 12 % more
+            time a step); perfect odometry merges the same.
     """
 
     grid_resolution: float = 0.1
