@@ -265,19 +265,20 @@ class EpisodeHooks:
             if graph.straighten(r, self.maps):  # its topological map follows at the next chance
                 self._extracted_at[r] = 0
         trivial = graph.trivial(0)
-        lo = self.maps[0].grid.log_odds  # robot 0's fused map: its own grid while trivial
+        states = self.maps[0].states  # robot 0's fused map: its own grid while trivial
         if trivial and not self._shared_incremental:
             self._shared_delta += self.shared.rebuild({0: self.maps[0]}, {})
         elif not trivial:
-            lo = graph.fused_log_odds(0, self.maps, self.views)
-            known = self.maps[0].grid.model.classify(lo) != 0
+            states = self.maps[0].grid.model.classify(
+                graph.fused_log_odds(0, self.maps, self.views))
+            known = states != 0
             count = int(np.count_nonzero(known))
             self.shared.ever[...] = known
             self._shared_delta += count - self.shared.count
             self.shared.count = count
         self.shared.members = {j: f for j, f in self._merging.frames[0].items() if j != 0}
         self._shared_incremental = trivial
-        ate, wall = graph.fused_truth(self.maps, self.views, self._walls, lo)
+        ate, wall = graph.fused_truth(self.maps, self.views, self._walls, states)
         self._fused_truth = (ate, 0.0 if math.isnan(wall) else wall)
 
     def _fused_states(self, r: int) -> np.ndarray:

@@ -441,20 +441,21 @@ class GraphMerging:
 
     # ----------------------------------------------------------------- truth
     def fused_truth(self, maps: Sequence[RobotMap], views: TeamViews, walls,
-                    log_odds: np.ndarray | None = None) -> tuple[float, float]:
+                    states: np.ndarray | None = None) -> tuple[float, float]:
         """Robot 0's fused map against the truth now: the ATE (m) of its component's anchors
         in its frame (:func:`fusion.evaluation.bending.ate_rms`) and the share of its occupied
         cells within ``walls.tolerance`` of a true wall (``walls``: a
         :class:`fusion.evaluation.bending.WallIndex`; NaN without occupied cells) once put in
-        the world by the anchors' best rigid fit. ``log_odds``: its fused log-odds if the
-        caller has them (else composed here). For metrics only."""
+        the world by the anchors' best rigid fit. ``states``: its fused map's cell states if
+        the caller has them (else composed here). For metrics only."""
         from fusion.evaluation.bending import ate_rms, world_alignment
 
         comp = sorted(self.graph.component(0))
         est = np.vstack([self.graph.trajectory(m, frame=0) for m in comp])
         truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
-        lo = self.fused_log_odds(0, maps, views) if log_odds is None else log_odds
-        occupied = maps[0].grid.model.classify(lo) == 2
+        if states is None:
+            states = maps[0].grid.model.classify(self.fused_log_odds(0, maps, views))
+        occupied = states == 2
         return (ate_rms(est, truth),
                 walls.share(_centres(occupied, maps[0]), world_alignment(est, truth)))
 
