@@ -129,6 +129,31 @@ def test_each_robot_has_its_own_search_budget(budget):
     assert {i for step, i in calls if step == first} == {0, 1, 2, 3}
 
 
+def test_a_robot_of_a_pair_searches_at_most_twice_a_merge_step():
+    """At most one candidate of each kind (the teammate to join or the joined teammate's
+    nearest window, and a loop closure): a budget above 2 changes nothing for two robots,
+    as ``MappingConfig.window_searches`` says."""
+    from collections import Counter
+
+    def calls(budget: int) -> list[tuple[int, int, int, int, int]]:
+        env = two_robot_explore_v0.parallel_env(
+            robot=PIONEER, max_cycles=400, world={"size": (10.0, 10.0)},
+            mapping={"pose_graph": True, "anchor_every": 10, "window_anchors": 2,
+                     "merge_every": 5, "window_searches": budget})
+        env.reset(seed=1)
+        graph, out = env._graph, []
+        align = graph._align
+        graph._align = lambda i, ei, j, ej: out.append((env.steps, i, ei, j, ej)) or align(
+            i, ei, j, ej)
+        for act in _actions(150):
+            env.step(act)
+        return out
+
+    two, five = calls(2), calls(5)
+    assert max(Counter((step, i) for step, i, *_ in two).values()) == 2
+    assert five == two
+
+
 def test_a_loop_closure_straightens_the_working_map_and_leaves_fused_maps_alone():
     """``GraphMerging.straighten``: a loop closure that turns robot 0's older anchors moves
     them in its own grid (its working map) and keeps the newest anchor's cells where they
