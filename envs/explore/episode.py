@@ -43,6 +43,7 @@ from envs.explore.submaps import ScanSettings
 from envs.explore.worlds import World, load_world, procedural_world
 from fusion.evaluation.bending import WallIndex
 from fusion.rigid import Rigid2D
+from topo.grid import CellState
 
 
 def agent_names(n: int) -> tuple[str, ...]:
@@ -271,7 +272,7 @@ class EpisodeHooks:
         elif not trivial:
             states = self.maps[0].grid.model.classify(
                 graph.fused_log_odds(0, self.maps, self.views))
-            known = states != 0
+            known = states != CellState.UNKNOWN
             count = int(np.count_nonzero(known))
             self.shared.ever[...] = known
             self._shared_delta += count - self.shared.count

@@ -58,6 +58,7 @@ from fusion.grid_merge import GridMergeConfig, merge_grids
 from fusion.local_align import align_near, near_features
 from fusion.posegraph import PoseGraph
 from fusion.rigid import Rigid2D
+from topo.grid import CellState
 
 LINK_SIGMAS = (0.15, 0.15, math.radians(3.0))
 """Standard deviations ``(x, y, θ)`` (m, m, rad) of a window alignment at the windows' middle
@@ -455,7 +456,7 @@ class GraphMerging:
         truth = np.vstack([np.array(self.submaps[m].truths) for m in comp])
         if states is None:
             states = maps[0].grid.model.classify(self.fused_log_odds(0, maps, views))
-        occupied = states == 2
+        occupied = states == CellState.OCCUPIED
         return (ate_rms(est, truth),
                 walls.share(_centres(occupied, maps[0]), world_alignment(est, truth)))
 
@@ -475,7 +476,7 @@ class GraphMerging:
         own_truth = np.array(sub.truths)
         pin = self.graph.correction(0, -1).inverse()
         working = np.array([(pin @ p).T for p in self.graph.corrected_poses(0)])
-        raw = model.classify(self.scanned_log_odds(0, maps)) == 2
+        raw = model.classify(self.scanned_log_odds(0, maps)) == CellState.OCCUPIED
         kept = [m for i in range(self.n) for j in range(i + 1, self.n)
                 for m in self.graph.links(i, j)[0]]
         comp = sorted(self.graph.component(0))
