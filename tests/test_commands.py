@@ -95,6 +95,16 @@ def test_demo_stage_runs_and_summarises(tmp_path, capsys):
     assert json.loads((tmp_path / "logs" / "summary.json").read_text())["stages"] == ["paper"]
 
 
+def test_demo_can_run_again_over_its_own_output(tmp_path):
+    """``make demo`` twice: the stages that would refuse an existing output replace the
+    demo's own (the PPO run folder by ``--overwrite``; the pairs folder is cleared)."""
+    from agents.commands import demo_stages
+
+    train = next(s for s in demo_stages() if s.name == "train")
+    argv = train.argv(tmp_path, 64)
+    assert "--overwrite" in argv and argv[argv.index("--run-name") + 1] == "demo"
+
+
 def test_python_m_form_works():
     done = subprocess.run([sys.executable, "-m", "agents.commands", "--help"],
                           capture_output=True, text=True, timeout=60, check=False)
