@@ -5,6 +5,7 @@
         [--steps 3000] [--explorer frontier] [--odometry-alphas pioneer3dx]
         [--odometry-noise S] [--settings on off] [--oracle [--oracle-at-last]]
         [--anchor-every N] [--window-anchors W] [--window-searches K] [--rows FILE]
+        [--out RUN.jsonl] [--from RUN.jsonl ...] [--against RUN.jsonl ...]
 
 For each seed (from 100: worlds the method was not developed on) one episode per setting,
 a scripted team (``agents.registry``), ``robot.odometry_model="rot_trans_rot"`` with the
@@ -33,12 +34,25 @@ against the share right within 5° and 1 m at their anchors, pooled and by confi
 ``--rows FILE`` writes every near search's row (features, confidence, errors at its anchors;
 split ``dev`` for seeds below 100, else ``test``) as JSON lines: what ``python -m
 fusion.calibration fit --model window_near --rows FILE --split dev`` fits on.
+
+**Judging a change** (the explorers follow the straightened maps, so any change sends some
+episodes down other paths and five seeds move by chance as much as most changes do): run about
+a hundred episodes of each version with ``--out`` (rewritten after each episode; run again with
+the same options, it resumes where it stopped), then ``--from NEW.jsonl ... --against
+OLD.jsonl ...`` prints the summary of the new rows and, over the episodes both runs hold, the
+paired table: per metric the mean difference and its standard error, the episodes better and
+worse (:data:`BETTER_ATE_M`, :data:`BETTER_WALL`), the gain over the robot's map as scanned
+(fused minus own, per episode: steadier than the raw values, since the map as scanned moves by
+chance too), the folded fused maps (:data:`FOLD_M`), links and loop closures kept wrong, and
+the first right merge of the episodes both merged right. A difference of two standard errors
+on one set of seeds has failed to repeat on the next hundred: confirm on fresh seeds.
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
+import math
 import statistics
 import time
 
@@ -51,10 +65,16 @@ from agents.registry import EXPLORERS, make_team
 from envs import multi_robot_explore_v0, two_robot_explore_v0
 from envs.explore.graph_merging import GraphMerging
 from fusion import Rigid2D
-from topo.fileio import atomic_write_json_lines
+from topo.fileio import atomic_write_json_lines, read_json_lines
 
 RIGHT_DEG, RIGHT_M = 5.0, 0.5
 WRONG_DEG, WRONG_M = 5.0, 1.0
+BETTER_ATE_M, BETTER_WALL = 0.03, 0.02
+"""A paired episode counts as better or worse (``--against``) when its fused ATE moved by
+more than this (m), or its wall share."""
+FOLD_M = 0.3
+"""A fused map counts as folded (``--against``) when its ATE is this much (m) worse than the
+robot's map as scanned."""
 ORACLE_MEET_M = 3.0
 ORACLE_AT_LAST = False
 
@@ -199,6 +219,69 @@ def calibration_lines(rows: list[dict]) -> list[str]:
     return out
 
 
+def _mean_se(values: list[float]) -> tuple[float, float]:
+    values = [v for v in values if not math.isnan(v)]
+    if not values:
+        return math.nan, math.nan
+    se = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else math.nan
+    return statistics.mean(values), se
+
+
+def paired_lines(old: list[dict], new: list[dict]) -> list[str]:
+    """The paired comparison (module docstring, ``--against``) of the pose-graph episodes
+    (``graph`` true) that both ``old`` and ``new`` hold, matched by seed."""
+    before = {r["seed"]: r for r in old if r["graph"]}
+    after = {r["seed"]: r for r in new if r["graph"]}
+    seeds = sorted(set(before) & set(after))
+    if not seeds:
+        return ["paired: no pose-graph episode in both runs"]
+    out = [f"paired: {len(seeds)} episodes (new minus old)",
+           "metric | old mean | new mean | mean difference (se) | better / worse episodes"]
+    metrics = (("fused ATE m", lambda r: r["fused_ate_m"], -BETTER_ATE_M),
+               ("fused wall share", lambda r: r["fused_wall_share"], BETTER_WALL),
+               ("ATE gain over own map m", lambda r: r["fused_ate_m"] - r["own_ate_m"],
+                -BETTER_ATE_M),
+               ("wall-share gain over own map",
+                lambda r: r["fused_wall_share"] - r["own_wall_share"], BETTER_WALL))
+    for name, get, better in metrics:
+        diff = [get(after[s]) - get(before[s]) for s in seeds]
+        mean, se = _mean_se(diff)
+        up = sum(d * math.copysign(1, better) > abs(better) for d in diff)
+        down = sum(d * math.copysign(1, better) < -abs(better) for d in diff)
+        old_mean, new_mean = (_mean_se([get(r[s]) for s in seeds])[0] for r in (before, after))
+        out.append(f"{name} | {old_mean:.3f} | {new_mean:.3f} | {mean:+.3f} ({se:.3f}) | "
+                   f"{up} / {down}")
+    for name, rows in (("old", before), ("new", after)):
+        folds = [s for s in seeds if rows[s]["fused_ate_m"] - rows[s]["own_ate_m"] > FOLD_M]
+        kept = ", ".join(
+            f"{k.replace('_', ' ')} wrong {sum(rows[s][k + '_wrong'] for s in seeds):.0f} / "
+            f"{sum(rows[s][k] for s in seeds):.0f}" for k in ("links_kept", "loops_kept"))
+        merged = sum(rows[s]["merged"] > 0 for s in seeds)
+        out.append(f"{name}: merged {merged}, {kept}; folded (fused ATE > own + {FOLD_M} m) "
+                   f"{len(folds)}: {folds}")
+    both = [s for s in seeds if before[s]["first_right"] and after[s]["first_right"]]
+    if both:
+        mean, se = _mean_se([after[s]["first_right"] - before[s]["first_right"] for s in both])
+        out.append(f"first right, the {len(both)} episodes both merged right: mean difference "
+                   f"{mean:+.0f} steps ({se:.0f})")
+    else:
+        out.append("first right: no episode merged right in both runs")
+    return out
+
+
+def _run_options(args: argparse.Namespace) -> dict:
+    """What a run's rows depend on besides the seed (``--out`` resumes only the same)."""
+    keys = ("size", "steps", "explorer", "odometry_alphas", "odometry_noise", "oracle",
+            "oracle_at_last", "robots", "window_searches", "window_anchors", "anchor_every")
+    return {k: getattr(args, k) for k in keys}
+
+
+def _jsonable(row: dict) -> dict:
+    return {k: (v if isinstance(v, (str, bool, type(None), list, dict)) else
+                int(v) if isinstance(v, (int, np.integer)) else float(v))
+            for k, v in row.items()}
+
+
 def _fmt(v) -> str:
     if v is None:
         return "-"
@@ -229,7 +312,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--anchor-every", type=int, default=None)
     parser.add_argument("--rows", default=None,
                         help="write the near searches' calibration rows (JSON lines) here")
+    parser.add_argument("--out", default=None,
+                        help="write every episode's row here (JSON lines); resumes a run")
+    parser.add_argument("--from", dest="from_", nargs="+", default=None, metavar="RUN",
+                        help="summarise these runs' rows (--out files) instead of running")
+    parser.add_argument("--against", nargs="+", default=None, metavar="RUN",
+                        help="compare with these runs' rows (--out files), paired by seed")
     args = parser.parse_args(argv)
+    if args.from_ and args.out:
+        parser.error("--from summarises runs already made: it takes no --out")
     if args.oracle:
         GraphMerging._align = oracle_align
     if args.oracle_at_last:
@@ -243,6 +334,15 @@ def main(argv: list[str] | None = None) -> None:
         robot = {"odometry_noise": (args.odometry_noise, args.odometry_noise)}
     else:
         robot = {"odometry_model": "rot_trans_rot", "odometry_alphas": args.odometry_alphas}
+    options = _run_options(args)
+    done: dict[tuple[int, bool], dict] = {}
+    if args.out:
+        for r in read_json_lines(args.out):
+            if r.get("options") != options:
+                raise ValueError(f"--out {args.out} holds a run with other options "
+                                 f"({r.get('options')}, not {options}): resume it with "
+                                 f"those or write to another file")
+            done[(r["seed"], r["graph"])] = r
     rows = []
     keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
             "fused_ate_m", "own_ate_m", "working_ate_m", "fused_wall_share", "own_wall_share",
@@ -250,13 +350,25 @@ def main(argv: list[str] | None = None) -> None:
             "links_kept_wrong", "loops_kept", "loops_kept_wrong", "window_searches", "floor_pairs",
             "floor_mid_wrong", "floor_last_wrong")
     print(" | ".join(keys), flush=True)
-    for seed in range(args.first_seed, args.first_seed + args.worlds):
+    if args.from_:
+        rows = [r for path in args.from_ for r in _read_run(path)]
+        args.steps = rows[0]["options"]["steps"]  # "never merged right" counts as steps + 1
+        args.settings = [s for s in ("on", "off") if any(r["graph"] == (s == "on")
+                                                          for r in rows)]
+    for seed in range(args.first_seed, args.first_seed + args.worlds) if not args.from_ else ():
         for setting in args.settings:
-            row = episode(seed, args.explorer, args.steps, args.size, robot, setting == "on",
-                          mapping, args.robots)
+            row = done.get((seed, setting == "on"))
+            if row is None:
+                row = _jsonable(episode(seed, args.explorer, args.steps, args.size, robot,
+                                        setting == "on", mapping, args.robots))
+                row["options"] = options
             rows.append(row)
             print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
-            if args.rows:  # rewritten whole after each episode: a crash keeps those done
+            # rewritten whole after each episode: a crash keeps those done
+            if args.out:
+                atomic_write_json_lines(args.out, [*rows, *(r for key, r in done.items()
+                                                            if r not in rows)])
+            if args.rows:
                 atomic_write_json_lines(args.rows, [n for r in rows
                                                     for n in r.get("near_rows", ())])
     print()
@@ -299,6 +411,22 @@ def main(argv: list[str] | None = None) -> None:
         print("\n".join(calibration_lines(near)))
     if args.rows:
         print(f"wrote {len(near)} rows to {args.rows}")
+    if args.against:
+        print()
+        print("\n".join(paired_lines([r for path in args.against for r in _read_run(path)],
+                                      rows)))
+
+
+def _read_run(path: str) -> list[dict]:
+    """The episode rows of an ``--out`` file.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+    """
+    rows = read_json_lines(path)
+    if not rows:
+        raise FileNotFoundError(f"{path}: no run rows (write them with --out)")
+    return rows
 
 
 if __name__ == "__main__":

@@ -68,3 +68,52 @@ def test_rows_are_written_and_their_calibration_printed(tmp_path, capsys):
                                    {"confidence": 0.6, "right": True}])
     assert lines[0] == "near searches: 3, mean confidence 0.810, right 0.667"
     assert "0.90–0.95 | 2 | 0.915 | 0.500" in lines
+
+
+def test_a_run_resumes_from_its_out_file_and_is_compared_paired(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("gtsam")
+    out = tmp_path / "run.jsonl"
+    tiny = ["--worlds", "1", "--steps", "40", "--size", "10", "--settings", "on"]
+    bil.main([*tiny, "--out", str(out)])
+    first = out.read_text()
+    assert len(first.splitlines()) == 1
+
+    def no_episode(*args, **kwargs):
+        raise AssertionError("a resumed run ran an episode it had")
+
+    monkeypatch.setattr(bil, "episode", no_episode)
+    bil.main([*tiny, "--out", str(out)])
+    assert out.read_text() == first
+    with pytest.raises(ValueError, match=r"--out .*run.jsonl holds a run with other options "
+                                         r"\(.*'steps': 40.*\): resume it with those"):
+        bil.main([*tiny[:2], "--steps", "41", *tiny[4:], "--out", str(out)])
+    capsys.readouterr()
+    bil.main(["--from", str(out), "--against", str(out)])
+    text = capsys.readouterr().out
+    assert "paired: 1 episodes (new minus old)" in text
+    assert "fused ATE m | " in text and "| +0.000 (nan) | 0 / 0" in text
+    with pytest.raises(FileNotFoundError, match=r"nothing.jsonl: no run rows"):
+        bil.main(["--from", str(tmp_path / "nothing.jsonl")])
+
+
+def _row(seed: int, fused: float, own: float, wall: float, first_right: int | None) -> dict:
+    return {"seed": seed, "graph": True, "fused_ate_m": fused, "own_ate_m": own,
+            "fused_wall_share": wall, "own_wall_share": 0.5, "merged": 10 * bool(first_right),
+            "first_right": first_right, "links_kept": 10, "links_kept_wrong": 1,
+            "loops_kept": 4, "loops_kept_wrong": 2}
+
+
+def test_paired_lines_count_better_and_worse_episodes_and_folds():
+    old = [_row(0, 0.30, 0.50, 0.70, 500), _row(1, 0.30, 0.50, 0.70, 900),
+           _row(2, 0.30, 0.50, 0.70, None), {**_row(3, 0.1, 0.1, 0.9, 1), "graph": False}]
+    new = [_row(0, 0.20, 0.50, 0.75, 400), _row(1, 0.31, 0.50, 0.69, 1000),
+           _row(2, 0.90, 0.50, 0.60, None), _row(4, 0.1, 0.1, 0.9, 1)]
+    lines = bil.paired_lines(old, new)
+    assert lines[0] == "paired: 3 episodes (new minus old)"
+    assert "fused ATE m | 0.300 | 0.470 | +0.170 (0.217) | 1 / 1" in lines
+    assert "fused wall share | 0.700 | 0.680 | -0.020 (0.044) | 1 / 1" in lines
+    assert lines[6].endswith("folded (fused ATE > own + 0.3 m) 0: []")
+    assert lines[7].endswith("folded (fused ATE > own + 0.3 m) 1: [2]")
+    assert lines[8] == ("first right, the 2 episodes both merged right: mean difference +0 "
+                        "steps (100)")
+    assert bil.paired_lines(old, [])[0] == "paired: no pose-graph episode in both runs"
