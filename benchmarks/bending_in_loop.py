@@ -37,15 +37,16 @@ fusion.calibration fit --model window_near --rows FILE --split dev`` fits on.
 
 **Judging a change** (the explorers follow the straightened maps, so any change sends some
 episodes down other paths and five seeds move by chance as much as most changes do): run about
-a hundred episodes of each version with ``--out`` (rewritten after each episode; run again with
-the same options, it resumes where it stopped), then ``--from NEW.jsonl ... --against
-OLD.jsonl ...`` prints the summary of the new rows and, over the episodes both runs hold, the
-paired table: per metric the mean difference and its standard error, the episodes better and
-worse (:data:`BETTER_ATE_M`, :data:`BETTER_WALL`), the gain over the robot's map as scanned
-(fused minus own, per episode: steadier than the raw values, since the map as scanned moves by
-chance too), the folded fused maps (:data:`FOLD_M`), links and loop closures kept wrong, and
-the first right merge of the episodes both merged right. A difference of two standard errors
-on one set of seeds has failed to repeat on the next hundred: confirm on fresh seeds.
+a hundred episodes of each version with ``--out`` (one file per version of the code; rewritten
+after each episode; run again with the same options, it resumes where it stopped), then
+``--from NEW.jsonl ... --against OLD.jsonl ...`` prints the summary of the new rows and, over
+the episodes both runs hold, the paired table: per metric the mean difference and its standard
+error, the episodes better and worse (:data:`BETTER_ATE_M`, :data:`BETTER_WALL`), the gain over
+the robot's map as scanned (fused minus own, per episode: steadier than the raw values, since
+the map as scanned moves by chance too), the folded fused maps (:data:`FOLD_M`), links and loop
+closures kept wrong, and the first right merge of the episodes both merged right. A difference
+of two standard errors on one set of seeds has failed to repeat on the next hundred: confirm on
+fresh seeds.
 """
 
 from __future__ import annotations
@@ -355,6 +356,8 @@ def main(argv: list[str] | None = None) -> None:
         args.steps = rows[0]["options"]["steps"]  # "never merged right" counts as steps + 1
         args.settings = [s for s in ("on", "off") if any(r["graph"] == (s == "on")
                                                           for r in rows)]
+        for row in rows:
+            print(" | ".join(_fmt(row.get(k)) for k in keys))
     for seed in range(args.first_seed, args.first_seed + args.worlds) if not args.from_ else ():
         for setting in args.settings:
             row = done.get((seed, setting == "on"))
@@ -366,7 +369,7 @@ def main(argv: list[str] | None = None) -> None:
             print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
             # rewritten whole after each episode: a crash keeps those done
             if args.out:
-                atomic_write_json_lines(args.out, [*rows, *(r for key, r in done.items()
+                atomic_write_json_lines(args.out, [*rows, *(r for r in done.values()
                                                             if r not in rows)])
             if args.rows:
                 atomic_write_json_lines(args.rows, [n for r in rows
@@ -421,7 +424,7 @@ def _read_run(path: str) -> list[dict]:
     """The episode rows of an ``--out`` file.
 
     Raises:
-        FileNotFoundError: ``path`` does not exist.
+        FileNotFoundError: ``path`` does not exist or holds no rows.
     """
     rows = read_json_lines(path)
     if not rows:
