@@ -50,7 +50,8 @@ class PoseGraphConfig:
         min_links: a robot pair is joined only by a consistent set of at least this many
             links — one link alone is one look-alike away from a folded map.
         max_links_per_pair: the most confident links of a pair that the consistency search
-            considers (its cost grows with the square of this).
+            considers (its agreement tests grow with the square of this, its maximal-clique
+            search exponentially at worst).
         huber_k: the Huber kernel's threshold (in standard deviations) on loop closures and
             links.
         max_drops: links the optimum explains worst that are dropped per component at most
