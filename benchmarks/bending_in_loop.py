@@ -283,6 +283,18 @@ def _jsonable(row: dict) -> dict:
             for k, v in row.items()}
 
 
+ROW_KEYS = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
+            "fused_ate_m", "own_ate_m", "working_ate_m", "fused_wall_share", "own_wall_share",
+            "working_wall_share", "links_kept", "links_kept_wrong", "loops_kept",
+            "loops_kept_wrong", "window_searches", "floor_pairs", "floor_mid_wrong",
+            "floor_last_wrong")
+"""The columns of an episode's printed row."""
+
+
+def _row_line(row: dict) -> str:
+    return " | ".join(_fmt(row.get(k)) for k in ROW_KEYS)
+
+
 def _fmt(v) -> str:
     if v is None:
         return "-"
@@ -345,32 +357,29 @@ def main(argv: list[str] | None = None) -> None:
                                  f"those or write to another file")
             done[(r["seed"], r["graph"])] = r
     rows = []
-    keys = ("seed", "graph", "first", "first_right", "merged", "right", "wrong", "step_s",
-            "fused_ate_m", "own_ate_m", "working_ate_m", "fused_wall_share", "own_wall_share",
-            "working_wall_share", "links_kept",
-            "links_kept_wrong", "loops_kept", "loops_kept_wrong", "window_searches", "floor_pairs",
-            "floor_mid_wrong", "floor_last_wrong")
-    print(" | ".join(keys), flush=True)
+    print(" | ".join(ROW_KEYS), flush=True)
+    seeds = range(args.first_seed, args.first_seed + args.worlds)
     if args.from_:
         rows = [r for path in args.from_ for r in _read_run(path)]
         args.steps = rows[0]["options"]["steps"]  # "never merged right" counts as steps + 1
         args.settings = [s for s in ("on", "off") if any(r["graph"] == (s == "on")
                                                           for r in rows)]
+        seeds = ()
         for row in rows:
-            print(" | ".join(_fmt(row.get(k)) for k in keys))
-    for seed in range(args.first_seed, args.first_seed + args.worlds) if not args.from_ else ():
+            print(_row_line(row))
+    for seed in seeds:
         for setting in args.settings:
             row = done.get((seed, setting == "on"))
             if row is None:
                 row = _jsonable(episode(seed, args.explorer, args.steps, args.size, robot,
                                         setting == "on", mapping, args.robots))
                 row["options"] = options
+                done[(seed, setting == "on")] = row
             rows.append(row)
-            print(" | ".join(_fmt(row.get(k)) for k in keys), flush=True)
+            print(_row_line(row), flush=True)
             # rewritten whole after each episode: a crash keeps those done
             if args.out:
-                atomic_write_json_lines(args.out, [*rows, *(r for r in done.values()
-                                                            if r not in rows)])
+                atomic_write_json_lines(args.out, done.values())
             if args.rows:
                 atomic_write_json_lines(args.rows, [n for r in rows
                                                     for n in r.get("near_rows", ())])

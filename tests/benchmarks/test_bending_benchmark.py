@@ -94,6 +94,9 @@ def test_a_run_resumes_from_its_out_file_and_is_compared_paired(tmp_path, capsys
     assert "fused ATE m | " in text and "| +0.000 (nan) | 0 / 0" in text
     with pytest.raises(FileNotFoundError, match=r"nothing.jsonl: no run rows"):
         bil.main(["--from", str(tmp_path / "nothing.jsonl")])
+    with pytest.raises(SystemExit):
+        bil.main(["--from", str(out), "--out", str(tmp_path / "again.jsonl")])
+    assert "--from summarises runs already made: it takes no --out" in capsys.readouterr().err
 
 
 def _row(seed: int, fused: float, own: float, wall: float, first_right: int | None) -> dict:
